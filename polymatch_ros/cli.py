@@ -1,0 +1,282 @@
+"""`polymatch` — one command, subcommands for every job.
+
+    polymatch simulate SCENE     centralised run: progress, summary table, npz, PNG snapshots
+    polymatch explain SCENE      which model, representation and integrator, and why
+    polymatch integrators        the registry: order, evaluations and exchange rounds per step
+    polymatch scenes             the scenes shipped in config/
+    polymatch run SCENE          the distributed ROS 2 ensemble (one process per agent) + monitor
+    polymatch agent | monitor    single ROS 2 nodes (same as `ros2 run polymatch_ros agent|monitor`)
+    polymatch bench WHAT         benchmarks (figures for README)
+
+Errors are one line on stderr and a non-zero exit code: 2 for bad input
+(scene, parameters), 3 for a run that did not converge although the scene
+expects it, 1 for anything else.
+"""
+
+import argparse
+import math
+import os
+import sys
+import warnings
+
+import numpy as np
+
+from .core.errors import PolymatchError, SceneError
+
+EXIT_NOT_CONVERGED = 3
+
+
+def shipped_config_dirs():
+    """Where shipped scenes live: the repository's config/, then the installed share/ directory."""
+    dirs = []
+    here = os.path.dirname(os.path.abspath(__file__))
+    dirs.append(os.path.join(os.path.dirname(here), "config"))
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        dirs.append(os.path.join(get_package_share_directory("polymatch_ros"), "config"))
+    except Exception:   # no ament index (plain pip install): the repository copy is all there is
+        pass
+    dirs.append(os.path.join(sys.prefix, "share", "polymatch_ros", "config"))
+    return [d for d in dirs if os.path.isdir(d)]
+
+
+def resolve_scene_path(name):
+    """A path as given, or a shipped scene by name (``congruent_triangles``)."""
+    if os.path.isfile(name):
+        return name
+    stem = name[:-5] if name.endswith(".yaml") else name
+    for d in shipped_config_dirs():
+        cand = os.path.join(d, os.path.basename(stem) + ".yaml")
+        if os.path.isfile(cand):
+            return cand
+    raise SceneError(f"{name}: no such scene file (nor a shipped scene of that name; "
+                         f"see `polymatch scenes`)")
+
+
+def load(args_scene, overrides=None):
+    from .core.scene import load_scene
+    return load_scene(resolve_scene_path(args_scene), overrides)
+
+
+def positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
+    return value
+
+
+def format_table(rows, header):
+    widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(len(header))]
+    line = "  ".join(h.ljust(w) for h, w in zip(header, widths))
+    out = [line, "  ".join("-" * w for w in widths)]
+    out += ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)) for r in rows]
+    return "\n".join(out)
+
+
+class Progress:
+    """One updating line on a terminal, a line every few seconds otherwise."""
+
+    def __init__(self, t_end, quiet=False, stream=sys.stderr):
+        import time
+        self.t_end, self.quiet, self.stream = t_end, quiet, stream
+        self.tty = stream.isatty()
+        self._time = time.monotonic
+        self.start = self._time()
+        self.last = -1e9
+
+    def __call__(self, t, diameter, extra=""):
+        if self.quiet:
+            return
+        now = self._time()
+        if not self.tty and now - self.last < 2.0 and t < self.t_end:
+            return
+        self.last = now
+        pct = 100.0 * t / self.t_end if self.t_end else 100.0
+        text = f"t = {t:8.3f} / {self.t_end:g} ({pct:5.1f}%)  diameter = {diameter:.3e}{extra}"
+        if self.tty:
+            self.stream.write("\r" + text + " " * 4)
+            self.stream.flush()
+        else:
+            self.stream.write(text + "\n")
+
+    def done(self):
+        if self.tty and not self.quiet:
+            self.stream.write("\n")
+
+
+def summary_rows(scene, metrics):
+    rows = []
+    for g, m in zip(scene.model.groups, metrics["groups"]):
+        rows.append([g.name, g.size, f"{m['centroid_diameter']:.3e}", f"{m['rotation_diameter']:.3e}",
+                     f"{m['matching_diameter']:.3e}", f"{m['energy']:.3e}", f"{m['orthogonality']:.1e}"])
+    return rows
+
+
+SUMMARY_HEADER = ["group", "N", "centroid diam", "rotation diam", "matching diam", "energy", "orth. defect"]
+
+
+def convergence_verdict(scene, diameter, converged_at, stationarity=None):
+    """(exit code, message) for the end of a run."""
+    if converged_at is not None:
+        return 0, f"converged: matching diameter < {scene.tolerance:g} from t = {converged_at:g}"
+    msg = f"did not converge: matching diameter {diameter:.3e} >= tolerance {scene.tolerance:g} at t_end"
+    if stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
+        msg += (f"; the rotations sit at an equilibrium that is not consensus (|W| = {stationarity:.1e}),"
+                " e.g. antipodal or splay states of the Lohe model")
+    if not scene.expect_convergence:
+        return 0, msg + " (the scene expects this: convergence.expected = false)"
+    return EXIT_NOT_CONVERGED, msg
+
+
+def cmd_simulate(args):
+    from .core.simulate import explain, simulate
+    scene = load(args.scene, {"time.t_end": args.t_end})
+    if args.explain:
+        print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
+        return 0
+    samples = None
+    if args.figure:
+        samples = np.unique(np.concatenate([scene.samples, [t for t in scene.snapshots if t <= scene.t_end]]))
+    progress = Progress(scene.t_end, args.quiet)
+    traj = simulate(scene, args.integrator, args.dt, args.tolerance, samples=samples,
+                    keep_states=bool(args.save or args.figure), progress=progress,
+                    stop_when_converged=args.stop_when_converged)
+    progress.done()
+    p = traj.plan
+    print(f"scene {scene.name}: {scene.model.n_agents} agents, d = {scene.dim}, "
+          f"integrator {p.name}" + (f" dt = {p.dt:g}" if p.dt else f" tolerance = {p.tolerance:g}"))
+    print(format_table(summary_rows(traj.scene, traj.metrics[-1]), SUMMARY_HEADER))
+    print(f"t = {traj.times[-1]:g}, steps {traj.steps}, right-hand sides {traj.rhs_evals}, "
+          f"wall time {traj.wall_time:.3f} s")
+    if "group_separation" in traj.metrics[-1]:
+        print(f"distance between group centres: {traj.metrics[-1]['group_separation']:.4g} "
+              f"(L = {scene.model.L:g})")
+    if args.save:
+        save_npz(traj, args.save)
+        print(f"trajectory saved to {args.save}")
+    if args.figure:
+        from .figures import snapshot_figure
+        snapshot_figure(traj, args.figure)
+        print(f"snapshots saved to {args.figure}")
+    code, msg = convergence_verdict(scene, traj.metrics[-1]["diameter"], traj.converged_at, traj.stationarity)
+    print(msg)
+    return code
+
+
+def save_npz(traj, path):
+    scene = traj.scene
+    model = scene.model
+    data = {"times": np.array(traj.times), "origin": scene.origin,
+            "diameter": traj.diameters}
+    for gi, g in enumerate(model.groups):
+        key = f"group{gi}_"
+        data[key + "name"] = np.array(g.name)
+        data[key + "reference"] = g.reference
+        data[key + "edges"] = np.array(g.edges)
+        if g.scales is not None:
+            data[key + "scales"] = g.scales
+        data[key + "centroids"] = np.array([st.groups[gi].x + scene.origin for st in traj.states])
+        data[key + "rotations"] = np.array([model.rotations.to_matrices(st.groups[gi].rot) for st in traj.states])
+        for name in ("centroid_diameter", "rotation_diameter", "matching_diameter", "energy", "orthogonality"):
+            data[key + name] = np.array([m["groups"][gi][name] for m in traj.metrics])
+    np.savez_compressed(path, **data)
+
+
+def cmd_explain(args):
+    from .core.simulate import explain
+    scene = load(args.scene)
+    print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed)))
+    return 0
+
+
+def cmd_integrators(args):
+    from .core.adaptive import AdaptiveLie
+    from .core.integrators import METHODS
+    rows = []
+    for m in list(METHODS.values()) + [AdaptiveLie]:
+        i = m.info
+        models = "/".join({1: "1st", 2: "2nd"}[k] for k in i.models)
+        rows.append([i.name, i.order, i.stages, i.rounds if i.rounds else "-", i.family, models, i.summary])
+    print(format_table(rows, ["name", "order", "evals/step", "rounds/step", "family", "models", "what"]))
+    return 0
+
+
+def cmd_scenes(args):
+    from .core.scene import load_scene
+    rows = []
+    for d in shipped_config_dirs()[:1]:
+        for f in sorted(os.listdir(d)):
+            if f.endswith(".yaml"):
+                try:
+                    s = load_scene(os.path.join(d, f))
+                    rows.append([f[:-5], s.dim, s.model.n_agents, s.model.order, s.description])
+                except PolymatchError as exc:
+                    rows.append([f[:-5], "?", "?", "?", f"invalid: {exc}"])
+    print(format_table(rows, ["scene", "d", "N", "order", "description"]))
+    return 0
+
+
+def add_integrator_options(p):
+    p.add_argument("--integrator", "-i", metavar="NAME", help="integrator (see `polymatch integrators`)")
+    p.add_argument("--dt", type=positive_float, help="fixed step size")
+    p.add_argument("--tolerance", type=positive_float, help="tolerance for the adaptive integrator")
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(prog="polymatch", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    p = sub.add_parser("simulate", help="centralised simulation of a scene")
+    p.add_argument("scene", help="scene file or shipped scene name")
+    add_integrator_options(p)
+    p.add_argument("--t-end", type=positive_float, help="override time.t_end")
+    p.add_argument("--save", metavar="NPZ", help="save the trajectory (npz)")
+    p.add_argument("--figure", metavar="PNG", help="render the snapshot figure (needs matplotlib)")
+    p.add_argument("--explain", action="store_true", help="say which model and integrator, then exit")
+    p.add_argument("--stop-when-converged", action="store_true", help="stop at the first sample under tolerance")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("explain", help="which model, representation and integrator a scene uses, and why")
+    p.add_argument("scene")
+    add_integrator_options(p)
+    p.add_argument("--distributed", action="store_true", help="as the ROS node set would run it")
+    p.set_defaults(func=cmd_explain)
+
+    p = sub.add_parser("integrators", help="list the integrators")
+    p.set_defaults(func=cmd_integrators)
+    p = sub.add_parser("scenes", help="list the shipped scenes")
+    p.set_defaults(func=cmd_scenes)
+
+    for name, module in (("run", "runner"), ("agent", "agent_node"), ("monitor", "monitor_node"),
+                         ("bench", "bench")):
+        try:
+            mod = __import__(f"polymatch_ros.{module}", fromlist=["add_parser"])
+        except ImportError as exc:
+            if exc.name and exc.name.startswith("polymatch_ros"):
+                continue   # module not present in this build
+            raise
+        mod.add_parser(sub)
+    return parser
+
+
+def main(argv=None):
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    warnings.showwarning = lambda msg, *a, **k: print(f"polymatch: warning: {msg}", file=sys.stderr)
+    try:
+        return args.func(args)
+    except PolymatchError as exc:
+        print(f"polymatch: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("polymatch: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

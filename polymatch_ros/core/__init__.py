@@ -1,0 +1,26 @@
+"""Pure numerical core of polymatch_ros (numpy/scipy only, no ROS).
+
+    scene = load_scene("config/congruent_triangles.yaml")
+    traj = simulate(scene)                 # centralised, metrics at sample times
+    traj.diameters[-1], traj.final         # matching diameter, final state
+
+The ROS agents, the monitor and the benchmarks use exactly these pieces:
+``System`` (model + mean field), the integrator registry ``METHODS``,
+``advance`` (one step) and ``ensemble_metrics``.
+"""
+
+from .adaptive import AdaptiveLie
+from .decompose import decompose
+from .errors import ParameterError, PolymatchError, SceneError, ShapeError, StabilityError
+from .integrators import METHODS, check_stability, get_method, max_stable_dt
+from .metrics import ensemble_metrics, point_set_diameter
+from .model import Coupling, GroupState, Model, State, System
+from .scene import Scene, load_scene
+from .simulate import Trajectory, advance, explain, plan, recommend, simulate, with_representation
+
+__all__ = [
+    "AdaptiveLie", "Coupling", "GroupState", "METHODS", "Model", "ParameterError", "PolymatchError",
+    "Scene", "SceneError", "ShapeError", "StabilityError", "State", "System", "Trajectory", "advance",
+    "check_stability", "decompose", "ensemble_metrics", "explain", "get_method", "load_scene",
+    "max_stable_dt", "plan", "point_set_diameter", "recommend", "simulate", "with_representation",
+]

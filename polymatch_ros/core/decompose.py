@@ -1,0 +1,138 @@
+"""Recover (centroid, rotation, scale) of vertex sets against a reference shape.
+
+Section 3 of the paper writes a rigidly moving polytope as
+
+    x^i_a = xbar^i + s^i O^i r_a,      O^i in SO(d),
+
+with xbar^i the vertex mean and r_a the centred reference (s^i = 1 for
+congruent ensembles, Section 4.1.1 for similar ones).  Given the vertices
+we find xbar^i as the mean and (O^i, s^i) by the Kabsch/Umeyama SVD
+solution, and check the residual against a tolerance relative to the
+polytope's size.
+
+When span{r_a} has dimension k <= d - 2 the rotation is not unique
+(Lemma 3.2 assumes k = d); we then take the rotation of least angle
+(largest trace) among all that fit.  For k = d - 1 (a triangle in R^3)
+the rotation is still unique: det O = +1 fixes the normal direction.
+"""
+
+import warnings
+
+import numpy as np
+
+from .errors import ShapeError
+from .shapes import check_distinct_vertices
+
+
+class RotationNotUniqueWarning(UserWarning):
+    """The reference spans fewer than d - 1 dimensions; least-angle rotation taken."""
+
+
+def _least_angle_rotation(m, rank):
+    """argmax tr(O) over O in SO(d) with O V_k = U_k, where m = U S V^T, k = rank.
+
+    For rank >= d - 1 this is the usual Kabsch rotation U diag(1, .., det) V^T.
+    """
+    u, _, vt = np.linalg.svd(m)
+    v = vt.T
+    d = m.shape[0]
+    sign = np.linalg.det(u) * np.linalg.det(v)
+    if rank >= d - 1:
+        corr = np.ones(d)
+        corr[-1] = sign
+        return (u * corr) @ vt
+    uk, up = u[:, :rank], u[:, rank:]
+    vk, vp = v[:, :rank], v[:, rank:]
+    b = vp.T @ up                              # maximise tr(T b), T orthogonal, det T = sign
+    p, _, qt = np.linalg.svd(b)
+    corr = np.ones(d - rank)
+    corr[-1] = sign * np.linalg.det(p) * np.linalg.det(qt)
+    t = (qt.T * corr) @ p.T
+    return uk @ vk.T + up @ t @ vp.T
+
+
+def decompose(vertex_sets, reference, *, similar=False, tol=1e-9, label="polytope", offset=0):
+    """Centroids (N, d), rotations (N, d, d) and scales (N,) of congruent or similar vertex sets.
+
+    Parameters
+    ----------
+    vertex_sets : array_like (N, n, d)
+        Vertex coordinates of each polytope, vertices in the reference's order.
+    reference : (n, d) array
+        The centred reference shape r_a.
+    similar : bool
+        Allow a scale s^i > 0 per polytope (F-1); otherwise s^i = 1 is enforced.
+    tol : float
+        Allowed max vertex mismatch, relative to the reference circumradius.
+
+    Raises ``ShapeError`` with one line that names the polytope and the size
+    of the mismatch for: non-finite values, wrong dimension or vertex count,
+    coincident vertices, mirror images (det -1), non-congruent/non-similar sets.
+    """
+    ref = np.asarray(reference, dtype=float)
+    n, d = ref.shape
+    size = float(np.max(np.linalg.norm(ref, axis=1)))
+    rank = int(np.linalg.matrix_rank(ref, tol=1e-9 * size))
+    sets = []
+    for i, raw in enumerate(vertex_sets):
+        name = f"{label} {i + offset}"
+        try:
+            v = np.array(raw, dtype=float)
+        except (TypeError, ValueError):
+            raise ShapeError(f"{name}: vertices are not a list of coordinate lists") from None
+        if v.ndim != 2:
+            raise ShapeError(f"{name}: vertices are not a list of coordinate lists")
+        if v.shape[1] != d:
+            raise ShapeError(f"{name}: vertices have {v.shape[1]} coordinates, the scene has dimension {d}")
+        if v.shape[0] != n:
+            raise ShapeError(f"{name} has {v.shape[0]} vertices, the reference has {n}")
+        bad = np.argwhere(~np.isfinite(v))
+        if bad.size:
+            raise ShapeError(f"{name}: vertex {bad[0][0]} has a non-finite coordinate ({v[tuple(bad[0])]})")
+        check_distinct_vertices(v, name)
+        sets.append(v)
+    if not sets:
+        return np.zeros((0, d)), np.zeros((0, d, d)), np.zeros(0)
+    if rank <= d - 2 and d >= 2:
+        warnings.warn(f"the reference spans {rank} of {d} dimensions, so the rotation of each "
+                      f"{label} is not unique (Lemma 3.2); taking the rotation of least angle",
+                      RotationNotUniqueWarning, stacklevel=2)
+    ref_sq = float(np.sum(ref * ref))
+    centroids = np.empty((len(sets), d))
+    rotations = np.empty((len(sets), d, d))
+    scales = np.empty(len(sets))
+    for i, v in enumerate(sets):
+        name = f"{label} {i + offset}"
+        c = v.mean(axis=0)
+        q = v - c
+        m = q.T @ ref
+        o = _least_angle_rotation(m, rank)
+        s = float(np.sum(o * m)) / ref_sq if similar else 1.0
+        mismatch = float(np.max(np.linalg.norm(q - s * ref @ o.T, axis=1)))
+        allowed = tol * size * max(s, 1.0)
+        if s <= 0 or mismatch > allowed:
+            _explain_mismatch(name, q, ref, m, similar, mismatch, allowed, rank)
+        centroids[i], rotations[i], scales[i] = c, o, s
+    return centroids, rotations, scales
+
+
+def _explain_mismatch(name, q, ref, m, similar, mismatch, allowed, rank):
+    d = ref.shape[1]
+    if rank >= d:   # a mirror image fits with an orthogonal matrix of det -1
+        u, _, vt = np.linalg.svd(m)
+        o = u @ vt
+        if np.linalg.det(o) < 0:
+            s = float(np.sum(o * m)) / float(np.sum(ref * ref)) if similar else 1.0
+            mirror = float(np.max(np.linalg.norm(q - s * ref @ o.T, axis=1)))
+            if mirror <= allowed:
+                raise ShapeError(f"{name} is a mirror image of the reference (its best fit has det -1); "
+                                 f"as a rotation the vertex mismatch is {mismatch:.3g} > {allowed:.3g}")
+    kind = "similar" if similar else "congruent"
+    raise ShapeError(f"{name} is not {kind} to the reference: max vertex mismatch {mismatch:.3g} "
+                     f"exceeds the tolerance {allowed:.3g}")
+
+
+def compose_vertices(centroids, rotations, reference, scales=None):
+    """x^i_a = xbar^i + s^i O^i r_a for (N, d) centroids and (N, d, d) rotations: (N, n, d)."""
+    s = np.ones(len(centroids)) if scales is None else np.asarray(scales)
+    return centroids[:, None, :] + s[:, None, None] * np.einsum("nij,aj->nai", rotations, reference)

@@ -1,0 +1,249 @@
+"""The centralised simulator: scene -> trajectory at the sample times, with per-group metrics.
+
+``simulate`` runs the same steppers the ROS agents run (``advance`` answers
+each stage with the simulator's own arrays), picks the integrator the scene
+asks for (or the recommended one for its kind), refuses unstable fixed steps,
+and records metrics only at sample times so they never dominate the run.
+"""
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .adaptive import AdaptiveLie
+from .errors import PolymatchError, StabilityError
+from .integrators import check_stability, get_method, max_stable_dt
+from .metrics import ensemble_metrics, stationarity
+from .model import GroupState, State, System
+from .so import group_for
+
+
+def advance(method, system, state, h):
+    """One step of ``method`` with every stage answered by the state's own arrays."""
+    gen = method.step(system, state, h)
+    try:
+        stage = next(gen)
+        while True:
+            stage = gen.send(stage.groups)
+    except StopIteration as stop:
+        return stop.value
+
+
+@dataclass
+class Plan:
+    """The integrator a run will use, and why."""
+
+    method: object
+    dt: float = None
+    tolerance: float = None
+    reason: str = ""
+
+    @property
+    def name(self):
+        return self.method.name
+
+
+def with_representation(scene, representation):
+    """The same scene with rotations in another representation (e.g. 'matrix' for the full model)."""
+    model = scene.model
+    new = group_for(model.dim, representation)
+    if type(new) is type(model.rotations) and getattr(new, "retraction", None) == model.rotations.retraction:
+        return scene
+    old = model.rotations
+    groups = []
+    for gs in scene.initial.groups:
+        rot = new.from_matrices(old.to_matrices(gs.rot))
+        w = None if gs.w is None else new.algebra_from_skew(old.algebra_to_skew(gs.w))
+        groups.append(GroupState(gs.x.copy(), rot, None if gs.v is None else gs.v.copy(), w))
+    return replace(scene, model=replace(model, rotations=new), initial=State(0.0, tuple(groups)))
+
+
+def recommend(scene, distributed=False):
+    """(method name, reason) recommended for the scene's kind (see README, 'Speed against accuracy')."""
+    m = scene.model
+    if m.order == 1:
+        if scene.integrator.tolerance is not None and not distributed:
+            return "adaptive", "a tolerance was asked for (centralised)"
+        return "rkmk4", "first order: 4th-order Munthe-Kaas, 4 rounds per step"
+    if m.gamma == 0:
+        return "lie_verlet", "undamped (gamma = 0): symplectic splitting keeps the energy without drift"
+    if scene.integrator.tolerance is not None and not distributed:
+        return "adaptive", "a tolerance was asked for (centralised)"
+    dt = scene.integrator.dt or 0.05
+    if m.mass / m.gamma < 0.5 * dt:
+        return "etd2", f"m/gamma = {m.mass / m.gamma:.3g} < dt/2: damping is stiff, integrate it exactly"
+    return "rkmk4", "second order, non-stiff: 4th-order Munthe-Kaas"
+
+
+def plan(scene, method=None, dt=None, tolerance=None, distributed=False, check=True):
+    """Resolve the integrator: explicit choice > scene file > recommendation; check stability."""
+    name = method or scene.integrator.method
+    reason = "chosen explicitly" if method else "from the scene file"
+    if tolerance is not None:
+        scene = replace(scene, integrator=replace(scene.integrator, tolerance=tolerance))
+    if name == "auto":
+        name, reason = recommend(scene, distributed)
+    tol = tolerance if tolerance is not None else scene.integrator.tolerance
+    if name == "adaptive":
+        if distributed:
+            raise PolymatchError("the adaptive integrator runs centralised only; pick a fixed-step method")
+        tol = tol or 1e-8
+        return Plan(AdaptiveLie(tol, max_steps=scene.integrator.max_steps), None, tol, reason)
+    meth = get_method(name)
+    step = dt if dt is not None else (scene.integrator.dt or 0.05)
+    if not step > 0 or not math.isfinite(step):
+        raise PolymatchError(f"dt must be a positive number, got {step}")
+    if step > scene.t_end:
+        warnings.warn(f"dt = {step:g} is larger than t_end = {scene.t_end:g}: taking one step of t_end")
+        step = scene.t_end
+    if check:
+        check_stability(meth, scene.model, step)
+    return Plan(meth, step, None, reason)
+
+
+def prepare(scene, plan_):
+    """Scene in the representation the method needs (projection baselines work on matrices)."""
+    if plan_.method.info.family == "projection" and scene.model.rotations.abelian:
+        return with_representation(scene, "matrix")
+    return scene
+
+
+@dataclass
+class Trajectory:
+    scene: object
+    plan: Plan
+    times: list = field(default_factory=list)
+    metrics: list = field(default_factory=list)
+    states: list = field(default_factory=list)
+    steps: int = 0
+    rhs_evals: int = 0
+    wall_time: float = 0.0
+    final: State = None
+    converged_at: float = None
+    stationarity: float = None
+
+    @property
+    def diameters(self):
+        return np.array([m["diameter"] for m in self.metrics])
+
+    @property
+    def converged(self):
+        return self.converged_at is not None
+
+
+def step_grid(t_end, dt):
+    """Step end times k*dt (k = 1..n), the last one clipped to t_end."""
+    n = max(1, int(math.ceil(t_end / dt - 1e-9)))
+    grid = dt * np.arange(1, n + 1)
+    grid[-1] = t_end
+    return grid
+
+
+def simulate(scene, method=None, dt=None, tolerance=None, *, samples=None, keep_states=True,
+             progress=None, stop_when_converged=False, check_stability=True, metrics=True):
+    """Run the scene centralised; return a ``Trajectory`` with metrics at the sample times.
+
+    Fixed-step runs take steps of dt (the last one clipped to t_end); sample times
+    are rounded to the nearest step.  ``progress(t, diameter)`` is called at samples.
+    """
+    plan_ = plan(scene, method, dt, tolerance, check=check_stability)
+    scene = prepare(scene, plan_)
+    system = System(scene.model)
+    times = np.asarray(scene.samples if samples is None else samples, dtype=float)
+    traj = Trajectory(scene, plan_)
+    state = State(0.0, tuple(replace(gs) for gs in scene.initial.groups))
+    t0 = time.perf_counter()
+    below = [None]
+
+    def record(st):
+        traj.times.append(st.t)
+        if metrics:
+            met = ensemble_metrics(scene.model, st)
+            traj.metrics.append(met)
+            if met["diameter"] < scene.tolerance:
+                if below[0] is None:
+                    below[0] = st.t
+            else:
+                below[0] = None
+            if progress is not None:
+                progress(st.t, met["diameter"])
+        if keep_states:
+            traj.states.append(st)
+        return stop_when_converged and below[0] is not None
+
+    stop = record(state)
+    if plan_.dt is None:
+        if not stop:
+            if stop_when_converged:
+                for t in times[times > 0]:
+                    state = plan_.method.integrate(system, state, [t])
+                    if record(state):
+                        break
+            else:
+                state = plan_.method.integrate(system, state, times[times > 0], record)
+        traj.steps, traj.rhs_evals = plan_.method.steps, plan_.method.nfev
+    else:
+        grid = step_grid(scene.t_end, plan_.dt)
+        sample_steps = set(int(k) for k in np.searchsorted(grid, times[times > 0] - 0.5 * plan_.dt))
+        meth = plan_.method
+        prev = 0.0
+        for k, t_next in enumerate(grid):
+            if stop:
+                break
+            state = advance(meth, system, state, t_next - prev)
+            state.t = t_next
+            prev = t_next
+            traj.steps += 1
+            if k in sample_steps or k == len(grid) - 1:
+                stop = record(state)
+        traj.rhs_evals = traj.steps * meth.info.stages
+    traj.wall_time = time.perf_counter() - t0
+    traj.final = state
+    traj.converged_at = below[0]
+    traj.stationarity = stationarity(system, state)
+    return traj
+
+
+def explain(scene, method=None, dt=None, tolerance=None, distributed=False):
+    """Lines saying which model, representation and integrator the scene will use, and why."""
+    m = scene.model
+    lines = [f"scene {scene.name!r}: d = {m.dim}, {m.n_agents} agents in {len(m.groups)} group(s)"]
+    if m.order == 1:
+        lines.append(f"model: first order (A-2), kappa = {m.kappa:g}, gamma = {m.gamma:g}: "
+                     "no velocities are carried")
+    else:
+        lines.append(f"model: second order (A-1), m = {m.mass:g}, gamma = {m.gamma:g}, kappa = {m.kappa:g}")
+    for g in m.groups:
+        kind = "similar (F-1: torque weights s_k/s_i)" if g.scales is not None else \
+            "congruent (no scale weights)"
+        lines.append(f"group {g.name!r}: {g.size} x {len(g.reference)}-vertex polytope, {kind}")
+    if m.inter_group:
+        lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; centroids integrated "
+                     "with the method's stages (the inter-group force is nonlinear)")
+    else:
+        lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential)")
+    rep = m.rotations
+    rep_text = {"angle": "angles (SO(2) is abelian: the first-order model is Kuramoto, exp is addition)",
+                "so3": f"3x3 matrices, structure-of-arrays, {rep.retraction} map in closed form",
+                "matrix": f"{m.dim}x{m.dim} matrices, Cayley map by batched solves"}[rep.name]
+    lines.append(f"rotations: {rep_text}")
+    p = plan(scene, method, dt, tolerance, distributed=distributed, check=False)
+    info = p.method.info
+    if p.dt is not None:
+        try:
+            check_stability(p.method, m, p.dt)
+            limit = max_stable_dt(p.method, m, 1e6)
+            stab = f"linear stability limit dt < {limit:.3g}" if limit < 1e6 else "no stability limit found"
+        except StabilityError as exc:
+            stab = f"REFUSED: {exc}"
+        lines.append(f"integrator: {info.name} (order {info.order}, {info.stages} evaluation(s)/step, "
+                     f"{info.rounds} exchange round(s)/step in lockstep), dt = {p.dt:g} — {p.reason}; {stab}")
+        if info.family == "projection" and rep.name == "angle":
+            lines.append("projection baselines need matrices: the run uses the full 2x2 matrix model")
+    else:
+        lines.append(f"integrator: adaptive DOP853-Lie, tolerance {p.tolerance:g} — {p.reason}")
+    lines.extend(f"note: {n}" for n in scene.notes)
+    return lines

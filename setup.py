@@ -1,0 +1,35 @@
+"""ament_python package setup: `colcon build` (ROS from apt) or `pip install .` (ROS from PyPI)."""
+
+import os
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "polymatch_ros"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    package_data={package_name: ["resources/*.xml"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        (os.path.join("share", package_name, "config"), glob("config/*.yaml")),
+    ],
+    install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
+    extras_require={"plot": ["matplotlib"], "test": ["pytest"]},
+    zip_safe=True,
+    maintainer="polymatch maintainers",
+    maintainer_email="maintainers@polymatch.dev",
+    description="Shape matching of polytopes along rigid-body motions as a ROS 2 node set",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "polymatch = polymatch_ros.cli:main",
+            "agent = polymatch_ros.agent_node:main",
+            "monitor = polymatch_ros.monitor_node:main",
+        ],
+    },
+)
