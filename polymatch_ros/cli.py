@@ -93,6 +93,9 @@ class Progress:
         now = self._time()
         if not self.tty and now - self.last < 2.0 and t < self.t_end:
             return
+        if not self.tty and t >= self.t_end and getattr(self, "_ended", False):
+            return
+        self._ended = t >= self.t_end
         self.last = now
         pct = 100.0 * t / self.t_end if self.t_end else 100.0
         text = f"t = {t:8.3f} / {self.t_end:g} ({pct:5.1f}%)  diameter = {diameter:.3e}{extra}"
@@ -252,8 +255,10 @@ def build_parser():
     p = sub.add_parser("scenes", help="list the shipped scenes")
     p.set_defaults(func=cmd_scenes)
 
-    for name, module in (("run", "runner"), ("agent", "agent_node"), ("monitor", "monitor_node"),
-                         ("bench", "bench")):
+    for name, module in PASSTHROUGH.items():
+        sub.add_parser(name, help=f"one {name} node (ROS 2); takes the same arguments as "
+                                  f"`ros2 run polymatch_ros {name}`, e.g. --ros-args -p scene:=FILE")
+    for name, module in (("run", "runner"), ("bench", "bench")):
         try:
             mod = __import__(f"polymatch_ros.{module}", fromlist=["add_parser"])
         except ImportError as exc:
@@ -264,7 +269,14 @@ def build_parser():
     return parser
 
 
+PASSTHROUGH = {"agent": "agent_node", "monitor": "monitor_node"}
+
+
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] in PASSTHROUGH:
+        mod = __import__(f"polymatch_ros.{PASSTHROUGH[argv[0]]}", fromlist=["main"])
+        return mod.main([f"polymatch {argv[0]}"] + argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     warnings.showwarning = lambda msg, *a, **k: print(f"polymatch: warning: {msg}", file=sys.stderr)

@@ -110,6 +110,15 @@ class State:
 
 
 @dataclass
+class Request:
+    """A stage whose mean field is needed: the driver answers with the ensemble's arrays."""
+
+    stage: State
+    boundary: bool
+    fields: tuple
+
+
+@dataclass
 class GroupCoupling:
     """What agent i needs from its group: S, N, and the centroid mean (and mean velocity)."""
 
@@ -250,10 +259,15 @@ class System:
         return tuple(fields)
 
     def evaluate(self, stage, first_stage=False):
-        """Generator: the coupling at ``stage``; yields the stage when it must be exchanged."""
+        """Generator: the coupling at ``stage``; yields a ``Request`` when it must be exchanged.
+
+        ``first_stage`` marks a state on the step grid (the start of a step, or the end
+        of a step whose last evaluation is the next one's first): there the centroid
+        means are needed too, and a distributed ensemble may decide to stop.
+        """
         if stage.coupling is not None:
             return stage.coupling
-        ensemble = yield stage
+        ensemble = yield Request(stage, first_stage, self.exchange_fields(first_stage))
         stage.coupling = self.couple(ensemble, first_stage)
         return stage.coupling
 

@@ -19,7 +19,6 @@ import numpy as np
 import yaml
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
-from scipy.stats import special_ortho_group
 
 from .decompose import RotationNotUniqueWarning, decompose
 from .errors import SceneError
@@ -444,6 +443,7 @@ def _rotations(raw, path, dim, count, rng):
             return np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)], -1)], -2)
         if dim == 3:
             return Rotation.random(count, random_state=rng).as_matrix().reshape(count, 3, 3)
+        from scipy.stats import special_ortho_group   # slow to import: only when needed
         return special_ortho_group.rvs(dim, size=count, random_state=rng).reshape(count, dim, dim)
     if raw == "identity":
         return np.repeat(np.eye(dim)[None], count, axis=0)

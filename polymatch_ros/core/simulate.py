@@ -25,9 +25,9 @@ def advance(method, system, state, h):
     """One step of ``method`` with every stage answered by the state's own arrays."""
     gen = method.step(system, state, h)
     try:
-        stage = next(gen)
+        request = next(gen)
         while True:
-            stage = gen.send(stage.groups)
+            request = gen.send(request.stage.groups)
     except StopIteration as stop:
         return stop.value
 

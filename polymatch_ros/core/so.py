@@ -82,6 +82,9 @@ class RotationGroup:
     def algebra_take(self, a, idx):
         raise NotImplementedError
 
+    def algebra_concat(self, parts):
+        raise NotImplementedError
+
     def algebra_from_skew(self, w):
         """(N, d, d) skew matrices -> algebra array."""
         raise NotImplementedError
@@ -197,6 +200,9 @@ class SO2(RotationGroup):
     def algebra_take(self, a, idx):
         return a[idx]
 
+    def algebra_concat(self, parts):
+        return np.concatenate(parts)
+
     def algebra_from_skew(self, w):
         return np.asarray(w, dtype=float)[:, 1, 0].copy()
 
@@ -292,6 +298,9 @@ class SO3(RotationGroup):
 
     def algebra_take(self, a, idx):
         return a[:, idx]
+
+    def algebra_concat(self, parts):
+        return np.concatenate(parts, axis=1)
 
     def algebra_from_skew(self, w):
         w = np.asarray(w, dtype=float)
@@ -419,6 +428,9 @@ class SOn(RotationGroup):
 
     def algebra_take(self, a, idx):
         return a[idx]
+
+    def algebra_concat(self, parts):
+        return np.concatenate(parts, axis=0)
 
     def algebra_from_skew(self, w):
         return np.array(w, dtype=float)

@@ -1,0 +1,404 @@
+"""`polymatch run SCENE`: a whole distributed ensemble from one scene file, without launch.
+
+Starts the monitor and one process per agent (or per K agents), all with
+loopback discovery and a fresh ROS_DOMAIN_ID unless the user set them; shows
+progress (simulated time, diameter, rounds/s); stops at t_end or once the
+diameter has stayed under the scene's tolerance; prints a summary (final
+diameters per group, in lockstep the deviation from the centralised solution,
+wall time, rounds/s); and ends every process it started, by PID, also on
+Ctrl-C and when a child dies.
+"""
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import deque
+from dataclasses import replace
+
+import numpy as np
+
+from . import wire
+from .cli import (Progress, SUMMARY_HEADER, convergence_verdict, format_table, load, positive_float,
+                  resolve_scene_path, summary_rows)
+from .core.errors import PolymatchError
+from .core.metrics import ensemble_metrics
+from .core.model import GroupState, State
+from .core.simulate import plan, prepare, simulate
+from .ros_env import reserved_domain_id, ros_environment
+
+
+class Child:
+    """A supervised process: output kept (last lines) and echoed on failure; ended by its own PID."""
+
+    def __init__(self, name, argv, env):
+        self.name = name
+        self.proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, start_new_session=True, text=True, bufsize=1)
+        self.lines = deque(maxlen=200)
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    @property
+    def pid(self):
+        return self.proc.pid
+
+    def poll(self):
+        return self.proc.poll()
+
+    def stop(self, grace=3.0):
+        """SIGINT, then SIGTERM, then SIGKILL — each to this child's PID only."""
+        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
+            if self.proc.poll() is not None:
+                break
+            try:
+                os.kill(self.proc.pid, sig)
+            except ProcessLookupError:
+                break
+            try:
+                self.proc.wait(timeout=wait)
+            except subprocess.TimeoutExpired:
+                continue
+        self.thread.join(timeout=1.0)
+        return self.proc.poll()
+
+    def tail(self, n=5):
+        return list(self.lines)[-n:]
+
+
+def partition(n_agents, k):
+    return [list(range(s, min(s + k, n_agents))) for s in range(0, n_agents, k)]
+
+
+class Watcher:
+    """The runner's own small node: diameter, every pose (for the summary), and the control topic."""
+
+    def __init__(self, scene, ensemble):
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from std_msgs.msg import Float64, String
+        self.node = Node("polymatch_runner")
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+        self.scene, self.model = scene, scene.model
+        self.grp = self.model.rotations
+        qos = wire.qos_profiles()
+        self.diameter = None
+        self.node.create_subscription(Float64, wire.ensemble_topic(ensemble, "diameter"), self._diam, qos["latched"])
+        self.control = self.node.create_publisher(String, wire.ensemble_topic(ensemble, "control"), qos["control"])
+        self.poses = {}
+        self.velocities = {}
+        dim = self.model.dim
+        if dim <= 3:
+            from geometry_msgs.msg import PoseStamped, TwistStamped
+            pose_t, twist_t = PoseStamped, TwistStamped
+        else:
+            from std_msgs.msg import Float64MultiArray
+            pose_t = twist_t = Float64MultiArray
+        for a in range(self.model.n_agents):
+            self.node.create_subscription(pose_t, wire.agent_topic(ensemble, a, "pose"), self._pose(a), qos["pose"])
+            if self.model.order == 2:
+                self.node.create_subscription(twist_t, wire.agent_topic(ensemble, a, "twist"), self._twist(a),
+                                              qos["pose"])
+
+    def _diam(self, msg):
+        self.diameter = float(msg.data)
+
+    def _pose(self, agent):
+        dim = self.model.dim
+
+        def receive(msg):
+            if dim <= 3:
+                p, q = msg.pose.position, msg.pose.orientation
+                val, _ = wire.pose_to_state(self.grp, dim, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
+                t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+            else:
+                res, _ = wire.array_to_state(msg, dim)
+                val = None if res is None else (res[1], self.grp.from_matrices(res[2][None]))
+                t = None if res is None else res[0]
+            if val is not None:
+                self.poses[agent] = (t, val[0] - self.scene.origin, val[1])
+        return receive
+
+    def _twist(self, agent):
+        dim = self.model.dim
+
+        def receive(msg):
+            if dim <= 3:
+                lin, ang = msg.twist.linear, msg.twist.angular
+                val, _ = wire.twist_to_state(self.grp, dim, (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z))
+            else:
+                res, _ = wire.array_to_state(msg, dim, rot_check=False)
+                val = None if res is None else (res[1], self.grp.algebra_from_skew(res[2][None]))
+            if val is not None:
+                self.velocities[agent] = val
+        return receive
+
+    def spin(self, timeout):
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def ensemble_time(self):
+        if len(self.poses) < self.model.n_agents:
+            return None
+        return min(p[0] for p in self.poses.values())
+
+    def all_fresh(self, within):
+        """Every agent's last pose is at most ``within`` simulated seconds behind the newest."""
+        if len(self.poses) < self.model.n_agents:
+            return False
+        times = [p[0] for p in self.poses.values()]
+        return max(times) - min(times) <= within
+
+    def stop(self):
+        from std_msgs.msg import String
+        self.control.publish(String(data="stop"))
+
+    def start(self, epoch):
+        from std_msgs.msg import String
+        self.control.publish(String(data=f"start {epoch!r}"))
+
+    def final_state(self):
+        """The last pose of every agent as a core State (None if some agent never reported)."""
+        if len(self.poses) < self.model.n_agents:
+            return None
+        groups = []
+        for g in self.model.groups:
+            x = np.array([self.poses[a][1] for a in g.indices])
+            rot = self.grp.concat([self.poses[a][2] for a in g.indices])
+            v = w = None
+            if self.model.order == 2 and all(a in self.velocities for a in g.indices):
+                v = np.array([self.velocities[a][0] for a in g.indices])
+                w = self.grp.algebra_concat([self.velocities[a][1] for a in g.indices])
+            groups.append(GroupState(x, rot, v, w))
+        return State(min(p[0] for p in self.poses.values()), tuple(groups))
+
+    def destroy(self):
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+
+
+def vertex_deviation(model, a, b):
+    """max over agents and vertices of |x^i_a(a) - x^i_a(b)|."""
+    worst = 0.0
+    grp = model.rotations
+    for g, ga, gb in zip(model.groups, a.groups, b.groups):
+        for r in g.reference:
+            pa = ga.x + grp.rotate(ga.rot, r)
+            pb = gb.x + grp.rotate(gb.rot, r)
+            worst = max(worst, float(np.max(np.linalg.norm(pa - pb, axis=1))))
+    return worst
+
+
+def cmd_run(args):
+    scene_path = resolve_scene_path(args.scene)
+    scene = load(scene_path, {"time.t_end": args.t_end})
+    rt = args.mode == "realtime"
+    dt = args.time_scale / args.rate if rt else args.dt
+    the_plan = plan(scene, args.integrator, dt, distributed=True)     # one-line errors before spawning
+    if args.agents_per_process < 1:
+        raise PolymatchError("--agents-per-process must be >= 1")
+    with reserved_domain_id() as domain:
+        env = ros_environment(domain)
+        for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID", "RMW_IMPLEMENTATION",
+                    "FASTRTPS_DEFAULT_PROFILES_FILE"):
+            os.environ[key] = env[key]
+        return _run(args, scene, scene_path, the_plan, env, domain)
+
+
+def _run(args, scene, scene_path, the_plan, env, domain):
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+    rt = args.mode == "realtime"
+    n = scene.model.n_agents
+    run_id = random.randrange(1, 2 ** 31 - 1)
+    ens = args.ensemble
+    common = ["-p", f"scene:={os.path.abspath(scene_path)}", "-p", f"ensemble:={ens}",
+              "-p", f"t_end:={scene.t_end!r}", "-p", f"mode:={args.mode}"]
+    agent_args = common + ["-p", f"run_id:={run_id}", "-p", f"agents_per_process:={args.agents_per_process}",
+                           "-p", f"pose_subscribers:={2 if args.monitor else 1}",
+                           "-p", f"integrator:={the_plan.name}",
+                           "-p", f"round_timeout:={args.round_timeout!r}",
+                           "-p", f"peer_timeout:={args.peer_timeout!r}"]
+    if rt:
+        agent_args += ["-p", f"rate:={args.rate!r}", "-p", f"time_scale:={args.time_scale!r}",
+                       "-p", "start_time:=-1.0"]
+    else:
+        agent_args += ["-p", f"dt:={the_plan.dt!r}"]
+    py = [sys.executable, "-m"]
+    quiet = args.quiet
+    say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    say(f"polymatch run: {n} agents in {len(partition(n, args.agents_per_process))} processes, {args.mode}, "
+        f"integrator {the_plan.name}, dt {the_plan.dt:g}, ROS_DOMAIN_ID={domain}, "
+        f"discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']}")
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    children, monitor, watcher = [], None, None
+    interrupted = []
+    old = {s: signal.signal(s, lambda sig, frame: interrupted.append(sig)) for s in (signal.SIGINT, signal.SIGTERM)}
+    start = time.monotonic()
+    code, message = 1, "not started"
+    try:
+        watcher = Watcher(scene, ens)
+        if args.monitor:
+            mon_args = common + ["-p", f"peer_timeout:={args.peer_timeout!r}"]
+            if rt:
+                mon_args += ["-p", "rate:=10.0"]
+            monitor = Child("monitor", py + ["polymatch_ros.monitor_node", "--ros-args"] + mon_args
+                            + ["-r", "__node:=polymatch_monitor"], env)
+        for agents in partition(n, args.agents_per_process):
+            name = f"agent_{agents[0]}" if len(agents) == 1 else f"agents_{agents[0]}_{agents[-1]}"
+            sel = ["-p", f"agent:={agents[0]}"] if len(agents) == 1 else \
+                ["-p", "agents:=[" + ",".join(map(str, agents)) + "]"]
+            children.append(Child(name, py + ["polymatch_ros.agent_node", "--ros-args"] + agent_args + sel
+                                  + ["-r", f"__node:={name}"], env))
+        code, message = _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, start, say)
+    finally:
+        for c in children:
+            c.stop()
+        if monitor is not None:
+            t0 = time.monotonic()
+            while watcher is not None and time.monotonic() - t0 < 0.5:
+                watcher.spin(0.05)
+            monitor.stop()
+        if watcher is not None:
+            watcher.destroy()
+        if rclpy.ok():
+            rclpy.shutdown()
+        for s, h in old.items():
+            signal.signal(s, h)
+    wall = time.monotonic() - start
+    final = watcher.final_state() if watcher is not None else None
+    if code == 0 and final is not None:
+        code, message = _summary(args, scene, the_plan, final, children, monitor, wall, quiet)
+    elif message:
+        print(f"polymatch: error: {message}", file=sys.stderr)
+    return code
+
+
+def _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, start, say):
+    progress = Progress(scene.t_end, args.quiet)
+    rounds_per_step = max(1, the_plan.method.info.rounds)
+    deadline = start + args.timeout
+    below_since = None
+    stop_sent = 0.0
+    # in realtime the monitor's diameter covers the agents it heard; require all of them, in step
+    fresh = args.peer_timeout * args.time_scale if args.mode == "realtime" else 0.0
+    rate_mark = None
+    rps = 0.0
+    started = args.mode != "realtime"
+    while True:
+        watcher.spin(0.05)
+        if not started and len(watcher.poses) == scene.model.n_agents:
+            watcher.start(time.time() + 0.5)       # every agent is up: start the clock together
+            started = True
+        if interrupted:
+            progress.done()
+            return 130, "interrupted: stopped every process"
+        failed = [c for c in children if c.poll() not in (None, 0)]
+        if monitor is not None and monitor.poll() not in (None, 0):
+            failed.append(monitor)
+        if failed:
+            progress.done()
+            c = failed[0]
+            detail = " | ".join(line for line in c.tail(3) if line.strip())
+            return 1, f"{c.name} (pid {c.pid}) exited with code {c.poll()}: {detail}"
+        if all(c.poll() == 0 for c in children):
+            progress.done()
+            return 0, ""
+        if time.monotonic() > deadline:
+            progress.done()
+            return 1, f"timed out after {args.timeout:g} s (raise --timeout)"
+        t = watcher.ensemble_time()
+        d = watcher.diameter
+        if t is not None and d is not None:
+            now = time.monotonic()
+            if rate_mark is None:
+                rate_mark = (now, t)
+            elif now - rate_mark[0] > 1.0:
+                rps = (t - rate_mark[1]) / max(the_plan.dt, 1e-12) * rounds_per_step / (now - rate_mark[0])
+                if args.mode == "realtime":
+                    rps = (t - rate_mark[1]) / the_plan.dt / (now - rate_mark[0])
+                rate_mark = (now, t)
+            progress(t, d, f"  {rps:7.1f} rounds/s")
+            if d < scene.tolerance and watcher.all_fresh(fresh):
+                below_since = t if below_since is None else below_since
+                if t - below_since >= args.hold and now - stop_sent > 0.5:
+                    watcher.stop()
+                    stop_sent = now
+            else:
+                below_since = None
+
+
+def _summary(args, scene, the_plan, final, children, monitor, wall, quiet):
+    met = ensemble_metrics(scene.model, final)
+    print(f"scene {scene.name}: {scene.model.n_agents} agents, {args.mode}, integrator {the_plan.name}, "
+          f"dt {the_plan.dt:g}")
+    print(format_table(summary_rows(scene, met), SUMMARY_HEADER))
+    agent_lines = [line for c in children for line in c.lines if line.startswith("agent ")]
+    rates = []
+    for line in agent_lines:
+        if "rounds/s" in line:
+            try:
+                rates.append(float(line.split("rounds, ")[1].split(" rounds/s")[0]))
+            except (IndexError, ValueError):
+                pass
+    dropped = [line for line in agent_lines if "; dropped" in line]
+    text = f"t = {final.t:g}, wall time {wall:.2f} s"
+    if rates:
+        text += f", {np.mean(rates):.1f} rounds/s per agent (mean)"
+    print(text)
+    for line in dropped:
+        print(line)
+    if monitor is not None and args.mode == "lockstep":
+        for line in monitor.lines:
+            if line.startswith("monitor:"):
+                print(line)
+    if args.mode == "lockstep" and args.compare:
+        ref = simulate(replace(scene, t_end=final.t), the_plan.name, the_plan.dt, samples=[final.t],
+                       keep_states=False, metrics=False)
+        central = prepare(scene, the_plan)
+        dev = vertex_deviation(central.model, ref.final, _as_rep(central.model, scene.model, final))
+        print(f"lockstep vs centralised simulation (same integrator and dt) at t = {final.t:g}: "
+              f"max vertex deviation {dev:.3e}")
+    converged_at = final.t if met["diameter"] < scene.tolerance else None
+    code, msg = convergence_verdict(scene, met["diameter"], converged_at)
+    print(msg)
+    return code, msg
+
+
+def _as_rep(target_model, model, state):
+    if type(target_model.rotations) is type(model.rotations):
+        return state
+    src, dst = model.rotations, target_model.rotations
+    return State(state.t, tuple(GroupState(gs.x, dst.from_matrices(src.to_matrices(gs.rot)), gs.v, None)
+                                for gs in state.groups))
+
+
+def add_parser(sub):
+    p = sub.add_parser("run", help="run the distributed ROS 2 ensemble of a scene (one process per agent)")
+    p.add_argument("scene", help="scene file or shipped scene name")
+    p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    p.add_argument("--integrator", "-i", metavar="NAME", help="fixed-step integrator (default: the scene's)")
+    p.add_argument("--dt", type=positive_float, help="lockstep step size (default: the scene's)")
+    p.add_argument("--t-end", type=positive_float, help="override time.t_end")
+    p.add_argument("--agents-per-process", "-k", type=int, default=1, metavar="K")
+    p.add_argument("--rate", type=positive_float, default=50.0, help="realtime: steps per second (default 50)")
+    p.add_argument("--time-scale", type=positive_float, default=1.0,
+                   help="realtime: simulated seconds per wall-clock second")
+    p.add_argument("--peer-timeout", type=positive_float, default=1.0, help="realtime: drop silent peers after S s")
+    p.add_argument("--round-timeout", type=positive_float, default=10.0, help="lockstep: give up a round after S s")
+    p.add_argument("--hold", type=float, default=1.0,
+                   help="stop once the diameter stayed under the tolerance this long (simulated s)")
+    p.add_argument("--timeout", type=positive_float, default=600.0, help="wall-clock limit for the whole run (s)")
+    p.add_argument("--ensemble", default="polymatch", help="ensemble namespace (default polymatch)")
+    p.add_argument("--no-monitor", dest="monitor", action="store_false", help="do not start the monitor")
+    p.add_argument("--no-compare", dest="compare", action="store_false",
+                   help="lockstep: skip the comparison with the centralised simulation")
+    p.add_argument("--quiet", "-q", action="store_true")
+    p.set_defaults(func=cmd_run)

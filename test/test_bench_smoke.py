@@ -1,0 +1,53 @@
+"""Smoke test of `polymatch bench`: every family runs with --quick and prints its tables.
+
+Benchmarks report figures; nothing here asserts on timings.
+"""
+
+import os
+
+import pytest
+
+from polymatch_ros import cli
+from polymatch_ros.bench import families
+
+# headers the shipped families must print (families added later are only checked for a table)
+EXPECTED = {
+    "step": ["| model", "| method", "best ms", "median ms", "rkmk4", "lie_euler", "rk4_proj",
+             "so3 (exp/Rodrigues, SoA)", "matrix (Cayley", "| d: representation", "N = 1,000"],
+    "meanfield": ["mean field best ms", "naive µs/agent (sample)", "naive total, scaled", "speed-up",
+                  "max abs diff"],
+    "dop853": ["| solver", "rtol=atol", "A: max err", "B: max err (own steps)", "orth. defect",
+               "ours (angle)", "ours (matrix, Cayley)", "scipy DOP853", "Cheapest run with max error"],
+}
+
+FAMILY_NAMES = [m.NAME for m in families()]
+
+
+def test_shipped_families_are_registered():
+    assert {"step", "meanfield", "dop853"} <= set(FAMILY_NAMES)
+
+
+@pytest.mark.parametrize("name", FAMILY_NAMES)
+def test_family_quick(name, capsys):
+    assert cli.main(["bench", name, "--quick", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("# ")
+    assert "|---" in out                     # at least one markdown table
+    for text in EXPECTED.get(name, []):
+        assert text in out, f"{name}: {text!r} missing from the output"
+
+
+def test_all_writes_one_report(tmp_path, capsys):
+    out_dir = tmp_path / "bench"
+    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield", "--out", str(out_dir)]) == 0
+    text = (out_dir / "report.md").read_text(encoding="utf-8")
+    assert text.startswith("# polymatch benchmark report")
+    assert "mean field best ms" in text
+    assert (out_dir / "meanfield.md").is_file()
+    pytest.importorskip("matplotlib")
+    assert os.path.isfile(out_dir / "meanfield_scaling.png")
+    assert "![" in text
+
+
+def test_all_rejects_unknown_family(tmp_path, capsys):
+    assert cli.main(["bench", "all", "--quick", "--only", "nope", "--out", str(tmp_path)]) == 2
