@@ -224,6 +224,12 @@ class AgentNode:
                     self.twist_pubs[a].publish(tw)
         self._maybe_diagnostics()
 
+    def flush_poses(self, timeout=3.0):
+        """Wait until the last poses reached every subscriber (the monitor, the runner)."""
+        from rclpy.duration import Duration
+        for pub in list(self.pose_pubs.values()) + list(self.twist_pubs.values()):
+            pub.wait_for_all_acked(Duration(seconds=timeout))
+
     def _maybe_diagnostics(self, force=False):
         now = time.monotonic()
         if not force and now - self._last_diag < 1.0:
@@ -296,6 +302,7 @@ class AgentNode:
             if stop:
                 break
         self.exchange.flush()
+        self.flush_poses()
         return f"finished at t = {self.state.t:.6g} after {self.steps} steps ({self.rounds} rounds, " \
                f"{self.rounds / max(self.round_time, 1e-9):.1f} rounds/s)"
 
@@ -347,6 +354,7 @@ class AgentNode:
             self.rounds += 1
             self.round_time = time.monotonic() - t0
             self.publish_state()
+        self.flush_poses()
         return f"finished at t = {self.state.t:.6g} after {self.steps} realtime steps"
 
     def run(self):

@@ -6,6 +6,7 @@
     polymatch scenes             the scenes shipped in config/
     polymatch run SCENE          the distributed ROS 2 ensemble (one process per agent) + monitor
     polymatch agent | monitor    single ROS 2 nodes (same as `ros2 run polymatch_ros agent|monitor`)
+    polymatch echo TOPIC         print a topic (stand-in for `ros2 topic echo`)
     polymatch bench WHAT         benchmarks (figures for README)
 
 Errors are one line on stderr and a non-zero exit code: 2 for bad input
@@ -258,7 +259,7 @@ def build_parser():
     for name, module in PASSTHROUGH.items():
         sub.add_parser(name, help=f"one {name} node (ROS 2); takes the same arguments as "
                                   f"`ros2 run polymatch_ros {name}`, e.g. --ros-args -p scene:=FILE")
-    for name, module in (("run", "runner"), ("bench", "bench")):
+    for name, module in (("run", "runner"), ("echo", "echo"), ("bench", "bench")):
         try:
             mod = __import__(f"polymatch_ros.{module}", fromlist=["add_parser"])
         except ImportError as exc:

@@ -103,8 +103,9 @@ class LockstepExchange:
                      for a in layout.local}
         self.inbox = defaultdict(dict)            # agent -> {(step, stage): Stage}
         self.current = (0, 0)
+        qos_in = wire.qos_profiles()["stage_in"]
         self.subs = [node.create_subscription(Float64MultiArray, wire.agent_topic(ensemble, a, "stage"),
-                                              self._callback(a), qos) for a in layout.peers]
+                                              self._callback(a), qos_in) for a in layout.peers]
 
     def _callback(self, agent):
         def receive(msg):

@@ -31,13 +31,23 @@ from .core.simulate import plan, prepare, simulate
 from .ros_env import reserved_domain_id, ros_environment
 
 
+def _die_with_parent():
+    """In the child, before exec: get SIGTERM if the runner dies (Linux), so nothing outlives it."""
+    try:
+        import ctypes
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
 class Child:
     """A supervised process: output kept (last lines) and echoed on failure; ended by its own PID."""
 
     def __init__(self, name, argv, env):
         self.name = name
         self.proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True, text=True, bufsize=1)
+                                     stdin=subprocess.DEVNULL, start_new_session=True, text=True, bufsize=1,
+                                     preexec_fn=_die_with_parent)
         self.lines = deque(maxlen=200)
         self.thread = threading.Thread(target=self._read, daemon=True)
         self.thread.start()
@@ -148,6 +158,10 @@ class Watcher:
         if len(self.poses) < self.model.n_agents:
             return None
         return min(p[0] for p in self.poses.values())
+
+    def in_step(self):
+        """Every agent has reported, all at the same simulated time."""
+        return self.all_fresh(0.0)
 
     def all_fresh(self, within):
         """Every agent's last pose is at most ``within`` simulated seconds behind the newest."""
@@ -288,7 +302,7 @@ def _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, s
     below_since = None
     stop_sent = 0.0
     # in realtime the monitor's diameter covers the agents it heard; require all of them, in step
-    fresh = args.peer_timeout * args.time_scale if args.mode == "realtime" else 0.0
+    fresh = args.peer_timeout * args.time_scale if args.mode == "realtime" else 1.5 * the_plan.dt
     rate_mark = None
     rps = 0.0
     started = args.mode != "realtime"
@@ -309,6 +323,9 @@ def _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, s
             detail = " | ".join(line for line in c.tail(3) if line.strip())
             return 1, f"{c.name} (pid {c.pid}) exited with code {c.poll()}: {detail}"
         if all(c.poll() == 0 for c in children):
+            drain = time.monotonic() + 2.0          # take the last poses still in flight
+            while time.monotonic() < drain and not watcher.in_step():
+                watcher.spin(0.05)
             progress.done()
             return 0, ""
         if time.monotonic() > deadline:
@@ -359,6 +376,13 @@ def _summary(args, scene, the_plan, final, children, monitor, wall, quiet):
         for line in monitor.lines:
             if line.startswith("monitor:"):
                 print(line)
+    if args.save:
+        data = {"t": final.t, "origin": scene.origin}
+        for gi, gs in enumerate(final.groups):
+            data[f"group{gi}_centroids"] = gs.x + scene.origin
+            data[f"group{gi}_rotations"] = scene.model.rotations.to_matrices(gs.rot)
+        np.savez(args.save, **data)
+        print(f"final poses (as received on the pose topics) saved to {args.save}")
     if args.mode == "lockstep" and args.compare:
         ref = simulate(replace(scene, t_end=final.t), the_plan.name, the_plan.dt, samples=[final.t],
                        keep_states=False, metrics=False)
@@ -400,5 +424,6 @@ def add_parser(sub):
     p.add_argument("--no-monitor", dest="monitor", action="store_false", help="do not start the monitor")
     p.add_argument("--no-compare", dest="compare", action="store_false",
                    help="lockstep: skip the comparison with the centralised simulation")
+    p.add_argument("--save", metavar="NPZ", help="save the final poses received from the agents (npz)")
     p.add_argument("--quiet", "-q", action="store_true")
     p.set_defaults(func=cmd_run)

@@ -229,6 +229,10 @@ def qos_profiles():
         # have matched every expected reader (TRANSIENT_LOCAL halves the round rate here)
         "stage": QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=16, reliability=ReliabilityPolicy.RELIABLE,
                             durability=DurabilityPolicy.VOLATILE),
+        # stage readers keep every sample: a flood on a peer's topic can then never evict the
+        # peer's real message before it is taken (it only blocks the flooding writer)
+        "stage_in": QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                               durability=DurabilityPolicy.VOLATILE),
         # poses: the monitor must see every lockstep pose; echo and RViz match RELIABLE/VOLATILE
         "pose": QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.VOLATILE),

@@ -7,6 +7,7 @@ import pytest
 
 from polymatch_ros.core import METHODS, StabilityError, System, simulate, with_representation
 from polymatch_ros.core.metrics import ensemble_metrics
+from polymatch_ros.core.model import GroupState
 
 from core_testlib import defect, make_scene, rot_matrices, skew_matrices, state_error
 
@@ -55,7 +56,6 @@ def test_projection_baseline_keeps_so_d_while_plain_euler_drifts_lemma_2_1():
     system = System(scene.model)
     o = np.array(scene.initial.groups[0].rot)
     for _ in range(200):
-        from polymatch_ros.core.model import GroupState
         coupling = system.couple((GroupState(None, o),))
         o = o + 0.01 * system.rotation_rate(0, o, coupling) @ o
     assert defect(o) > 1e-4
@@ -166,23 +166,11 @@ def _angle_vs_matrix(method, dt, order=1):
     return max(state_error(scene, a.final, full, b.final).values())
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG (so.py): the 2-D angle model retracts with exp (theta + xi) but SOn(2) with the Cayley map, "
-    "so the 'matrix' reduction is a different discrete scheme: trajectories differ by O(dt^p) "
-    "truncation error, not round-off"))
-@pytest.mark.parametrize("method", ["lie_euler", "rkmk4"])
-def test_angle_reduction_same_trajectory_as_matrix_model_A_2(method):
-    assert _angle_vs_matrix(method, 0.05) <= 1e-12
-
-
-@pytest.mark.parametrize("order", [1, 2])
-@pytest.mark.parametrize("method", ["lie_euler", "lie_heun", "rkmk4"])
-def test_angle_reduction_converges_to_matrix_model_A_1_A_2(method, order):
-    """Both representations discretise the same ODE: their difference vanishes at the method's order."""
-    p = METHODS[method].info.order
-    e1, e2 = _angle_vs_matrix(method, 0.05, order), _angle_vs_matrix(method, 0.025, order)
-    assert e1 < 1e-3
-    assert np.log2(e1 / e2) >= p - 0.3
+@pytest.mark.parametrize("method,order", [("lie_euler", 1), ("rkmk4", 1), ("rkmk4", 2), ("etd2", 2),
+                                          ("lie_verlet", 2)])
+def test_angle_reduction_same_trajectory_as_matrix_model_A_1_A_2(method, order):
+    """Model only what the scene requires: 2-D angles are the full 2x2 model, to round-off."""
+    assert _angle_vs_matrix(method, 0.05, order) <= 1e-12
 
 
 # ---------------------------------------------------------------------------------------------
@@ -196,18 +184,15 @@ def test_adaptive_dop853_lie_accuracy_and_orthogonality_lemma_2_1(order):
     ada = simulate(scene, "adaptive", tolerance=1e-10, samples=[0.0, 2.5, 5.0])
     assert ada.final.t == pytest.approx(5.0)
     assert ada.steps > 3 and ada.rhs_evals > ada.steps
-    ref = simulate(scene, "rkmk4", 0.005, samples=[0.0], keep_states=False, metrics=False)
+    ref = simulate(scene, "rkmk4", 0.01, samples=[0.0], keep_states=False, metrics=False)
     err = state_error(scene, ada.final, scene, ref.final)
     assert max(err.values()) <= 1e-8, err
     for st in ada.states:
         assert defect(rot_matrices(scene.model.rotations, st.groups[0].rot)) <= 1e-14
     # and it is much cheaper than the fixed-step reference
-    assert ada.rhs_evals < 4 * 1000 / 2
+    assert ada.rhs_evals < 4 * 500 / 2
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG (simulate.py, adaptive branch): integrates only up to the last requested sample time, "
-    "while fixed-step runs always reach t_end; Trajectory.final is at t = max(samples)"))
 def test_adaptive_final_state_at_t_end_like_fixed_step_theorem_4_2():
     scene = make_scene(2, 1, count=4, seed=5, t_end=5.0)
     fixed = simulate(scene, "rkmk4", 0.05, samples=[0.0, 1.0], keep_states=False, metrics=False)
@@ -221,7 +206,7 @@ def test_adaptive_final_state_at_t_end_like_fixed_step_theorem_4_2():
 
 
 def _stiff_pair(dt=0.01):
-    kw = dict(count=5, seed=7, kappa=1.5, gamma=2.0, t_end=4.0, samples={"every": 0.1}, dt=dt)
+    kw = dict(count=5, seed=7, kappa=1.5, gamma=2.0, t_end=2.0, samples={"every": 0.1}, dt=dt)
     return make_scene(3, 2, mass=1e-8, **kw), make_scene(3, 1, **kw)
 
 
@@ -263,8 +248,8 @@ def test_etd2_stiff_mass_tends_to_first_order_model_A_2():
     for dt in (0.01, 0.005):
         a = simulate(second, "etd2", dt)
         b = simulate(first, "rkmk4", dt)
-        assert len(a.diameters) == len(b.diameters) == 41
-        assert a.diameters[-1] < 0.5 * a.diameters[0]           # something happened
+        assert len(a.diameters) == len(b.diameters) == 21
+        assert a.diameters[-1] < 0.6 * a.diameters[0]           # something happened
         diam = float(np.max(np.abs(a.diameters - b.diameters)))
         err = state_error(second, a.final, first, b.final)
         assert diam < 1e-3 and err["rot"] < 1e-3

@@ -201,31 +201,32 @@ class _Reference:
 
 # -- the benchmark ----------------------------------------------------------------------------
 
-def _measure(label, sc, scene, tol, times, ref_dense, ref, repeats):
-    """One row: wall/evals/error on the sample times (A) and on the solver's own steps (B)."""
+def _runs(sc, scene, tol, times):
+    """One timed run A (outputs at ``times``) and one timed run B (final state only)."""
+    import numpy as np
+    if sc is None:
+        return _scipy_run(scene, tol, times), _scipy_run(scene, tol, None)
+    return (_core_run(sc, times, "adaptive", tolerance=tol),
+            _core_run(sc, np.array([0.0, scene.t_end]), "adaptive", tolerance=tol))
+
+
+def _row(label, sc, scene, tol, runs, ref_dense, ref):
+    """Wall/evals/error on the sample times (A) and on the solver's own steps (B) from timed runs."""
     import numpy as np
     r_verts = scene.model.groups[0].reference
-    end = np.array([0.0, scene.t_end])
-    dense_w, end_w = [], []
-    for _ in range(repeats):
-        if sc is None:
-            w, sol = _scipy_run(scene, tol, times)
-            w_end, sol_end = _scipy_run(scene, tol, None)
-        else:
-            w, traj = _core_run(sc, times, "adaptive", tolerance=tol)
-            w_end, traj_end = _core_run(sc, end, "adaptive", tolerance=tol)
-        dense_w.append(w)
-        end_w.append(w_end)
+    dense_w = [a[0] for a, _ in runs]
+    end_w = [b[0] for _, b in runs]
+    (_, out), (_, out_end) = runs[-1]
     n, d = scene.model.n_agents, scene.dim
     if sc is None:
-        c, m = unflatten(sol.y, n, d)
-        evals, steps = sol.nfev, len(sol_end.t) - 1       # t_eval does not change scipy's steps
-        own_t = sol_end.t
-        own_c, own_m = unflatten(sol_end.y, n, d)
-        evals_end, steps_end = sol_end.nfev, len(sol_end.t) - 1
+        c, m = unflatten(out.y, n, d)
+        evals, steps = out.nfev, len(out_end.t) - 1       # t_eval does not change scipy's steps
+        own_t = out_end.t
+        own_c, own_m = unflatten(out_end.y, n, d)
+        evals_end, steps_end = out_end.nfev, len(out_end.t) - 1
     else:
-        _, c, m = _core_arrays(traj)
-        evals, steps, evals_end, steps_end = traj.rhs_evals, traj.steps, traj_end.rhs_evals, traj_end.steps
+        _, c, m = _core_arrays(out)
+        evals, steps, evals_end, steps_end = out.rhs_evals, out.steps, out_end.rhs_evals, out_end.steps
         try:
             own_t, own_c, own_m = _core_own_steps(sc, tol)
         except (AttributeError, TypeError, ValueError):   # AdaptiveLie._attempt changed: B error unknown
@@ -250,9 +251,9 @@ def _target_rows(results, solvers, target, wall_key, err_key, evals_key):
         if ok:
             b = max(ok, key=lambda r: r["tol"])
             rows.append([label, f"{b['tol']:.0e}", f"{b[err_key]:.1e}", fmt_ms(b[wall_key]), b[evals_key],
-                         fmt_ms(interp) if interp else "-"])
+                         f"{b[wall_key] / b[evals_key] * 1e6:.1f}", fmt_ms(interp) if interp else "-"])
         else:
-            rows.append([label, "none in the sweep", "-", "-", "-", fmt_ms(interp) if interp else "-"])
+            rows.append([label, "none in the sweep", "-", "-", "-", "-", fmt_ms(interp) if interp else "-"])
     return rows
 
 
@@ -287,11 +288,16 @@ def run(args, log):
 
     solvers = {"ours (angle)": scene, "ours (matrix, Cayley)": with_representation(scene, "matrix"),
                "scipy DOP853": None}
-    results = []
-    for label, sc in solvers.items():
-        for tol in tols:
-            log(f"dop853: {label}, tol {tol:g}, {repeats} repeats")
-            results.append(_measure(label, sc, scene, tol, times, ref_dense, ref, repeats))
+    rows_by = {}
+    for tol in tols:
+        log(f"dop853: tol {tol:g}, {repeats} interleaved repeats of every solver")
+        runs = {label: [] for label in solvers}
+        for _ in range(repeats):           # round-robin: a burst of machine load hits every solver alike
+            for label, sc in solvers.items():
+                runs[label].append(_runs(sc, scene, tol, times))
+        for label, sc in solvers.items():
+            rows_by[label, tol] = _row(label, sc, scene, tol, runs[label], ref_dense, ref)
+    results = [rows_by[label, tol] for label in solvers for tol in tols]
 
     report.text(f"Scene `{scene.name}`: d = {scene.dim}, N = {scene.model.n_agents}, first-order model (A-2), "
                 f"t_end = {scene.t_end:g}.  Error = max over time and all vertices of |x^i_a - x^i_a(ref)|: "
@@ -309,13 +315,15 @@ def run(args, log):
                   f"A: max err ({n_samples} times)", f"B: wall ms, best of {repeats}", "B: median ms",
                   "B: evals", "B: steps", "B: max err (own steps)", "orth. defect"], rows,
                  caption=f"Tolerance sweep. A: outputs at {n_samples} sample times; B: final state only "
-                         "(error on its own steps). orth. defect: max_i |O_i^T O_i - I|_F at t_end")
+                         "(error on its own steps); repeats interleaved across solvers. "
+                         "orth. defect: max_i |O_i^T O_i - I|_F at t_end")
 
     if any(r["err_own"] != r["err_own"] for r in results):
         report.text("**B errors of ours are nan: recording the accepted steps relies on "
                     "AdaptiveLie._attempt(system, y, h, k0) -> (state, rates, err), which has changed.**")
     target = args.target
-    header = ["solver", "loosest tol", "its max error", "wall ms (best)", "rhs evals", "wall ms interpolated"]
+    header = ["solver", "loosest tol", "its max error", "wall ms (best)", "rhs evals", "µs/eval",
+              "wall ms interpolated"]
     report.table(header, _target_rows(results, solvers, target, "wall_end", "err_own", "evals_end"),
                  caption=f"Cheapest run with max error <= {target:.0e}, B (final state only, error on own steps)")
     report.table(header, _target_rows(results, solvers, target, "wall", "err", "evals"),

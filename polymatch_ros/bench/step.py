@@ -67,7 +67,7 @@ def _consecutive(meth, scene, dt, steps, repeats):
 def _prepare(scene, meth):
     """Projection baselines need matrices where the default representation is angles (d = 2)."""
     from ..core import with_representation
-    if meth.info.family == "projection" and scene.model.rotations.abelian:
+    if meth.info.family == "projection" and scene.model.rotations.name == "angle":
         return with_representation(scene, "matrix")
     return scene
 

@@ -89,7 +89,7 @@ def decompose(vertex_sets, reference, *, similar=False, tol=1e-9, label="polytop
         bad = np.argwhere(~np.isfinite(v))
         if bad.size:
             raise ShapeError(f"{name}: vertex {bad[0][0]} has a non-finite coordinate ({v[tuple(bad[0])]})")
-        check_distinct_vertices(v, name)
+        check_distinct_vertices(v, name, ShapeError)
         sets.append(v)
     if not sets:
         return np.zeros((0, d)), np.zeros((0, d, d)), np.zeros(0)

@@ -200,7 +200,7 @@ class ProjectedRK(Method):
     def step(self, system, y, h):
         model = system.model
         grp = system.group
-        if grp.abelian:
+        if grp.name == "angle":
             raise TypeError(f"{self.name} needs the matrix representation of SO(2)")
         ks = []
         centroids = None

@@ -88,7 +88,7 @@ def vertex_points(grp, gs, reference, scales=None):
 
 
 def orthogonality_defect(grp, g):
-    if grp.abelian:
+    if grp.name == "angle":           # angles are rotations by construction
         return 0.0
     mats = grp.to_matrices(g)
     gram = np.swapaxes(mats, 1, 2) @ mats

@@ -168,14 +168,14 @@ def check_vertex_array(value, path):
     return v
 
 
-def check_distinct_vertices(v, path):
-    """Reject coincident vertices (relative to the polytope's size)."""
+def check_distinct_vertices(v, path, error=SceneError):
+    """Reject coincident vertices (relative to the polytope's size) with ``error``."""
     size = np.max(np.linalg.norm(v - v.mean(axis=0), axis=1))
     if size == 0.0:
-        raise SceneError(f"{path}: all {len(v)} vertices coincide")
+        raise error(f"{path}: all {len(v)} vertices coincide")
     diff = np.linalg.norm(v[:, None, :] - v[None, :, :], axis=2)
     diff[np.diag_indices(len(v))] = np.inf
     a, b = np.unravel_index(np.argmin(diff), diff.shape)
     if diff[a, b] <= 1e-12 * size:
-        raise SceneError(f"{path}: vertices {min(a, b)} and {max(a, b)} coincide "
+        raise error(f"{path}: vertices {min(a, b)} and {max(a, b)} coincide "
                          f"(distance {diff[a, b]:.3g}, polytope size {size:.3g})")

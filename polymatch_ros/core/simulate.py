@@ -106,7 +106,7 @@ def plan(scene, method=None, dt=None, tolerance=None, distributed=False, check=T
 
 def prepare(scene, plan_):
     """Scene in the representation the method needs (projection baselines work on matrices)."""
-    if plan_.method.info.family == "projection" and scene.model.rotations.abelian:
+    if plan_.method.info.family == "projection" and scene.model.rotations.name == "angle":
         return with_representation(scene, "matrix")
     return scene
 
@@ -183,7 +183,8 @@ def simulate(scene, method=None, dt=None, tolerance=None, *, samples=None, keep_
                     if record(state):
                         break
             else:
-                state = plan_.method.integrate(system, state, times[times > 0], record)
+                ends = np.union1d(times[times > 0], [scene.t_end])   # always reach t_end, like fixed steps
+                state = plan_.method.integrate(system, state, ends, record)
         traj.steps, traj.rhs_evals = plan_.method.steps, plan_.method.nfev
     else:
         grid = step_grid(scene.t_end, plan_.dt)

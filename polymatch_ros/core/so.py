@@ -383,7 +383,7 @@ class SO3(RotationGroup):
 
 
 class SOn(RotationGroup):
-    """SO(d) for any d >= 2 as (N, d, d) matrices, with the Cayley map.
+    """SO(d) for any d >= 2 as (N, d, d) matrices, with the Cayley map (exp for d = 2).
 
     cay(W) = (I - W/2)^{-1} (I + W/2),   dcay^{-1}_W(A) = (I - W/2) A (I + W/2).
     Both are exact and need no matrix exponential, which is what makes a
@@ -391,13 +391,16 @@ class SOn(RotationGroup):
     """
 
     name = "matrix"
-    retraction = "cayley"
 
     def __init__(self, dim):
         if dim < 2:
             raise ValueError("dimension must be >= 2")
         self.dim = dim
         self._eye = np.eye(dim)
+        # SO(2) is abelian with a closed-form exp: use it, so this full matrix model runs
+        # the same discrete scheme as the angle representation
+        self.abelian = dim == 2
+        self.retraction = "exp" if dim == 2 else "cayley"
 
     def identity(self, n):
         return np.repeat(self._eye[None], n, axis=0)
@@ -445,10 +448,16 @@ class SOn(RotationGroup):
         return a * np.asarray(c)[:, None, None]
 
     def retract(self, xi, g):
+        if self.dim == 2:
+            c, s = np.cos(xi[:, 1, 0]), np.sin(xi[:, 1, 0])
+            rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+            return rot @ g
         half = 0.5 * xi
         return np.linalg.solve(self._eye - half, (self._eye + half) @ g)
 
     def dpsi_inv(self, xi, a):
+        if self.dim == 2:
+            return a
         half = 0.5 * xi
         return (self._eye - half) @ a @ (self._eye + half)
 

@@ -1,0 +1,113 @@
+"""`polymatch echo TOPIC`: a launch-free stand-in for `ros2 topic echo` (ros2cli is not on PyPI).
+
+    polymatch echo /polymatch/diameter                     print every value, YAML-like
+    polymatch echo /polymatch/diameter --until-below 1e-6  exit 0 once a value is below 1e-6
+    polymatch echo /diagnostics --count 3
+
+The message type is read from the ROS graph (like ros2 topic echo) and the
+subscription adopts the publisher's durability, so a late echo of a latched
+topic still prints its last value.  It runs in the caller's ROS environment
+(ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE) and ends by itself: after
+--count messages, --until-below, or --timeout seconds (exit 1 on timeout).
+"""
+
+import importlib
+import sys
+import time
+
+from .core.errors import ParameterError, PolymatchError
+
+
+def message_to_lines(msg, indent=""):
+    """A YAML-like rendering of a ROS message (nested fields, arrays shortened)."""
+    lines = []
+    for name in msg.get_fields_and_field_types():
+        value = getattr(msg, name)
+        if hasattr(value, "get_fields_and_field_types"):
+            lines.append(f"{indent}{name}:")
+            lines.extend(message_to_lines(value, indent + "  "))
+        elif isinstance(value, (list, tuple)) or (hasattr(value, "__len__") and not isinstance(value, str)):
+            items = list(value)
+            if items and hasattr(items[0], "get_fields_and_field_types"):
+                lines.append(f"{indent}{name}:")
+                for item in items:
+                    sub = message_to_lines(item, indent + "  ")
+                    lines.append(f"{indent}- {sub[0].strip()}" if sub else f"{indent}-")
+                    lines.extend(sub[1:])
+            else:
+                shown = ", ".join(repr(float(v)) if isinstance(v, float) else str(v) for v in items[:16])
+                more = ", ..." if len(items) > 16 else ""
+                lines.append(f"{indent}{name}: [{shown}{more}]")
+        elif isinstance(value, float):
+            lines.append(f"{indent}{name}: {value!r}")
+        else:
+            lines.append(f"{indent}{name}: {value}")
+    return lines
+
+
+def message_class(type_name):
+    """'std_msgs/msg/Float64' -> the Python class."""
+    pkg, _, cls = type_name.partition("/msg/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), cls)
+
+
+def echo(topic, count=None, until_below=None, timeout=None, stream=sys.stdout):
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    rclpy.init()
+    node = Node("polymatch_echo")
+    code = 1
+    try:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        infos = []
+        while not infos:
+            infos = node.get_publishers_info_by_topic(topic)
+            if deadline is not None and time.monotonic() > deadline:
+                raise PolymatchError(f"no publisher on {topic} within {timeout:g} s")
+            rclpy.spin_once(node, timeout_sec=0.1)
+        cls = message_class(infos[0].topic_type)
+        latched = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+        reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+        qos = QoSProfile(depth=10,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+                         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT)
+        seen = [0]
+        done = [False]
+
+        def receive(msg):
+            seen[0] += 1
+            stream.write("\n".join(message_to_lines(msg)) + "\n---\n")
+            stream.flush()
+            if count is not None and seen[0] >= count:
+                done[0] = True
+            if until_below is not None and hasattr(msg, "data") and float(msg.data) < until_below:
+                done[0] = True
+
+        node.create_subscription(cls, topic, receive, qos)
+        while not done[0]:
+            if deadline is not None and time.monotonic() > deadline:
+                raise PolymatchError(f"{topic}: stopped after {timeout:g} s and {seen[0]} message(s)"
+                                     + (f", none below {until_below:g}" if until_below is not None else ""))
+            rclpy.spin_once(node, timeout_sec=0.1)
+        code = 0
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return code
+
+
+def cmd_echo(args):
+    if not args.topic.startswith("/"):
+        raise ParameterError(f"topic must be absolute (start with /), got {args.topic!r}")
+    return echo(args.topic, args.count, args.until_below, args.timeout)
+
+
+def add_parser(sub):
+    p = sub.add_parser("echo", help="print messages of a topic (stand-in for `ros2 topic echo`)")
+    p.add_argument("topic")
+    p.add_argument("--count", type=int, help="exit after this many messages")
+    p.add_argument("--until-below", type=float, metavar="X", help="exit 0 once a Float64 value is below X")
+    p.add_argument("--timeout", type=float, help="give up after this many seconds (exit 1)")
+    p.set_defaults(func=cmd_echo)

@@ -1,0 +1,53 @@
+"""A rogue publisher for the robustness test: floods one agent's topics with bad messages.
+
+    python test/rogue_publisher.py ENSEMBLE AGENT SECONDS
+
+Sends, at ~100 Hz each: PoseStamped with NaN positions, PoseStamped with a quaternion of
+norm 2, and lockstep stage messages with NaN data or a foreign run id.  It is started by
+the test in the test's own ROS domain (loopback discovery) under `timeout`.
+"""
+
+import math
+import sys
+import time
+
+import rclpy
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from polymatch_ros import wire
+
+
+def main():
+    ensemble, agent, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+    rclpy.init()
+    node = Node("rogue")
+    qos = wire.qos_profiles()
+    pose = node.create_publisher(PoseStamped, wire.agent_topic(ensemble, agent, "pose"), qos["pose"])
+    stage = node.create_publisher(Float64MultiArray, wire.agent_topic(ensemble, agent, "stage"), qos["stage"])
+    end = time.monotonic() + seconds
+    k = 0
+    while time.monotonic() < end:
+        p = PoseStamped()
+        p.header.frame_id = "world"
+        p.header.stamp.sec = k
+        if k % 2:
+            p.pose.position.x = math.nan
+            p.pose.orientation.w = 1.0
+        else:
+            p.pose.orientation.w = 2.0                      # quaternion far from unit norm
+        pose.publish(p)
+        fields = [("x", [0.0, 0.0]), ("rot", [math.nan if k % 2 else 0.3])]
+        msg = wire.encode_stage(Float64MultiArray, MultiArrayDimension, 12345 if k % 2 == 0 else 0,
+                                agent, k, 0, 0, 0.0, fields)
+        stage.publish(msg)
+        k += 1
+        rclpy.spin_once(node, timeout_sec=0.01)
+    print(f"rogue: sent {k} bad poses and {k} bad stage messages", flush=True)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()

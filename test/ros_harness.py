@@ -1,0 +1,151 @@
+"""Launch-free helpers for the multi-process ROS tests.
+
+Every process started here runs with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST,
+a ROS_DOMAIN_ID reserved for the test alone (domain_coordinator), under
+`timeout -k`, and is ended by its own PID when the test finishes.  Fast DDS
+shared-memory segments left behind by processes a test SIGKILLs are removed
+afterwards (only new ones that no live process still maps).
+"""
+
+import contextlib
+import glob
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG = os.path.join(REPO, "config")
+PY = sys.executable
+
+
+def scene_path(name):
+    return os.path.join(CONFIG, name if name.endswith(".yaml") else name + ".yaml")
+
+
+def ros_available():
+    try:
+        import rclpy  # noqa: F401
+        return True
+    except ImportError:
+        return False
+
+
+needs_ros = pytest.mark.skipif(not ros_available(), reason="rclpy is not installed")
+
+
+def _mapped_shm():
+    held = set()
+    for maps in glob.glob("/proc/[0-9]*/maps"):
+        try:
+            with open(maps) as fh:
+                for line in fh:
+                    if "/dev/shm/" in line:
+                        held.add(line.split()[-1])
+        except OSError:
+            continue
+    return held
+
+
+class Ros:
+    """A test's private ROS world: one domain id, loopback discovery, processes ended by PID."""
+
+    def __init__(self, domain):
+        from polymatch_ros.ros_env import ros_environment
+        self.domain = domain
+        self.env = ros_environment(domain, base={k: v for k, v in os.environ.items()
+                                                 if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
+        assert self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+        self.procs = []
+        self.shm_before = set(glob.glob("/dev/shm/fastrtps_*"))
+
+    def start(self, argv, timeout, name=""):
+        """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file."""
+        log = open(os.path.join(os.environ.get("TMPDIR", "/tmp"),
+                                f"polymatch_test_{os.getpid()}_{len(self.procs)}.log"), "w+")
+        proc = subprocess.Popen(["timeout", "-k", "5", str(timeout)] + list(argv), env=self.env,
+                                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, cwd=REPO)
+        proc.log, proc.name = log, name
+        self.procs.append(proc)
+        return proc
+
+    def agent(self, scene, agent, timeout=120, **params):
+        return self.start(node_argv("agent_node", scene, agent=agent, **params), timeout, f"agent {agent}")
+
+    def monitor(self, scene, timeout=120, **params):
+        return self.start(node_argv("monitor_node", scene, **params), timeout, "monitor")
+
+    @staticmethod
+    def output(proc):
+        proc.log.flush()
+        proc.log.seek(0)
+        return proc.log.read()
+
+    @staticmethod
+    def wait(proc, timeout):
+        try:
+            return proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def kill(self, proc, sig=signal.SIGKILL):
+        """Signal one process by PID: the `timeout` wrapper's child too, for SIGKILL."""
+        if proc.poll() is None:
+            if sig == signal.SIGKILL:
+                for child in _children(proc.pid):
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(child, signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(proc.pid, sig)
+
+    def close(self):
+        for proc in self.procs:
+            if proc.poll() is None:
+                self.kill(proc, signal.SIGINT)
+        deadline = time.monotonic() + 5
+        for proc in self.procs:
+            left = max(0.1, deadline - time.monotonic())
+            if self.wait(proc, left) is None:
+                self.kill(proc, signal.SIGKILL)
+                self.wait(proc, 5)
+            proc.log.close()
+            with contextlib.suppress(OSError):
+                os.unlink(proc.log.name)
+        held = _mapped_shm()
+        for path in set(glob.glob("/dev/shm/fastrtps_*")) - self.shm_before:
+            if path not in held:
+                with contextlib.suppress(OSError):
+                    os.unlink(path)
+
+
+def _children(pid):
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as fh:
+            return [int(c) for c in fh.read().split()]
+    except OSError:
+        return []
+
+
+def node_argv(module, scene, **params):
+    argv = [PY, "-m", f"polymatch_ros.{module}", "--ros-args", "-p", f"scene:={scene_path(scene)}"]
+    for key, value in params.items():
+        if isinstance(value, (list, tuple)):
+            value = "[" + ",".join(map(str, value)) + "]"
+        elif isinstance(value, float):
+            value = repr(value)
+        argv += ["-p", f"{key}:={value}"]
+    return argv
+
+
+@pytest.fixture
+def ros():
+    from domain_coordinator import domain_id
+    with domain_id() as dom:
+        world = Ros(dom)
+        try:
+            yield world
+        finally:
+            world.close()

@@ -1,0 +1,130 @@
+"""Scene loading: initial data satisfy the paper's constraints; bad scenes give one-line key-path errors."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from polymatch_ros.core import SceneError, load_scene
+from polymatch_ros.core.shapes import polygon
+
+from core_testlib import defect, rot_matrices, skew_matrices
+
+CONFIG = Path(__file__).resolve().parent.parent / "config"
+TRI = polygon(3).vertices
+
+
+def _base(**over):
+    data = {"dimension": 2, "seed": 1, "model": {"order": 1, "kappa": 1.0, "gamma": 1.0},
+            "groups": [{"shape": "triangle", "count": 3}]}
+    for key, value in over.items():
+        data[key] = value
+    return data
+
+
+def _group(**kw):
+    g = {"shape": "triangle", "count": 3}
+    g.update(kw)
+    return g
+
+
+MODEL_CASES = [
+    ("model.order", _base(model={"order": 3})),
+    ("model.mass", _base(model={"order": 2, "mass": 0.0})),              # (A-1) needs m > 0
+    ("model.mass", _base(model={"order": 1, "mass": 0.5})),              # (A-2) has m = 0
+    ("model.gamma", _base(model={"order": 1, "gamma": 0.0})),            # (A-2) divides by gamma
+    ("model.kappa", _base(model={"kappa": -1.0})),
+    ("model.kappa", _base(model={"kappa": "nan"})),
+    ("model.representation", _base(model={"representation": "so3"})),
+    ("model.kapa", _base(model={"kapa": 1.0})),
+    ("dimension", _base(dimension=1)),
+]
+
+GROUP_CASES = [
+    ("groups", _base(groups=[])),
+    ("groups[0].count", _base(groups=[_group(count=0)])),
+    ("groups[0].count", _base(groups=[_group(count=2.5)])),
+    ("groups[0].rotations", _base(groups=[_group(rotations="sideways")])),
+    ("groups[0].rotations.within", _base(groups=[_group(rotations={"within": -1.0})])),
+    ("groups[0].rotations.matrices[0]", _base(groups=[_group(rotations={"matrices": [[[1, 0], [0, -1]]] * 3})])),
+    ("groups[1].shape", _base(groups=[_group(), _group(name="b", shape="dodecagonal-blob")])),
+    ("groups[0].shape", _base(groups=[_group(shape="tetrahedron")])),
+    ("groups[0].shape.vertices", _base(groups=[_group(shape={"vertices": [[0.0, 0.0]]})])),
+    ("groups[0].velocities", _base(groups=[_group(velocities={"angular": {"normal": 1.0}})])),
+    ("groups[0].scales.uniform", _base(groups=[_group(scales={"uniform": [-1.0, 2.0]})])),
+    ("groups[0].centroids.points", _base(groups=[_group(centroids={"points": [[0.0, 0.0]]})])),
+    ("groups[0].agents", _base(groups=[{"agents": [{"vertices": TRI.tolist()},
+                                                   {"vertices": (TRI * [1.0, -1.0]).tolist()}]}])),
+    ("groups[0].agents", _base(groups=[{"agents": [{"vertices": TRI.tolist()},
+                                                   {"vertices": (TRI * 1.2).tolist()}]}])),
+]
+
+RUN_CASES = [
+    ("integrator.dt", _base(integrator={"dt": -0.1})),
+    ("integrator.dt", _base(integrator={"dt": "fast"})),
+    ("integrator.tolerance", _base(integrator={"tolerance": 2.0})),
+    ("time.t_end", _base(time={"t_end": 0})),
+    ("time.samples", _base(time={"t_end": 5.0, "samples": [1.0, 9.0]})),
+]
+
+
+def _check(path, data):
+    with pytest.raises(SceneError) as exc:
+        load_scene(data)
+    msg = str(exc.value)
+    assert msg.startswith(path + ":"), msg
+    assert "\n" not in msg and len(msg) < 300
+    return msg
+
+
+@pytest.mark.parametrize("path,data", MODEL_CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(MODEL_CASES)])
+def test_scene_rejects_invalid_model_parameters_A_1_A_2(path, data):
+    _check(path, data)
+
+
+@pytest.mark.parametrize("path,data", GROUP_CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(GROUP_CASES)])
+def test_scene_rejects_invalid_polytope_groups_section_3(path, data):
+    msg = _check(path, data)
+    if "agents" in path:
+        assert ("mirror" in msg) or ("not congruent" in msg)
+
+
+@pytest.mark.parametrize("path,data", RUN_CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(RUN_CASES)])
+def test_scene_rejects_invalid_integration_settings_section_5(path, data):
+    _check(path, data)
+
+
+@pytest.mark.parametrize("path", sorted(CONFIG.glob("*.yaml")), ids=lambda p: p.stem)
+def test_config_initial_data_satisfy_constraints_B_4(path):
+    """O^{i0} in SO(d), O'^{i0} O^{i0 T} skew (B-4), centroids stored as offsets from their mean."""
+    scene = load_scene(path)
+    rep = scene.model.rotations
+    offsets = np.concatenate([gs.x for gs in scene.initial.groups])
+    np.testing.assert_allclose(offsets.mean(axis=0), 0.0, atol=1e-12)
+    for g, gs in zip(scene.model.groups, scene.initial.groups):
+        mats = rot_matrices(rep, gs.rot)
+        assert mats.shape == (g.size, scene.dim, scene.dim)
+        assert defect(mats) <= 1e-12
+        assert np.all(np.linalg.det(mats) > 0)
+        np.testing.assert_allclose(g.reference.mean(axis=0), 0.0, atol=1e-12)   # sum_a r_a = 0
+        if scene.model.order == 2:
+            w = skew_matrices(rep, gs.w)
+            np.testing.assert_allclose(w + np.swapaxes(w, 1, 2), 0.0, atol=0)
+            assert gs.v.shape == gs.x.shape
+        else:
+            assert gs.v is None and gs.w is None                                # (A-2) carries no velocities
+
+
+def test_explicit_vertices_round_trip_section_3():
+    """A scene given by explicit vertices recovers x^i_a = xbar^i + O^i r_a exactly."""
+    rng = np.random.default_rng(4)
+    angles = rng.uniform(-np.pi, np.pi, 4)
+    cents = rng.normal(scale=3.0, size=(4, 2))
+    verts = [c + TRI @ np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]).T for a, c in zip(angles, cents)]
+    scene = load_scene(_base(groups=[{"shape": {"vertices": TRI.tolist()},
+                                      "agents": [{"vertices": v.tolist()} for v in verts]}]))
+    gs = scene.initial.groups[0]
+    mats = rot_matrices(scene.model.rotations, gs.rot)
+    ref = scene.model.groups[0].reference
+    rebuilt = scene.origin + gs.x[:, None, :] + np.einsum("nij,aj->nai", mats, ref)
+    np.testing.assert_allclose(rebuilt, np.array(verts), atol=1e-12)

@@ -1,0 +1,58 @@
+"""Realtime mode: wall-clock agents with the latest peer poses converge, survive a killed peer,
+and re-admit it when it comes back (Theorem 4.2 under delays and churn)."""
+
+import re
+import time
+
+from ros_harness import PY, needs_ros
+
+pytestmark = needs_ros
+
+SCENE = "congruent_triangles"
+N = 8
+
+
+def _heard(text):
+    """(heard, diameter, below?) for every monitor diagnostics message printed so far."""
+    out = []
+    for m in re.finditer(r"matching diameter ([0-9.e+-]+) \((below|above) tolerance [^)]*\); (\d+)/8 agents heard",
+                         text):
+        out.append((int(m.group(3)), float(m.group(1)), m.group(2) == "below"))
+    return out
+
+
+def _wait_for(ros, proc, predicate, timeout):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate(_heard(ros.output(proc))):
+            return True
+        time.sleep(0.2)
+    return False
+
+
+def test_realtime_converges_survives_sigkill_and_rejoin_theorem_4_2(ros):
+    start = time.time() + 10.0                      # every process is up well before t = 0
+    common = dict(mode="realtime", time_scale=3.0, start_time=start, t_end=90.0, peer_timeout=1.0)
+    ros.monitor(SCENE, mode="realtime", rate=5.0, peer_timeout=1.0, t_end=90.0)
+    agents = [ros.agent(SCENE, i, **common) for i in range(N)]
+    diag = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/diagnostics", "--timeout", "80"], timeout=90)
+
+    # all eight run and are heard
+    assert _wait_for(ros, diag, lambda h: any(n == 8 for n, _, _ in h), 25), ros.output(diag)[-2000:]
+    time.sleep(max(0.0, start + 3.0 - time.time()))            # t = 9: mid-run
+    ros.kill(agents[5])                                       # SIGKILL, no goodbye
+    marked = len(_heard(ros.output(diag)))
+    # the monitor reports one agent fewer, and the others keep converging
+    assert _wait_for(ros, diag, lambda h: any(n == 7 for n, _, _ in h[marked:]), 10), ros.output(diag)[-2000:]
+    seven = [d for n, d, _ in _heard(ros.output(diag))[marked:] if n == 7]
+    time.sleep(2.0)
+    seven = [d for n, d, _ in _heard(ros.output(diag))[marked:] if n == 7]
+    assert len(seven) >= 3 and seven[-1] < seven[0], seven
+    assert all(a.poll() is None for i, a in enumerate(agents) if i != 5), "the survivors keep running"
+
+    # restart agent 5: it rejoins (from its initial state, on the shared clock) and matches
+    marked = len(_heard(ros.output(diag)))
+    agents[5] = ros.agent(SCENE, 5, **common)
+    assert _wait_for(ros, diag, lambda h: any(n == 8 for n, _, _ in h[marked:]), 20), ros.output(diag)[-2000:]
+    assert _wait_for(ros, diag, lambda h: any(n == 8 and below for n, _, below in h[marked:]), 45), \
+        ros.output(diag)[-3000:]

@@ -1,0 +1,115 @@
+"""Bad input from the network or the command line never poisons the ensemble.
+
+- a rogue publisher on an agent's pose and stage topics (NaN, non-unit quaternions,
+  foreign run ids) changes nothing in a lockstep result, and the drops are counted;
+- bad ROS parameters are one line and exit code 2;
+- the package builds with colcon (from PyPI) in a scratch workspace and the installed
+  `agent` and `monitor` executables start; a one-agent scene runs to t_end.
+"""
+
+import os
+import re
+import signal
+import subprocess
+import textwrap
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.simulate import simulate
+
+from ros_harness import PY, REPO, needs_ros, node_argv, scene_path
+
+pytestmark = needs_ros
+
+
+def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
+    rogue = ros.start([PY, os.path.join(REPO, "test", "rogue_publisher.py"), "polymatch", "3", "60"], timeout=70)
+    time.sleep(2.0)
+    out = tmp_path / "final.npz"
+    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path("congruent_triangles"), "--t-end", "1.0",
+                      "--integrator", "rkmk4", "--no-compare", "--save", str(out), "--timeout", "150", "-q"],
+                     timeout=180)
+    rc = ros.wait(proc, 190)
+    text = ros.output(proc)
+    assert rc in (0, 3), text
+    assert rogue.poll() is None, "the rogue must still be sending when the run ends"
+    scene = load_scene(scene_path("congruent_triangles"))
+    data = np.load(out)
+    traj = simulate(replace(scene, t_end=1.0), "rkmk4", 0.05, samples=[1.0], metrics=False)
+    want = scene.model.rotations.to_matrices(traj.final.groups[0].rot)
+    assert np.max(np.abs(data["group0_rotations"] - want)) <= 1e-12
+    assert np.max(np.abs(data["group0_centroids"] - (traj.final.groups[0].x + scene.origin))) <= 1e-12
+    # every agent of the group listens to agent 3's stages: each dropped the rogue's
+    drops = re.findall(r"^agent (\d+): finished.*; dropped (\d+) messages \((.*)\)$", text, re.M)
+    assert len(drops) >= 7, text
+    reasons = " ".join(d[2] for d in drops)
+    assert "non-finite value" in reasons and "unknown sender (run id)" in reasons
+    mon = re.search(r"^monitor: .*dropped (\d+) messages \((.*)\)$", text, re.M)
+    assert mon and "quaternion far from unit norm" in mon.group(2) and "non-finite value" in mon.group(2), text
+
+
+@pytest.mark.parametrize("params,expect", [
+    ({"agent": 99}, "agent 99 is not in the scene"),
+    ({"mode": "fast"}, "expected lockstep or realtime"),
+    ({"dt": "abc"}, "expected a number"),
+    ({"rate": -5.0}, "out of range"),
+    ({"integrator": "rk45"}, "unknown integrator"),
+])
+def test_bad_agent_parameter_is_one_line_and_exit_code_2(ros, params, expect):
+    proc = ros.start(node_argv("agent_node", "congruent_triangles", **params), timeout=60)
+    assert ros.wait(proc, 70) == 2
+    text = ros.output(proc).strip()
+    assert len(text.splitlines()) == 1 and expect in text and "Traceback" not in text, text
+
+
+def test_missing_scene_is_one_line_and_exit_code_2(ros):
+    proc = ros.start([PY, "-m", "polymatch_ros.monitor_node", "--ros-args", "-p", "scene:=/nonexistent.yaml"],
+                     timeout=60)
+    assert ros.wait(proc, 70) == 2
+    text = ros.output(proc).strip()
+    assert len(text.splitlines()) == 1 and "no such scene file" in text
+
+
+ONE_AGENT = textwrap.dedent("""\
+    name: one_agent
+    dimension: 3
+    model: {order: 1}
+    integrator: {method: rkmk4, dt: 0.1}
+    time: {t_end: 2.0}
+    groups:
+      - {name: solo, shape: tetrahedron, count: 1}
+    """)
+
+
+def test_colcon_build_and_installed_executables_start(ros, tmp_path):
+    colcon = os.path.join(os.path.dirname(PY), "colcon")
+    if not os.path.exists(colcon):
+        pytest.skip("colcon is not installed in this environment")
+    ws = tmp_path / "ws"
+    ws.mkdir()
+    build = subprocess.run(["timeout", "-k", "5", "300", colcon, "build", "--base-paths", REPO,
+                            "--build-base", str(ws / "build"), "--install-base", str(ws / "install")],
+                           cwd=ws, capture_output=True, text=True)
+    assert build.returncode == 0, build.stdout + build.stderr
+    prefix = ws / "install" / "polymatch_ros"
+    exe = prefix / "lib" / "polymatch_ros"
+    assert (exe / "agent").exists() and (exe / "monitor").exists()
+    assert (prefix / "share" / "polymatch_ros" / "config" / "congruent_triangles.yaml").exists()
+    site = prefix / "lib" / "python3.11" / "site-packages"
+    ros.env["PYTHONPATH"] = str(site)
+    ros.env["AMENT_PREFIX_PATH"] = f"{prefix}:{ros.env.get('AMENT_PREFIX_PATH', '')}"
+    scene = tmp_path / "one_agent.yaml"
+    scene.write_text(ONE_AGENT)
+    agent = ros.start([str(exe / "agent"), "--ros-args", "-p", f"scene:={scene}", "-p", "agent:=0"], timeout=60)
+    assert ros.wait(agent, 70) == 0, ros.output(agent)
+    assert "agent 0: finished at t = 2 after 20 steps" in ros.output(agent)
+    # a shipped scene by name, found through the ament index of the colcon install
+    monitor = ros.start([str(exe / "monitor"), "--ros-args", "-p", "scene:=congruent_triangles"], timeout=60)
+    time.sleep(4.0)
+    assert monitor.poll() is None, ros.output(monitor)
+    ros.kill(monitor, signal.SIGINT)
+    assert ros.wait(monitor, 20) == 0, ros.output(monitor)
