@@ -86,7 +86,7 @@ class Model:
         raise IndexError(f"agent {agent} is not in the scene (0..{self.n_agents - 1})")
 
 
-@dataclass
+@dataclass(slots=True)
 class GroupState:
     """Rows of one group: centroid offsets x (n, d), rotations, and velocities (second order)."""
 
@@ -96,7 +96,7 @@ class GroupState:
     w: object = None
 
 
-@dataclass
+@dataclass(slots=True)
 class State:
     """An ensemble (or an agent's local rows of it) at time t.
 
@@ -109,7 +109,7 @@ class State:
     coupling: object = field(default=None, repr=False)
 
 
-@dataclass
+@dataclass(slots=True)
 class Request:
     """A stage whose mean field is needed: the driver answers with the ensemble's arrays."""
 
@@ -118,7 +118,7 @@ class Request:
     fields: tuple
 
 
-@dataclass
+@dataclass(slots=True)
 class GroupCoupling:
     """What agent i needs from its group: S, N, and the centroid mean (and mean velocity)."""
 
@@ -128,7 +128,7 @@ class GroupCoupling:
     mean_v: np.ndarray = None
 
 
-@dataclass
+@dataclass(slots=True)
 class Coupling:
     groups: tuple
     centroids: tuple = None        # every group's full centroid array (F-2 only)
@@ -239,6 +239,8 @@ class System:
         self.group = model.rotations
         self.rows = tuple(None for _ in model.groups) if rows is None else tuple(rows)
         self.flows = tuple(CentroidFlow(model.mass, model.gamma, model.kappa) for _ in model.groups)
+        # kappa/(2N) (second order) or kappa/(2 gamma N) (first order), N supplied per evaluation
+        self._rate_scale = model.kappa / 2.0 if model.order == 2 else model.kappa / (2.0 * model.gamma)
         self._inv_scales = []
         for g, r in zip(model.groups, self.rows):
             if g.scales is None:
@@ -274,26 +276,27 @@ class System:
     def couple(self, ensemble, first_stage=True):
         """Mean fields from full group arrays (a tuple of objects with .x, .rot, .v)."""
         m = self.model
+        grp = self.group
+        need_means = first_stage or m.inter_group
         out = []
         for g, e in zip(m.groups, ensemble):
             if e is None or e.rot is None:
                 out.append(None)
                 continue
-            n = self.group.count(e.rot)
-            s = self.group.mean_field(e.rot, None if g.scales is None else _ensemble_scales(g, e, n))
-            need_means = first_stage or m.inter_group
-            mean_x = _mean_rows(e.x) if need_means else None
-            mean_v = _mean_rows(e.v) if (need_means and m.order == 2) else None
-            out.append(GroupCoupling(s, n, mean_x, mean_v))
+            n = grp.count(e.rot)
+            s = grp.mean_field(e.rot, None if g.scales is None else _ensemble_scales(g, e, n))
+            if need_means:
+                out.append(GroupCoupling(s, n, _mean_rows(e.x), _mean_rows(e.v) if m.order == 2 else None))
+            else:
+                out.append(GroupCoupling(s, n))
         centroids = tuple(None if e is None else e.x for e in ensemble) if m.inter_group else None
         return Coupling(tuple(out), centroids)
 
     # -- local right-hand sides -----------------------------------------------
     def rotation_rate(self, gi, rot, coupling):
         """First order: W_i of (A-2)/(F-1).  Second order: the torque kappa/(2N)(S O^T - O S^T)[/s_i]."""
-        m = self.model
         c = coupling.groups[gi]
-        scale = m.kappa / (2.0 * c.n) if m.order == 2 else m.kappa / (2.0 * m.gamma * c.n)
+        scale = self._rate_scale / c.n
         rate = self.group.coupling(rot, c.s)
         inv = self._inv_scales[gi]
         if inv is not None:
@@ -321,13 +324,17 @@ class System:
         Centroid entries are None when centroids are solved exactly.
         """
         m = self.model
+        count = self.group.count
         out = []
         for gi, gs in enumerate(stage.groups):
-            if gs is None or self.group.count(gs.rot) == 0:
+            if gs is None or count(gs.rot) == 0:
                 out.append(None)
                 continue
             rate = self.rotation_rate(gi, gs.rot, coupling)
             if m.order == 1:
+                if m.centroids_exact:
+                    out.append((rate, None, None, None))
+                    continue
                 k_rot, k_w = rate, None
             else:
                 k_rot, k_w = gs.w, (rate - m.gamma * gs.w) / m.mass

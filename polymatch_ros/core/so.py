@@ -222,13 +222,24 @@ class SO2(RotationGroup):
     def dpsi_inv(self, xi, a):
         return a
 
+    _trig = (None, None, None)
+
+    def _cos_sin(self, g):
+        """cos and sin of the angles, reused when the mean field and the coupling see the same array."""
+        if self._trig[0] is not g:
+            self._trig = (g, np.cos(g), np.sin(g))
+        return self._trig[1], self._trig[2]
+
     def mean_field(self, g, weights=None):
-        z = np.exp(1j * g)
-        return complex(np.sum(z if weights is None else weights * z))
+        c, s = self._cos_sin(g)
+        if weights is None:
+            return complex(c.sum(), s.sum())
+        return complex(c @ weights, s @ weights)
 
     def coupling(self, g, s):
         # S R(theta)^T - R(theta) S^T = 2 Im(Z e^{-i theta}) J
-        return 2.0 * (s.imag * np.cos(g) - s.real * np.sin(g))
+        c, sn = self._cos_sin(g)
+        return 2.0 * (s.imag * c - s.real * sn)
 
     def tangent(self, a, g):
         raise TypeError("projection methods need a matrix representation; use SOn(2)")
