@@ -101,6 +101,8 @@ class AgentNode:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
         self.node = Node(_node_name(args), automatically_declare_parameters_from_overrides=False)
+        self.created = time.monotonic()
+        self.matched_after = None
         self.log = self.node.get_logger()
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
@@ -146,7 +148,8 @@ class AgentNode:
         self._make_publishers()
         if self.mode == "lockstep":
             rot_tol = 1e-9 if self.plan.method.info.family != "projection" else 0.5
-            self.exchange = LockstepExchange(self.node, self.layout, self.ensemble, p["run_id"], rot_tol, self.drops)
+            self.exchange = LockstepExchange(self.node.get_name() + "_stages", self.layout, self.ensemble,
+                                             p["run_id"], rot_tol, self.drops)
         else:
             self.peers = PeerTable(self.node, self.layout, self.ensemble, p["frame_id"], p["peer_timeout"],
                                    self.drops, scene.origin)
@@ -263,7 +266,10 @@ class AgentNode:
             peers_ok = (not need_peers) or self.exchange.matched()
             subs_ok = all(p.get_subscription_count() >= want for p in self.pose_pubs.values())
             if peers_ok and subs_ok:
+                self.matched_after = time.monotonic() - self.created
                 return
+            if need_peers:
+                self.exchange.spin_once(0.0)
             if time.monotonic() > deadline:
                 missing = self.exchange.missing_peers() if need_peers else []
                 what = f"agent(s) {', '.join(map(str, missing))}" if missing else "all subscribers"
@@ -286,8 +292,7 @@ class AgentNode:
             try:
                 request = next(gen)
                 while True:
-                    ensemble, stop_seen = self.exchange.round(k, stage, request, self.stop_requested,
-                                                              self.spin_once, timeout)
+                    ensemble, stop_seen = self.exchange.round(k, stage, request, self.stop_requested, timeout)
                     stop = stop or (request.boundary and stop_seen)
                     stage += 1
                     self.rounds += 1
@@ -299,6 +304,7 @@ class AgentNode:
             self.steps += 1
             self.round_time = time.monotonic() - start
             self.publish_state()
+            self.spin_once(0.0)               # the control topic (stop) and anything else on the node
             if stop:
                 break
         self.exchange.flush()
@@ -361,10 +367,14 @@ class AgentNode:
         text = self.run_lockstep() if self.mode == "lockstep" else self.run_realtime()
         self._maybe_diagnostics(force=True)
         names = ",".join(map(str, self.layout.local))
+        if self.matched_after is not None:
+            text += f"; peers matched after {self.matched_after:.2f} s"
         print(f"agent {names}: {text}; {self.drops.summary()}", flush=True)
         return 0
 
     def destroy(self):
+        if getattr(self, "exchange", None) is not None:
+            self.exchange.destroy()
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
 

@@ -88,24 +88,54 @@ def _blank_group(grp, n, dim, with_v):
                            v=np.zeros((n, dim)) if with_v else None, index=None)
 
 
-class LockstepExchange:
-    """Stage rounds: publish the local stage rows, wait for every peer's message of the same round."""
+def lean_node(name):
+    """A node with nothing but what the exchange adds: no parameter services, no rosout.
 
-    def __init__(self, node, layout, ensemble, run_id, rot_tol, drops):
+    rclpy's executor rebuilds its wait set from every entity of its nodes at each
+    spin, so the lockstep stages get a node (and an executor) of their own.
+    """
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    node = Node(name, start_parameter_services=False, enable_rosout=False)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    return node, executor
+
+
+def quiet_events():
+    """(publisher, subscription) event callbacks without rclpy's default QoS-event waitables."""
+    from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+    return (PublisherEventCallbacks(use_default_callbacks=False),
+            SubscriptionEventCallbacks(use_default_callbacks=False))
+
+
+class LockstepExchange:
+    """Stage rounds: publish the local stage rows, wait for every peer's message of the same round.
+
+    Runs on its own lean node and executor (``lean_node``); ``spin_once`` waits on
+    nothing but the peers' stage topics.
+    """
+
+    def __init__(self, name, layout, ensemble, run_id, rot_tol, drops):
         from std_msgs.msg import Float64MultiArray, MultiArrayDimension
         self._msg, self._dim = Float64MultiArray, MultiArrayDimension
-        self.node, self.layout, self.run_id, self.drops = node, layout, int(run_id), drops
+        self.node, self.executor = lean_node(name)
+        self.layout, self.run_id, self.drops = layout, int(run_id), drops
         self.model = layout.model
         self.grp = self.model.rotations
         self.rot_tol = rot_tol
+        pub_events, sub_events = quiet_events()
         qos = wire.qos_profiles()["stage"]
-        self.pubs = {a: node.create_publisher(Float64MultiArray, wire.agent_topic(ensemble, a, "stage"), qos)
+        self.pubs = {a: self.node.create_publisher(Float64MultiArray, wire.agent_topic(ensemble, a, "stage"), qos,
+                                                   event_callbacks=pub_events)
                      for a in layout.local}
         self.inbox = defaultdict(dict)            # agent -> {(step, stage): Stage}
         self.current = (0, 0)
         qos_in = wire.qos_profiles()["stage_in"]
-        self.subs = [node.create_subscription(Float64MultiArray, wire.agent_topic(ensemble, a, "stage"),
-                                              self._callback(a), qos_in) for a in layout.peers]
+        self.subs = [self.node.create_subscription(Float64MultiArray, wire.agent_topic(ensemble, a, "stage"),
+                                                   self._callback(a), qos_in, event_callbacks=sub_events)
+                     for a in layout.peers]
+        self._msgs = {}
 
     def _callback(self, agent):
         def receive(msg):
@@ -147,7 +177,10 @@ class LockstepExchange:
                                         flags, st.t, fields)
                 self.pubs[g.start + row].publish(msg)
 
-    def round(self, step, stage, request, stop_flag, spin_once, timeout):
+    def spin_once(self, timeout):
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def round(self, step, stage, request, stop_flag, timeout):
         """Publish, wait, assemble: returns (ensemble, stop requested by anyone)."""
         key = (step, stage)
         self.current = key
@@ -159,7 +192,7 @@ class LockstepExchange:
             if left <= 0:
                 raise RoundTimeout(f"lockstep round (step {step}, stage {stage}) timed out after {timeout:g} s "
                                    f"waiting for agent(s) {', '.join(map(str, waiting))}")
-            spin_once(min(left, 0.5))
+            self.executor.spin_once(timeout_sec=min(left, 0.5))
             waiting = [a for a in waiting if key not in self.inbox[a]]
         stop = stop_flag or any(self.inbox[a][key].flags & wire.FLAG_STOP for a in self.layout.peers)
         return self._assemble(key, request), stop
@@ -204,6 +237,10 @@ class LockstepExchange:
         from rclpy.duration import Duration
         for p in self.pubs.values():
             p.wait_for_all_acked(Duration(seconds=timeout))
+
+    def destroy(self):
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
 
 
 class PeerTable:

@@ -370,7 +370,7 @@ def _summary(args, scene, the_plan, final, children, monitor, wall, quiet):
     if rates:
         text += f", {np.mean(rates):.1f} rounds/s per agent (mean)"
     print(text)
-    for line in dropped:
+    for line in (agent_lines if args.verbose else dropped):
         print(line)
     if monitor is not None and args.mode == "lockstep":
         for line in monitor.lines:
@@ -426,4 +426,5 @@ def add_parser(sub):
                    help="lockstep: skip the comparison with the centralised simulation")
     p.add_argument("--save", metavar="NPZ", help="save the final poses received from the agents (npz)")
     p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
     p.set_defaults(func=cmd_run)

@@ -18,13 +18,17 @@ EXPECTED = {
                   "max abs diff"],
     "dop853": ["| solver", "rtol=atol", "A: max err", "B: max err (own steps)", "orth. defect",
                "ours (angle)", "ours (matrix, Cayley)", "scipy DOP853", "Cheapest run with max error"],
+    "precision": ["| method", "h or tol", "max error", "rhs evals", "orth. defect", "rkmk4", "lie_verlet",
+                  "adaptive (ours)", "RK45", "DOP853", "observed order", "Frontier", "cheapest (best wall)"],
+    "longhorizon": ["rel. energy drift up to", "growth p", "orth. defect up to", "lie_verlet", "refused (unstable)",
+                    "RK45", "DOP853", "adaptive (ours)"],
 }
 
 FAMILY_NAMES = [m.NAME for m in families()]
 
 
 def test_shipped_families_are_registered():
-    assert {"step", "meanfield", "dop853"} <= set(FAMILY_NAMES)
+    assert {"step", "meanfield", "dop853", "precision", "longhorizon"} <= set(FAMILY_NAMES)
 
 
 @pytest.mark.parametrize("name", FAMILY_NAMES)

@@ -3,6 +3,8 @@
     polymatch bench step         wall time of one integrator step (rkmk4 at N = 10,000, d = 3, ...)
     polymatch bench meanfield    mean field S = sum_k O_k against the naive O(N^2) double sum
     polymatch bench dop853       adaptive Lie DOP853 against scipy's DOP853 at a target error
+    polymatch bench precision    work-precision: every integrator and scipy, error over the run vs cost
+    polymatch bench longhorizon  orthogonality defect and energy drift (gamma = 0) after 10^5 steps
     polymatch bench all --out DIR   every family, one report DIR/report.md
 
 Benchmarks *report* figures (markdown tables on stdout; with ``--out DIR``
@@ -35,7 +37,7 @@ from .report import Report
 from .timing import machine_lines
 
 #: modules of this package that are helpers, not families
-HELPERS = frozenset({"report", "timing", "scenes", "options"})
+HELPERS = frozenset({"report", "timing", "scenes", "options", "flat"})
 
 
 def families():

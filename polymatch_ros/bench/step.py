@@ -32,8 +32,8 @@ def add_arguments(p):
     from .options import at_least, int_list
     p.add_argument("--n", type=at_least(1), default=10_000, help="agents for the headline table (default 10000)")
     p.add_argument("--dim", type=at_least(2), default=3, help="dimension for the headline table (default 3)")
-    p.add_argument("--sizes", type=int_list(1), default=[100, 1000, 10_000, 100_000],
-                   help="N values of the N x d table (default 100,1000,10000,100000)")
+    p.add_argument("--sizes", type=int_list(1), default=[10, 100, 1000, 10_000, 100_000],
+                   help="N values of the N x d table (default 10,100,1000,10000,100000)")
     p.add_argument("--dims", type=int_list(2), default=[2, 3, 4, 6, 10],
                    help="d values of the N x d table (default 2,3,4,6,10)")
     p.add_argument("--grid-order", type=int, choices=(1, 2), default=1, help="model order of the N x d table")
@@ -147,7 +147,7 @@ def grid(args, log, report):
     from .scenes import representation_label, timing_scene
     from .timing import fmt_ms, fmt_time, measure
 
-    sizes = [100, 1000] if args.quick else sorted(args.sizes)
+    sizes = [10, 100, 1000] if args.quick else sorted(args.sizes)
     dims = [2, 3, 4] if args.quick else args.dims
     max_repeats = args.repeats or (3 if args.quick else 15)
     cell_budget = 0.5 if args.quick else 2.0
