@@ -30,6 +30,17 @@ def polytope_segments(scene, state):
     return out
 
 
+def first_vertices(scene, state):
+    """Per group: (N, d) positions of every polytope's vertex 0, to show the vertex correspondence."""
+    model = scene.model
+    out = []
+    for g, gs in zip(model.groups, state.groups):
+        mats = model.rotations.to_matrices(gs.rot)
+        scales = np.ones(len(mats)) if g.scales is None else g.scales
+        out.append(gs.x + scene.origin + scales[:, None] * (mats @ g.reference[0]))
+    return out
+
+
 def snapshot_figure(traj, path, times=None):
     """Save a 1 x k row of snapshots (t = 0, 3, 6, 12 by default) of a trajectory to ``path``."""
     plt = _pyplot()
@@ -54,10 +65,11 @@ def snapshot_figure(traj, path, times=None):
             ax = fig.add_subplot(1, len(picks), k + 1)
         else:
             ax = fig.add_subplot(1, len(picks), k + 1, projection="3d")
-        for gi, segs in enumerate(polytope_segments(scene, st)):
+        for gi, (segs, first) in enumerate(zip(polytope_segments(scene, st), first_vertices(scene, st))):
             colour = COLOURS[gi % len(COLOURS)]
             for seg in segs:
                 ax.plot(*seg[:, :3].T, color=colour, lw=1.0, alpha=0.85)
+            ax.plot(*first[:, :3].T, "o", color=colour, ms=2.5)     # vertex a = 0: matched vertex for vertex
         for a in range(min(dim, 3)):
             getattr(ax, "set_" + "xyz"[a] + "lim")(centre[a] - half, centre[a] + half)
         if dim == 2:

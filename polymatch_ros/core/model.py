@@ -64,6 +64,9 @@ class Model:
     rotations: RotationGroup
     kappa_2: float = 0.0
     L: float = 0.0
+    #: "exact": decoupled centroids follow Proposition 2.1's closed form; "integrated": the
+    #: integrator's stages carry them (the full model, kept to show the reduction is exact)
+    centroids: str = "exact"
 
     @property
     def n_agents(self):
@@ -77,7 +80,7 @@ class Model:
     @property
     def centroids_exact(self):
         """Centroids decouple into linear consensus per group: solved in closed form."""
-        return not self.inter_group
+        return not self.inter_group and self.centroids == "exact"
 
     def group_of(self, agent):
         for gi, g in enumerate(self.groups):
@@ -254,7 +257,7 @@ class System:
         """Fields of a stage that other agents need (the distributed driver sends only these)."""
         m = self.model
         fields = ["rot"]
-        if m.inter_group or first_stage:
+        if first_stage or not m.centroids_exact:
             fields.append("x")
         if m.order == 2 and m.centroids_exact and first_stage:
             fields.append("v")
@@ -277,7 +280,7 @@ class System:
         """Mean fields from full group arrays (a tuple of objects with .x, .rot, .v)."""
         m = self.model
         grp = self.group
-        need_means = first_stage or m.inter_group
+        need_means = first_stage or not m.centroids_exact
         out = []
         for g, e in zip(m.groups, ensemble):
             if e is None or e.rot is None:

@@ -189,7 +189,7 @@ def build_scene(data):
     notes = []
 
     mm = _Map(top.raw("model", {}), "model",
-              ("order", "kappa", "gamma", "mass", "kappa_2", "L", "representation"))
+              ("order", "kappa", "gamma", "mass", "kappa_2", "L", "representation", "centroids"))
     order = mm.number("order", 1, integer=True)
     if order not in (1, 2):
         raise SceneError(f"model.order: must be 1 (A-2) or 2 (A-1), got {order}")
@@ -224,8 +224,11 @@ def build_scene(data):
         notes.append("one group: the inter-group potential (kappa_2, L) has nothing to act on and is not modelled")
         kappa_2 = 0.0
 
+    centroids = mm.raw("centroids", "exact")
+    if centroids not in ("exact", "integrated"):
+        raise SceneError(f"model.centroids: expected exact or integrated, got {centroids!r}")
     model = Model(dim=dim, order=order, kappa=kappa, gamma=gamma, mass=mass, groups=tuple(groups),
-                  rotations=rotations, kappa_2=kappa_2, L=L)
+                  rotations=rotations, kappa_2=kappa_2, L=L, centroids=centroids)
     validate_model(model)
 
     all_x = np.concatenate([gs.x for gs in states])

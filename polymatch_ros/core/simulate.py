@@ -224,8 +224,11 @@ def explain(scene, method=None, dt=None, tolerance=None, distributed=False):
     if m.inter_group:
         lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; centroids integrated "
                      "with the method's stages (the inter-group force is nonlinear)")
-    else:
+    elif m.centroids_exact:
         lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential)")
+    else:
+        lines.append("centroids: integrated with the method's stages (model.centroids = integrated; "
+                     "the exact flow would be cheaper and exact)")
     rep = m.rotations
     rep_text = {"angle": "angles (SO(2) is abelian: the first-order model is Kuramoto, exp is addition)",
                 "so3": f"3x3 matrices, structure-of-arrays, {rep.retraction} map in closed form",
