@@ -21,7 +21,7 @@ import pytest
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
 
-from ros_harness import PY, REPO, needs_ros, node_argv, scene_path
+from ros_harness import PY, REPO, _children, needs_ros, node_argv, scene_path
 
 pytestmark = needs_ros
 
@@ -113,3 +113,49 @@ def test_colcon_build_and_installed_executables_start(ros, tmp_path):
     assert monitor.poll() is None, ros.output(monitor)
     ros.kill(monitor, signal.SIGINT)
     assert ros.wait(monitor, 20) == 0, ros.output(monitor)
+
+
+def _descendants(pid):
+    """PIDs below ``pid`` (children, grandchildren), read from /proc."""
+    from ros_harness import _children
+    out, todo = [], [pid]
+    while todo:
+        for c in _children(todo.pop()):
+            out.append(c)
+            todo.append(c)
+    return out
+
+
+def _alive(pid):
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().split()[2] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "child-dies"])
+def test_runner_ends_every_process_it_started(ros, how):
+    """`polymatch run` ends all its processes by PID on Ctrl-C and when a child dies."""
+    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path("congruent_triangles"), "--t-end", "500",
+                      "--timeout", "120"], timeout=150)
+    deadline = time.monotonic() + 60
+    kids = []
+    while time.monotonic() < deadline:
+        kids = [p for p in _descendants(proc.pid) if _alive(p)]
+        if len(kids) >= 10 and "rounds/s" in ros.output(proc) and "t =    0.000" not in ros.output(proc)[-200:]:
+            break
+        time.sleep(0.5)
+    assert len(kids) >= 10, ros.output(proc)          # runner + monitor + 8 agents (+ wrappers)
+    runner = _children(proc.pid)[0]
+    if how == "ctrl-c":
+        os.kill(runner, signal.SIGINT)
+        expect_code, expect_text = 130, "interrupted"
+    else:
+        agent = [p for p in _children(runner) if "agent_3" in open(f"/proc/{p}/cmdline").read()][0]
+        os.kill(agent, signal.SIGKILL)
+        expect_code, expect_text = 1, "agent_3"
+    assert ros.wait(proc, 40) == expect_code, ros.output(proc)
+    assert expect_text in ros.output(proc)
+    time.sleep(0.5)
+    assert not [p for p in kids if _alive(p)], "a process outlived the runner"
