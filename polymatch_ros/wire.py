@@ -25,7 +25,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 STAGE_FORMAT = 1
 HEADER = 7
@@ -138,6 +137,7 @@ def pose_fields(grp, x, g):
         theta = float(grp.from_matrices(grp.to_matrices(g))[0]) if grp.name != "angle" else float(g[0])
         quat = np.array([0.0, 0.0, math.sin(theta / 2), math.cos(theta / 2)])
     else:
+        from scipy.spatial.transform import Rotation
         quat = Rotation.from_matrix(grp.to_matrices(g)[0]).as_quat()
     return pos, quat
 
@@ -157,6 +157,7 @@ def pose_to_state(grp, dim, position, quat):
         theta = 2.0 * math.atan2(q[2], q[3])
         mat = np.array([[[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]]])
         return (p[:2].copy(), grp.from_matrices(mat) if grp.name != "angle" else np.array([theta])), None
+    from scipy.spatial.transform import Rotation
     mat = Rotation.from_quat(q / norm).as_matrix()[None]
     return (p[:3].copy(), grp.from_matrices(mat)), None
 

@@ -17,8 +17,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import yaml
-from scipy.linalg import expm
-from scipy.spatial.transform import Rotation
 
 from .decompose import RotationNotUniqueWarning, decompose
 from .errors import SceneError
@@ -411,6 +409,7 @@ def _base_rotation(raw, path, dim):
             a = _number(val, p)
             return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
         if kind == "rotvec":
+            from scipy.spatial.transform import Rotation
             if dim != 3:
                 raise SceneError(f"{p}: a rotation vector defines a rotation only for dimension 3")
             return Rotation.from_rotvec(_vector(val, p, 3)).as_matrix()
@@ -430,6 +429,7 @@ def _check_rotation(m, path):
 
 def random_rotation_within(dim, count, angle, rng):
     """Rotations exp(theta A) with A a uniformly random unit-spectral-norm skew matrix, theta ~ U[0, angle]."""
+    from scipy.linalg import expm
     out = np.empty((count, dim, dim))
     for i in range(count):
         a = rng.standard_normal((dim, dim))
@@ -445,6 +445,7 @@ def _rotations(raw, path, dim, count, rng):
             a = rng.uniform(-np.pi, np.pi, count)
             return np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)], -1)], -2)
         if dim == 3:
+            from scipy.spatial.transform import Rotation
             return Rotation.random(count, random_state=rng).as_matrix().reshape(count, 3, 3)
         from scipy.stats import special_ortho_group   # slow to import: only when needed
         return special_ortho_group.rvs(dim, size=count, random_state=rng).reshape(count, dim, dim)
@@ -466,6 +467,7 @@ def _rotations(raw, path, dim, count, rng):
                 return np.stack([np.stack([np.cos(a), -np.sin(a)], -1),
                                  np.stack([np.sin(a), np.cos(a)], -1)], -2)
             if kind == "rotvecs":
+                from scipy.spatial.transform import Rotation
                 if dim != 3:
                     raise SceneError(f"{p}: rotation vectors define rotations only for dimension 3")
                 return Rotation.from_rotvec(_matrix_rows(val, p, count, 3)).as_matrix()

@@ -13,7 +13,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .adaptive import AdaptiveLie
 from .errors import PolymatchError, StabilityError
 from .integrators import check_stability, get_method, max_stable_dt
 from .metrics import ensemble_metrics, stationarity
@@ -88,6 +87,7 @@ def plan(scene, method=None, dt=None, tolerance=None, distributed=False, check=T
         name, reason = recommend(scene, distributed)
     tol = tolerance if tolerance is not None else scene.integrator.tolerance
     if name == "adaptive":
+        from .adaptive import AdaptiveLie
         if distributed:
             raise PolymatchError("the adaptive integrator runs centralised only; pick a fixed-step method")
         tol = tol or 1e-8
