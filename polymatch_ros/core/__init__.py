@@ -9,26 +9,20 @@ The ROS agents, the monitor and the benchmarks use exactly these pieces:
 ``advance`` (one step) and ``ensemble_metrics``.
 """
 
-import importlib
-
-_WHERE = {
-    "AdaptiveLie": "adaptive", "decompose": "decompose",
-    "ParameterError": "errors", "PolymatchError": "errors", "SceneError": "errors", "ShapeError": "errors",
-    "StabilityError": "errors",
-    "METHODS": "integrators", "check_stability": "integrators", "get_method": "integrators",
-    "max_stable_dt": "integrators",
-    "ensemble_metrics": "metrics", "point_set_diameter": "metrics",
-    "Coupling": "model", "GroupState": "model", "Model": "model", "State": "model", "System": "model",
-    "Scene": "scene", "load_scene": "scene",
-    "Trajectory": "simulate", "advance": "simulate", "explain": "simulate", "plan": "simulate",
-    "recommend": "simulate", "simulate": "simulate", "with_representation": "simulate",
-}
+from .decompose import decompose
+from .errors import ParameterError, PolymatchError, SceneError, ShapeError, StabilityError
+from .integrators import METHODS, check_stability, get_method, max_stable_dt
+from .metrics import ensemble_metrics, point_set_diameter
+from .model import Coupling, GroupState, Model, State, System
+from .scene import Scene, load_scene
+from .simulate import Trajectory, advance, explain, plan, recommend, simulate, with_representation
 
 
 def __getattr__(name):
-    """Import on first use: a ROS agent needs the model and steppers, not scipy.integrate."""
-    if name in _WHERE:
-        return getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+    """AdaptiveLie on first use: it pulls in scipy.integrate, which a ROS agent never needs."""
+    if name == "AdaptiveLie":
+        from .adaptive import AdaptiveLie
+        return AdaptiveLie
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
