@@ -39,6 +39,8 @@ PARAMETERS = (
                         "-1 = wait for 'start <epoch>' on /<ensemble>/control", (-1.0, 1e12)),
     ("peer_timeout", 1.0, "realtime: seconds of silence after which a peer is dropped from the sums",
      (0.001, 1e6)),
+    ("delay", 0.0, "realtime: injected transport delay (s) before a peer's pose is used (experiments)",
+     (0.0, 1e6)),
     ("round_timeout", 10.0, "lockstep: seconds to wait for a round before giving up", (0.001, 1e6)),
     ("discovery_timeout", 30.0, "seconds to wait until every peer is matched", (0.0, 1e6)),
     ("pose_subscribers", 0, "do not start before this many subscribers listen to the poses", (0, 100000)),
@@ -152,7 +154,7 @@ class AgentNode:
                                              p["run_id"], rot_tol, self.drops)
         else:
             self.peers = PeerTable(self.node, self.layout, self.ensemble, p["frame_id"], p["peer_timeout"],
-                                   self.drops, scene.origin)
+                                   self.drops, scene.origin, p["delay"])
 
     def _make_publishers(self):
         from diagnostic_msgs.msg import DiagnosticArray
@@ -227,6 +229,15 @@ class AgentNode:
                     self.twist_pubs[a].publish(tw)
         self._maybe_diagnostics()
 
+    def time_split(self):
+        """Milliseconds per round spent publishing stages, waiting for peers, and everything else."""
+        ex = getattr(self, "exchange", None)
+        if ex is None or self.rounds == 0:
+            return {}
+        pub, wait = ex.publish_time / self.rounds * 1e3, ex.wait_time / self.rounds * 1e3
+        rest = max(0.0, self.round_time / self.rounds * 1e3 - pub - wait)
+        return {"publish_ms_per_round": pub, "wait_ms_per_round": wait, "other_ms_per_round": rest}
+
     def flush_poses(self, timeout=3.0):
         """Wait until the last poses reached every subscriber (the monitor, the runner)."""
         from rclpy.duration import Duration
@@ -249,6 +260,7 @@ class AgentNode:
         rps = self.rounds / self.round_time if self.round_time > 0 else 0.0
         vals = {"t": self.state.t, "steps": self.steps, "rounds": self.rounds, "rounds_per_second": rps,
                 "dropped": self.drops.total}
+        vals.update(self.time_split())
         vals.update({f"dropped: {k}": v for k, v in self.drops.counts.items()})
         status.values = [KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v))
                          for k, v in vals.items()]
@@ -284,7 +296,7 @@ class AgentNode:
         method = self.plan.method
         prev = 0.0
         timeout = self.params["round_timeout"]
-        start = time.monotonic()
+        start = last_spin = time.monotonic()
         for k, t_next in enumerate(grid):
             gen = method.step(self.system, self.state, t_next - prev)
             stop = False
@@ -302,15 +314,21 @@ class AgentNode:
             self.state.t = t_next
             prev = t_next
             self.steps += 1
-            self.round_time = time.monotonic() - start
+            now = time.monotonic()
+            self.round_time = now - start
             self.publish_state()
-            self.spin_once(0.0)               # the control topic (stop) and anything else on the node
+            # the node's own entities (control topic, parameter services) cost a full wait-set
+            # rebuild per spin: serve them a few times a second, not every step
+            if now - last_spin > 0.1:
+                self.spin_once(0.0)
+                last_spin = now
             if stop:
                 break
         self.exchange.flush()
         self.flush_poses()
+        split = ", ".join(f"{k.split('_ms')[0]} {v:.2f}" for k, v in self.time_split().items())
         return f"finished at t = {self.state.t:.6g} after {self.steps} steps ({self.rounds} rounds, " \
-               f"{self.rounds / max(self.round_time, 1e-9):.1f} rounds/s)"
+               f"{self.rounds / max(self.round_time, 1e-9):.1f} rounds/s; ms per round: {split})"
 
     def run_realtime(self):
         p = self.params

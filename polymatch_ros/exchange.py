@@ -135,7 +135,8 @@ class LockstepExchange:
         self.subs = [self.node.create_subscription(Float64MultiArray, wire.agent_topic(ensemble, a, "stage"),
                                                    self._callback(a), qos_in, event_callbacks=sub_events)
                      for a in layout.peers]
-        self._msgs = {}
+        self.publish_time = 0.0       # seconds spent publishing stages (for the diagnostics)
+        self.wait_time = 0.0          # seconds spent waiting for (and taking) the peers' stages
 
     def _callback(self, agent):
         def receive(msg):
@@ -184,7 +185,10 @@ class LockstepExchange:
         """Publish, wait, assemble: returns (ensemble, stop requested by anyone)."""
         key = (step, stage)
         self.current = key
+        t0 = time.perf_counter()
         self.publish(step, stage, request, stop_flag)
+        t1 = time.perf_counter()
+        self.publish_time += t1 - t0
         deadline = time.monotonic() + timeout
         waiting = [a for a in self.layout.peers if key not in self.inbox[a]]
         while waiting:
@@ -194,6 +198,7 @@ class LockstepExchange:
                                    f"waiting for agent(s) {', '.join(map(str, waiting))}")
             self.executor.spin_once(timeout_sec=min(left, 0.5))
             waiting = [a for a in waiting if key not in self.inbox[a]]
+        self.wait_time += time.perf_counter() - t1
         stop = stop_flag or any(self.inbox[a][key].flags & wire.FLAG_STOP for a in self.layout.peers)
         return self._assemble(key, request), stop
 
@@ -246,8 +251,10 @@ class LockstepExchange:
 class PeerTable:
     """Realtime: the latest pose (and velocity) heard from each peer, and who is still alive."""
 
-    def __init__(self, node, layout, ensemble, frame_id, timeout, drops, origin):
+    def __init__(self, node, layout, ensemble, frame_id, timeout, drops, origin, delay=0.0):
         self.node, self.layout, self.drops = node, layout, drops
+        self.delay = float(delay)    # injected transport delay (s): a pose is used only this long after arrival
+        self.pending = defaultdict(list)   # agent -> [(arrival, kind, values)] not yet delivered
         self.origin = np.asarray(origin, dtype=float)      # poses are absolute; the core works in offsets
         self.model = layout.model
         self.grp = self.model.rotations
@@ -294,17 +301,30 @@ class PeerTable:
             if val is None:
                 self.drops(f"agent {agent}", reason)
                 return
-            e = self._entry(agent)
-            if t < e.t:
-                self.drops(f"agent {agent}", "out-of-order pose")
-                return
-            e.t, (e.x, e.rot) = t, val
-            e.x = e.x - self.origin
-            e.heard = time.monotonic()
-            if agent in self.silent:
-                self.silent.discard(agent)
-                self.node.get_logger().info(f"agent {agent} is back: re-admitted to the sums")
+            self.pending[agent].append((time.monotonic(), "pose", (t, val[0] - self.origin, val[1])))
         return receive
+
+    def _deliver(self, now):
+        """Move every pose and velocity that has waited ``delay`` into the table."""
+        for agent, queue in self.pending.items():
+            keep = []
+            for arrival, kind, values in queue:
+                if now - arrival < self.delay:
+                    keep.append((arrival, kind, values))
+                    continue
+                e = self._entry(agent)
+                if kind == "twist":
+                    e.v = values
+                    continue
+                t, x, rot = values
+                if t < e.t:
+                    self.drops(f"agent {agent}", "out-of-order pose")
+                    continue
+                e.t, e.x, e.rot, e.heard = t, x, rot, arrival + self.delay
+                if agent in self.silent:
+                    self.silent.discard(agent)
+                    self.node.get_logger().info(f"agent {agent} is back: re-admitted to the sums")
+            queue[:] = keep
 
     def _twist_cb(self, agent):
         dim = self.model.dim
@@ -319,12 +339,13 @@ class PeerTable:
             if val is None:
                 self.drops(f"agent {agent}", reason)
                 return
-            self._entry(agent).v = val[0]
+            self.pending[agent].append((time.monotonic(), "twist", val[0]))
         return receive
 
     def active(self):
         """Peers heard within the timeout; logs once when one falls silent."""
         now = time.monotonic()
+        self._deliver(now)
         alive = []
         for a in self.layout.peers:
             e = self.latest.get(a)

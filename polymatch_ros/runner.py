@@ -159,6 +159,10 @@ class Watcher:
             return None
         return min(p[0] for p in self.poses.values())
 
+    def pose_times(self):
+        """Simulated time of every agent's last pose."""
+        return {a: p[0] for a, p in self.poses.items()}
+
     def in_step(self):
         """Every agent has reported, all at the same simulated time."""
         return self.all_fresh(0.0)
@@ -242,7 +246,7 @@ def _run(args, scene, scene_path, the_plan, env, domain):
                            "-p", f"peer_timeout:={args.peer_timeout!r}"]
     if rt:
         agent_args += ["-p", f"rate:={args.rate!r}", "-p", f"time_scale:={args.time_scale!r}",
-                       "-p", "start_time:=-1.0"]
+                       "-p", "start_time:=-1.0", "-p", f"delay:={args.delay!r}"]
     else:
         agent_args += ["-p", f"dt:={the_plan.dt!r}"]
     py = [sys.executable, "-m"]
@@ -289,7 +293,7 @@ def _run(args, scene, scene_path, the_plan, env, domain):
     wall = time.monotonic() - start
     final = watcher.final_state() if watcher is not None else None
     if code == 0 and final is not None:
-        code, message = _summary(args, scene, the_plan, final, children, monitor, wall, quiet)
+        code, message = _summary(args, scene, the_plan, final, children, monitor, wall, quiet, watcher)
     elif message:
         print(f"polymatch: error: {message}", file=sys.stderr)
     return code
@@ -352,7 +356,7 @@ def _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, s
                 below_since = None
 
 
-def _summary(args, scene, the_plan, final, children, monitor, wall, quiet):
+def _summary(args, scene, the_plan, final, children, monitor, wall, quiet, watcher):
     met = ensemble_metrics(scene.model, final)
     print(f"scene {scene.name}: {scene.model.n_agents} agents, {args.mode}, integrator {the_plan.name}, "
           f"dt {the_plan.dt:g}")
@@ -378,6 +382,9 @@ def _summary(args, scene, the_plan, final, children, monitor, wall, quiet):
                 print(line)
     if args.save:
         data = {"t": final.t, "origin": scene.origin}
+        times = watcher.pose_times()
+        for gi, g in enumerate(scene.model.groups):
+            data[f"group{gi}_times"] = np.array([times[a] for a in g.indices])
         for gi, gs in enumerate(final.groups):
             data[f"group{gi}_centroids"] = gs.x + scene.origin
             data[f"group{gi}_rotations"] = scene.model.rotations.to_matrices(gs.rot)
@@ -416,6 +423,7 @@ def add_parser(sub):
     p.add_argument("--time-scale", type=positive_float, default=1.0,
                    help="realtime: simulated seconds per wall-clock second")
     p.add_argument("--peer-timeout", type=positive_float, default=1.0, help="realtime: drop silent peers after S s")
+    p.add_argument("--delay", type=float, default=0.0, help="realtime: injected transport delay (s), experiments")
     p.add_argument("--round-timeout", type=positive_float, default=10.0, help="lockstep: give up a round after S s")
     p.add_argument("--hold", type=float, default=1.0,
                    help="stop once the diameter stayed under the tolerance this long (simulated s)")
