@@ -22,6 +22,8 @@ EXPECTED = {
                   "adaptive (ours)", "RK45", "DOP853", "observed order", "Frontier", "cheapest (best wall)"],
     "longhorizon": ["rel. energy drift up to", "growth p", "orth. defect up to", "lie_verlet", "refused (unstable)",
                     "RK45", "DOP853", "adaptive (ours)"],
+    "extremes": ["| extreme", "| expectation", "what happened", "pass/fail", "wall s", "m = 1e-8", "gamma = 0",
+                 "kappa = 1e4", "centroids ~1e9", "one agent", "known defect"],
 }
 
 FAMILY_NAMES = [m.NAME for m in families()]

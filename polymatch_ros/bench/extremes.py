@@ -268,7 +268,7 @@ def undamped(ctx):
             def verlet():
                 early, late, traj = run()
                 ok = late < 2.0 * early and max(early, late) < 2e-3 and _finite(traj)
-                return (f"{traj.steps} steps: |E - E0|/E0 <= {early:.1e} in the first tenth, {late:.1e} in the last "
+                return (f"{traj.steps} steps: relative energy error <= {early:.1e} in the first tenth, {late:.1e} in the last "
                         "(bounded oscillation, no drift)"), ok
             ctx.check(f"gamma = 0, lie_verlet, t_end = {t_end:g}", "energy (Prop. 2.2 i) without secular drift",
                       verlet)
@@ -406,7 +406,7 @@ def large_n(ctx):
             ok = (_finite(traj) and traj.converged and abs(d0 - e0) <= 1e-12 * d0
                   and abs(dend - eend) <= 1e-12 * d0)
             return (f"{traj.steps} steps in {traj.wall_time:.1f} s; diameter {d0:.2f} -> {dend:.1e}, converged at "
-                    f"t = {traj.converged_at}; metrics = exact farthest pair (|diff| {abs(d0 - e0):.0e}, "
+                    f"t = {traj.converged_at}; metrics = exact farthest pair (differences {abs(d0 - e0):.0e}, "
                     f"{abs(dend - eend):.0e})"), ok
         ctx.check(f"N = {n}, order {order}, rkmk4 dt = 0.1", "full run converges; metrics finite and exact", run)
     ctx.detail(f"N = {n}, d = 3 (regular tetrahedra), rkmk4 dt = 0.1",
@@ -423,7 +423,7 @@ def dim10(ctx):
             traj = simulate(sc, "rkmk4", 0.1)
             worst = max(_defect(sc.model, s.groups[0]) for s in traj.states)
             ok = _finite(traj) and worst < 1e-12 and traj.converged
-            return (f"max |O^T O - I| = {worst:.1e}; diameter {traj.metrics[0]['diameter']:.2f} -> "
+            return (f"orthogonality defect <= {worst:.1e}; diameter {traj.metrics[0]['diameter']:.2f} -> "
                     f"{traj.diameters[-1]:.1e}, converged at t = {traj.converged_at} ({traj.wall_time:.1f} s)"), ok
         ctx.check(f"d = 10, N = {n}, order {order}", "stays in SO(10) to 1e-12; converges", run)
 
@@ -489,7 +489,7 @@ def huge_coords(ctx):
             diff = max(abs(gf["matching_diameter"] - gn["matching_diameter"])
                        for mf, mn in zip(tf.metrics, tn.metrics) for gf, gn in zip(mf["groups"], mn["groups"]))
             ok = _finite(tf) and diff <= 1e-12
-            return (f"N = {size}{' + ' + str(size) if mixed else ''}: max |D_far - D_origin| over {len(tf.metrics)} "
+            return (f"N = {size}{' + ' + str(size) if mixed else ''}: max diameter difference far - origin over {len(tf.metrics)} "
                     f"samples = {diff:.1e} (shape size 1); "
                     f"D(t_end) = {tf.diameters[-1]:.1e}"), ok
         ctx.check(f"centroids ~1e9, d = {dim}, order {order}{', mixed F-2' if mixed else ''}",

@@ -22,7 +22,7 @@ import numpy as np
 from scipy.integrate import DOP853
 
 from .errors import PolymatchError
-from .integrators import MethodInfo, _exact_centroids
+from .integrators import MethodInfo, _exact_centroids, rk_stability, test_matrices
 from .model import GroupState, State
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
@@ -117,6 +117,31 @@ class AdaptiveLie:
     def name(self):
         return self.info.name
 
+    def step_cap(self, model):
+        """0.9 x the largest h at which DOP853 is linearly stable on the model's test matrices.
+
+        Near consensus the error estimate lets the step grow until it hovers at the
+        stability boundary, which keeps a converged ensemble from staying converged;
+        no step beyond the cap can be accurate anyway.  Returns (cap, binding cause).
+        """
+        a, b = self.A, self.B
+        best = (np.inf, "")
+        for _, mat, cause in test_matrices(model):
+            lam = np.linalg.eigvals(np.atleast_2d(mat))
+            rate = float(np.max(np.abs(lam)))
+            if rate == 0.0:
+                continue
+            lo, hi = 0.0, 20.0 / rate
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                if np.all(np.abs(rk_stability(a, b, mid * lam)) <= 1.0):
+                    lo = mid
+                else:
+                    hi = mid
+            if 0.9 * lo < best[0]:
+                best = (0.9 * lo, cause)
+        return best
+
     def _fun(self, chart, vec):
         stage, thetas = chart.state(vec)
         system = chart.system
@@ -193,11 +218,17 @@ class AdaptiveLie:
         if not times:
             return y
         t_end = times[-1]
+        cap, cause = self.step_cap(system.model)
+        if (t_end - y.t) / cap > self.max_steps:
+            raise PolymatchError(f"adaptive: the scene is stiff ({cause}): an explicit method needs at least "
+                                 f"{(t_end - y.t) / cap:.2g} steps to reach t = {t_end:g} (max_steps = "
+                                 f"{self.max_steps}); use etd2 for stiff damping, a shorter t_end, or a "
+                                 f"larger integrator.max_steps")
         coupling = system.couple(y.groups)
         chart = _Chart(system, y)
         k0 = chart.pack(system.rates(y, coupling))
         self.nfev += 1
-        h = self._initial_step(chart, k0, t_end - y.t)
+        h = min(self._initial_step(chart, k0, t_end - y.t), cap)
         pending = list(times)
         while y.t < t_end:
             if self.steps >= self.max_steps:
@@ -236,7 +267,7 @@ class AdaptiveLie:
             coupling = system.couple(y.groups)
             chart = _Chart(system, y)
             k0 = chart.pack(raw_new)               # FSAL: raw rates at y_new are the new chart's k0
-            h = step * factor
+            h = min(step * factor, cap)
             if pending and pending[0] == reached:
                 pending.pop(0)
                 if on_sample is not None:

@@ -28,27 +28,52 @@ class RotationNotUniqueWarning(UserWarning):
     """The reference spans fewer than d - 1 dimensions; least-angle rotation taken."""
 
 
-def _least_angle_rotation(m, rank):
-    """argmax tr(O) over O in SO(d) with O V_k = U_k, where m = U S V^T, k = rank.
+def _complete(p, vk):
+    """The rotation O with O vk = p (d x k orthonormal each) of least angle, det O = +1.
 
-    For rank >= d - 1 this is the usual Kabsch rotation U diag(1, .., det) V^T.
+    On the complement, maximise tr(O) = const + tr(T Vp^T Up) over T in O(d - k) with the
+    determinant that makes det O = +1 (an orthogonal Procrustes problem).
+    """
+    d, k = p.shape
+    up = np.linalg.qr(p, mode="complete")[0][:, k:]
+    vp = np.linalg.qr(vk, mode="complete")[0][:, k:]
+    sign = np.linalg.det(np.hstack([p, up])) * np.linalg.det(np.hstack([vk, vp]))
+    pp, _, qt = np.linalg.svd(vp.T @ up)
+    corr = np.ones(d - k)
+    corr[-1] = sign * np.linalg.det(pp) * np.linalg.det(qt)
+    return p @ vk.T + up @ ((qt.T * corr) @ pp.T) @ vp.T
+
+
+def _least_angle_rotation(m, rank):
+    """Kabsch: argmax tr(O^T m) over SO(d), m = q^T r; for rank <= d - 2 the least-angle one.
+
+    For rank >= d - 1 this is the usual U diag(1, .., det) V^T.
     """
     u, _, vt = np.linalg.svd(m)
-    v = vt.T
     d = m.shape[0]
-    sign = np.linalg.det(u) * np.linalg.det(v)
     if rank >= d - 1:
         corr = np.ones(d)
-        corr[-1] = sign
+        corr[-1] = np.linalg.det(u) * np.linalg.det(vt)
         return (u * corr) @ vt
-    uk, up = u[:, :rank], u[:, rank:]
-    vk, vp = v[:, :rank], v[:, rank:]
-    b = vp.T @ up                              # maximise tr(T b), T orthogonal, det T = sign
-    p, _, qt = np.linalg.svd(b)
-    corr = np.ones(d - rank)
-    corr[-1] = sign * np.linalg.det(p) * np.linalg.det(qt)
-    t = (qt.T * corr) @ p.T
-    return uk @ vk.T + up @ t @ vp.T
+    return _complete(u[:, :rank], vt[:rank].T)
+
+
+def _rotation_from_reference_svd(q, ref_u, ref_s, ref_vt, rank):
+    """For an ill-conditioned reference (a nearly collinear triangle): map its singular directions.
+
+    Kabsch works with q^T r and squares the reference's condition number; here
+    O v_j = q^T u_j / s_j for the j-th singular triple of r, orthonormalised in order of
+    decreasing s_j, then completed with det +1.  The roll about a nearly degenerate axis is
+    then as accurate as the data allow.
+    """
+    d = ref_vt.shape[0]
+    images = []
+    for j in range(min(rank, d - 1)):
+        c = q.T @ ref_u[:, j] / ref_s[j]
+        for img in images:
+            c = c - (img @ c) * img
+        images.append(c / np.linalg.norm(c))
+    return _complete(np.array(images).T, ref_vt[:len(images)].T)
 
 
 def decompose(vertex_sets, reference, *, similar=False, tol=1e-9, label="polytope", offset=0):
@@ -98,6 +123,8 @@ def decompose(vertex_sets, reference, *, similar=False, tol=1e-9, label="polytop
                       f"{label} is not unique (Lemma 3.2); taking the rotation of least angle",
                       RotationNotUniqueWarning, stacklevel=2)
     ref_sq = float(np.sum(ref * ref))
+    ref_u, ref_s, ref_vt = np.linalg.svd(ref, full_matrices=False)
+    ill_conditioned = rank >= 1 and ref_s[rank - 1] < 1e-5 * ref_s[0]
     centroids = np.empty((len(sets), d))
     rotations = np.empty((len(sets), d, d))
     scales = np.empty(len(sets))
@@ -106,10 +133,14 @@ def decompose(vertex_sets, reference, *, similar=False, tol=1e-9, label="polytop
         c = v.mean(axis=0)
         q = v - c
         m = q.T @ ref
-        o = _least_angle_rotation(m, rank)
+        if ill_conditioned:
+            o = _rotation_from_reference_svd(q, ref_u, ref_s, ref_vt, rank)
+        else:
+            o = _least_angle_rotation(m, rank)
         s = float(np.sum(o * m)) / ref_sq if similar else 1.0
         mismatch = float(np.max(np.linalg.norm(q - s * ref @ o.T, axis=1)))
-        allowed = tol * size * max(s, 1.0)
+        # relative to the shape, but never finer than the input's own resolution (coordinates ~1e9)
+        allowed = max(tol * size * max(s, 1.0), 8 * np.finfo(float).eps * float(np.max(np.abs(v))))
         if s <= 0 or mismatch > allowed:
             _explain_mismatch(name, q, ref, m, similar, mismatch, allowed, rank)
         centroids[i], rotations[i], scales[i] = c, o, s

@@ -429,70 +429,95 @@ def get_method(name):
 
 
 def test_matrices(model):
-    """Linearisations at consensus that a fixed-step method must keep bounded.
+    """Linearisations at consensus that a fixed-step method must keep bounded: (label, matrix, cause).
 
     Rotations in algebra coordinates xi: first order xi' = -k xi / gamma, second order
     m xi'' = -gamma xi' - k xi, with k = kappa * max_i(mean s / s_i) (F-1 weights; 1 if
     congruent).  Integrated (F-2) centroids add k = kappa + kappa_2.  The mean mode (k = 0)
     carries the pure damping -gamma/m.  Exactly solved centroids contribute nothing.
     """
-    ks = []
+    out = []
+    m, gamma = model.mass, model.gamma
     for g in model.groups:
         w = 1.0 if g.scales is None else float(np.mean(g.scales) / np.min(g.scales))
-        ks.append(("rotations", model.kappa * w))
-    if not model.centroids_exact:
-        ks.append(("centroids", model.kappa + model.kappa_2))
-    mats = []
-    for what, k in ks:
+        k = model.kappa * w
+        weights = f"; scale ratios make the torque weights s_k/s_i up to {w:.3g}" if w > 1.0 + 1e-12 else ""
         if model.order == 1:
-            mats.append((what, np.array([[-k / model.gamma]])))
+            out.append(("rotations", np.array([[-k / gamma]]),
+                        f"the coupling sets the rate kappa/gamma = {k / gamma:.3g}{weights}"))
         else:
-            mats.append((what, np.array([[0.0, 1.0], [-k / model.mass, -model.gamma / model.mass]])))
-    if model.order == 2:
-        mats.append(("damping", np.array([[0.0, 1.0], [0.0, -model.gamma / model.mass]])))
-    return mats
+            a = np.array([[0.0, 1.0], [-k / m, -gamma / m]])
+            if gamma * gamma >= 4.0 * m * k:          # over-damped: the fast mode is the damping
+                what = f"m/gamma = {m / gamma:.3g} makes the damping stiff"
+            else:
+                what = (f"the coupling kappa/m = {k / m:.3g} makes the rotations oscillate at "
+                        f"{np.sqrt(k / m - (gamma / (2 * m)) ** 2):.3g} rad/s")
+            out.append(("rotations", a, what + weights))
+    if not model.centroids_exact:
+        k = model.kappa + model.kappa_2
+        a = np.array([[-k / gamma]]) if model.order == 1 else np.array([[0.0, 1.0], [-k / m, -gamma / m]])
+        out.append(("centroids", a, f"the centroid coupling kappa + kappa_2 = {k:.3g}"))
+    if model.order == 2 and gamma > 0:
+        out.append(("damping", np.array([[0.0, 1.0], [0.0, -gamma / m]]),
+                    f"m/gamma = {m / gamma:.3g} makes the damping stiff"))
+    return out
 
 
-def max_stable_dt(method, model, upper):
-    """Largest h <= upper with spectral radius <= 1 on every test matrix (bisection)."""
-    mats = [a for _, a in test_matrices(model)]
+def _stable(method, h, a):
+    """Stable just beyond h too: a damped mode exactly on |R| = 1 would never decay."""
+    return method.spectral_radius(h * (1.0 + 1e-6), a) <= 1.0 + 1e-12
 
-    def ok(h):
-        return all(method.spectral_radius(h, a) <= 1.0 + 1e-12 for a in mats)
 
-    if ok(upper):
+def _limit(method, a, upper):
+    """Largest stable h <= upper for one test matrix; 0 when no step is stable (e.g. Euler, gamma = 0)."""
+    if _stable(method, upper, a):
         return upper
     lo, hi = 0.0, upper
     for _ in range(200):
         mid = 0.5 * (lo + hi)
-        if ok(mid):
+        if _stable(method, mid, a):
             lo = mid
         else:
             hi = mid
         if hi - lo <= 1e-6 * hi:
             break
+    rate = float(np.max(np.abs(np.linalg.eigvals(a))))
+    # a suspiciously small "limit" may be the 1e-12 slack, not a stability interval: if the
+    # method still amplifies well inside it, it grows at every h (Euler or Heun with gamma = 0)
+    if rate > 0 and lo * rate < 1e-2 and method.spectral_radius(0.5 * lo, a) > 1.0:
+        return 0.0
     return lo
 
 
+def max_stable_dt(method, model, upper):
+    """Largest h <= upper that is linearly stable on every test matrix (0: none is)."""
+    return min(_limit(method, a, upper) for _, a, _ in test_matrices(model))
+
+
 def check_stability(method, model, dt):
-    """Refuse a step beyond the method's linear stability limit, naming the limit and the cause."""
+    """Refuse a step beyond the method's linear stability limit, naming the limit and its cause."""
     if model.order not in method.info.models:
         raise StabilityError(f"{method.name} integrates only the "
                              f"{'second' if 2 in method.info.models else 'first'}-order model "
                              f"(model.order = {model.order})")
-    limit = max_stable_dt(method, model, dt)
+    limits = [(_limit(method, a, dt), label, cause) for label, a, cause in test_matrices(model)]
+    limit, label, cause = min(limits, key=lambda x: x[0])
     if limit >= dt:
         return
-    causes = []
-    if model.order == 2 and model.mass / max(model.gamma, 1e-300) < dt:
-        causes.append(f"m/gamma = {model.mass / model.gamma:.3g} makes the damping stiff; use etd2"
-                      if model.gamma > 0 else "")
-    if model.order == 2 and model.gamma == 0:
-        causes.append("gamma = 0 (undamped oscillation); use lie_verlet")
-    if any(g.scales is not None for g in model.groups):
-        causes.append("scale ratios make the torque weights s_k/s_i large")
-    cause = "; ".join(c for c in causes if c) or "the coupling kappa sets the time scale"
+    if method.info.family == "splitting" and label != "damping" and "damping stiff" in cause:
+        # the splitting integrates the damping exactly: what binds is the stiff coupling
+        cause = cause.replace(f"m/gamma = {model.mass / model.gamma:.3g} makes the damping stiff",
+                              f"kappa/m = {model.kappa / model.mass:.3g} makes the coupling stiff")
+    advice = []
+    stiff_damping = model.order == 2 and model.gamma > 0 and model.mass / model.gamma < dt
+    if stiff_damping and method.name != "etd2":
+        advice.append("etd2 integrates the damping exactly")
+    if model.order == 2 and model.gamma == 0 and method.name != "lie_verlet":
+        advice.append("lie_verlet is symplectic")
+    hint = f"; {'; '.join(advice)}" if advice else ""
     if limit <= 0:
-        raise StabilityError(f"{method.name} has no stable step for this scene ({cause})")
+        what = "gamma = 0: the undamped oscillation grows at every dt" if model.order == 2 and model.gamma == 0 \
+            else cause
+        raise StabilityError(f"{method.name} has no stable step for this scene ({what}{hint})")
     raise StabilityError(f"{method.name} is unstable at dt = {dt:g}: its linear stability limit here is "
-                         f"dt < {limit:.3g} ({cause}), or use a smaller dt")
+                         f"dt < {limit:.3g} ({cause}{hint}); use a smaller dt")

@@ -69,11 +69,12 @@ def recommend(scene, distributed=False):
         return "rkmk4", "first order: 4th-order Munthe-Kaas, 4 rounds per step"
     if m.gamma == 0:
         return "lie_verlet", "undamped (gamma = 0): symplectic splitting keeps the energy without drift"
-    if scene.integrator.tolerance is not None and not distributed:
-        return "adaptive", "a tolerance was asked for (centralised)"
     dt = scene.integrator.dt or 0.05
     if m.mass / m.gamma < 0.5 * dt:
-        return "etd2", f"m/gamma = {m.mass / m.gamma:.3g} < dt/2: damping is stiff, integrate it exactly"
+        return "etd2", (f"m/gamma = {m.mass / m.gamma:.3g} < dt/2: damping is stiff, integrate it exactly "
+                        "(an explicit adaptive method would crawl at the stability limit)")
+    if scene.integrator.tolerance is not None and not distributed:
+        return "adaptive", "a tolerance was asked for (centralised)"
     return "rkmk4", "second order, non-stiff: 4th-order Munthe-Kaas"
 
 
