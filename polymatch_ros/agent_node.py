@@ -176,6 +176,14 @@ class AgentNode:
                                                              wire.agent_topic(self.ensemble, a, "twist"),
                                                              qos["pose"]) for a in self.layout.local}
         self.diag_pub = self.node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        # the final state, latched, for whoever supervises the run (the runner's summary)
+        self.final_pubs = {a: self.node.create_publisher(self._pose_t, wire.agent_topic(self.ensemble, a, "final_pose"),
+                                                         qos["latched"]) for a in self.layout.local}
+        self.final_twist_pubs = {}
+        if self.model.order == 2:
+            self.final_twist_pubs = {a: self.node.create_publisher(
+                self._twist_t, wire.agent_topic(self.ensemble, a, "final_twist"), qos["latched"])
+                for a in self.layout.local}
         self.node.create_subscription(String, wire.ensemble_topic(self.ensemble, "control"), self._control,
                                       qos["control"])
         self._last_diag = 0.0
@@ -192,7 +200,8 @@ class AgentNode:
                 self.drops("control", f"bad command {msg.data!r}")
 
     # -- publishing ------------------------------------------------------------------------------
-    def publish_state(self):
+    def publish_state(self, final=False):
+        """Publish every local agent's pose (and velocity); ``final`` also on the latched final topics."""
         st = self.state
         sec, nsec = wire.stamp_of(st.t)
         for gi in self.layout.local_groups:
@@ -213,6 +222,8 @@ class AgentNode:
                 else:
                     msg = wire.array_pose(self._dim_t, self._pose_t, st.t, x, self.grp.to_matrices(one)[0])
                 self.pose_pubs[a].publish(msg)
+                if final:
+                    self.final_pubs[a].publish(msg)
                 if self.model.order == 2:
                     w_one = self.grp.algebra_take(gs.w, [r])
                     if self.model.dim <= 3:
@@ -227,6 +238,8 @@ class AgentNode:
                                              self.grp.algebra_to_skew(w_one)[0],
                                              labels=("t", "velocity", "angular_row_major"))
                     self.twist_pubs[a].publish(tw)
+                    if final:
+                        self.final_twist_pubs[a].publish(tw)
         self._maybe_diagnostics()
 
     def time_split(self):
@@ -241,7 +254,8 @@ class AgentNode:
     def flush_poses(self, timeout=3.0):
         """Wait until the last poses reached every subscriber (the monitor, the runner)."""
         from rclpy.duration import Duration
-        for pub in list(self.pose_pubs.values()) + list(self.twist_pubs.values()):
+        pubs = [self.pose_pubs, self.twist_pubs, self.final_pubs, self.final_twist_pubs]
+        for pub in [p for group in pubs for p in group.values()]:
             pub.wait_for_all_acked(Duration(seconds=timeout))
 
     def _maybe_diagnostics(self, force=False):
@@ -324,6 +338,7 @@ class AgentNode:
                 last_spin = now
             if stop:
                 break
+        self.publish_state(final=True)
         self.exchange.flush()
         self.flush_poses()
         split = ", ".join(f"{k.split('_ms')[0]} {v:.2f}" for k, v in self.time_split().items())
@@ -340,6 +355,7 @@ class AgentNode:
                 self.spin_once(0.05)
                 if time.monotonic() - last > 0.5:                    # keep announcing the initial pose
                     self.publish_state()
+                    self._maybe_diagnostics(force=True)              # the runner counts agents that are up
                     last = time.monotonic()
             start = self.start_epoch if self.start_epoch is not None else time.time()
         else:
@@ -378,6 +394,7 @@ class AgentNode:
             self.rounds += 1
             self.round_time = time.monotonic() - t0
             self.publish_state()
+        self.publish_state(final=True)
         self.flush_poses()
         return f"finished at t = {self.state.t:.6g} after {self.steps} realtime steps"
 

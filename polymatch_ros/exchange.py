@@ -117,8 +117,7 @@ class LockstepExchange:
     """
 
     def __init__(self, name, layout, ensemble, run_id, rot_tol, drops):
-        from std_msgs.msg import Float64MultiArray, MultiArrayDimension
-        self._msg, self._dim = Float64MultiArray, MultiArrayDimension
+        from std_msgs.msg import Float64MultiArray
         self.node, self.executor = lean_node(name)
         self.layout, self.run_id, self.drops = layout, int(run_id), drops
         self.model = layout.model
@@ -129,6 +128,7 @@ class LockstepExchange:
         self.pubs = {a: self.node.create_publisher(Float64MultiArray, wire.agent_topic(ensemble, a, "stage"), qos,
                                                    event_callbacks=pub_events)
                      for a in layout.local}
+        self._out = {a: Float64MultiArray() for a in layout.local}     # reused: rclpy copies on publish
         self.inbox = defaultdict(dict)            # agent -> {(step, stage): Stage}
         self.current = (0, 0)
         qos_in = wire.qos_profiles()["stage_in"]
@@ -168,15 +168,14 @@ class LockstepExchange:
             gs = st.groups[gi]
             g = self.model.groups[gi]
             for r, row in enumerate(self.layout.rows[gi]):
-                fields = []
+                fields = {"rot": wire.rot_values(self.grp, self.grp.take(gs.rot, [r]))}
                 if "x" in request.fields:
-                    fields.append(("x", gs.x[r].tolist()))
+                    fields["x"] = gs.x[r].tolist()
                 if "v" in request.fields and gs.v is not None:
-                    fields.append(("v", gs.v[r].tolist()))
-                fields.append(("rot", wire.rot_values(self.grp, self.grp.take(gs.rot, [r]))))
-                msg = wire.encode_stage(self._msg, self._dim, self.run_id, g.start + row, step, stage,
-                                        flags, st.t, fields)
-                self.pubs[g.start + row].publish(msg)
+                    fields["v"] = gs.v[r].tolist()
+                a = g.start + row
+                wire.encode_stage(self._out[a], self.run_id, a, step, stage, flags, st.t, fields)
+                self.pubs[a].publish(self._out[a])
 
     def spin_once(self, timeout):
         self.executor.spin_once(timeout_sec=timeout)

@@ -88,9 +88,16 @@ def partition(n_agents, k):
 
 
 class Watcher:
-    """The runner's own small node: diameter, every pose (for the summary), and the control topic."""
+    """The runner's own small node.
+
+    It hears the headline diameter and the monitor's and agents' diagnostics (progress,
+    agents heard), publishes the control topic, and takes each agent's *final* pose from
+    its latched ``final_pose``/``final_twist`` topics for the summary — not the per-step
+    poses, so supervising a run adds no load to the lockstep rounds.
+    """
 
     def __init__(self, scene, ensemble):
+        from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
         from std_msgs.msg import Float64, String
@@ -99,9 +106,14 @@ class Watcher:
         self.executor.add_node(self.node)
         self.scene, self.model = scene, scene.model
         self.grp = self.model.rotations
+        self.ensemble = ensemble
         qos = wire.qos_profiles()
         self.diameter = None
+        self.monitor_t = None
+        self.monitor_heard = 0
+        self.agent_t = {}                # agent -> simulated time from its diagnostics
         self.node.create_subscription(Float64, wire.ensemble_topic(ensemble, "diameter"), self._diam, qos["latched"])
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._diag, 50)
         self.control = self.node.create_publisher(String, wire.ensemble_topic(ensemble, "control"), qos["control"])
         self.poses = {}
         self.velocities = {}
@@ -113,13 +125,32 @@ class Watcher:
             from std_msgs.msg import Float64MultiArray
             pose_t = twist_t = Float64MultiArray
         for a in range(self.model.n_agents):
-            self.node.create_subscription(pose_t, wire.agent_topic(ensemble, a, "pose"), self._pose(a), qos["pose"])
+            self.node.create_subscription(pose_t, wire.agent_topic(ensemble, a, "final_pose"), self._pose(a),
+                                          qos["latched"])
             if self.model.order == 2:
-                self.node.create_subscription(twist_t, wire.agent_topic(ensemble, a, "twist"), self._twist(a),
-                                              qos["pose"])
+                self.node.create_subscription(twist_t, wire.agent_topic(ensemble, a, "final_twist"), self._twist(a),
+                                              qos["latched"])
 
     def _diam(self, msg):
         self.diameter = float(msg.data)
+
+    def _diag(self, msg):
+        prefix = f"polymatch/{self.ensemble}/"
+        for st in msg.status:
+            if not st.name.startswith(prefix):
+                continue
+            values = {kv.key: kv.value for kv in st.values}
+            try:
+                t = float(values.get("t", "nan"))
+            except ValueError:
+                continue
+            if st.name == prefix + "monitor":
+                self.monitor_t = t
+                self.monitor_heard = int(values.get("agents_heard", "0"))
+            elif st.hardware_id.startswith("agents "):
+                for a in st.hardware_id[len("agents "):].split(","):
+                    if a.strip().isdigit():
+                        self.agent_t[int(a)] = t
 
     def _pose(self, agent):
         dim = self.model.dim
@@ -154,25 +185,28 @@ class Watcher:
     def spin(self, timeout):
         self.executor.spin_once(timeout_sec=timeout)
 
+    def agents_up(self):
+        return len(self.agent_t) >= self.model.n_agents
+
     def ensemble_time(self):
-        if len(self.poses) < self.model.n_agents:
+        """Simulated time of the ensemble: the monitor's last report, else the slowest agent's."""
+        if self.monitor_t is not None:
+            return self.monitor_t
+        if len(self.agent_t) < self.model.n_agents:
             return None
-        return min(p[0] for p in self.poses.values())
+        return min(self.agent_t.values())
+
+    def all_heard(self):
+        """The monitor's last report covered every agent."""
+        return self.monitor_heard >= self.model.n_agents
 
     def pose_times(self):
-        """Simulated time of every agent's last pose."""
+        """Simulated time of every agent's final pose."""
         return {a: p[0] for a, p in self.poses.items()}
 
-    def in_step(self):
-        """Every agent has reported, all at the same simulated time."""
-        return self.all_fresh(0.0)
-
-    def all_fresh(self, within):
-        """Every agent's last pose is at most ``within`` simulated seconds behind the newest."""
-        if len(self.poses) < self.model.n_agents:
-            return False
-        times = [p[0] for p in self.poses.values()]
-        return max(times) - min(times) <= within
+    def have_final(self):
+        return len(self.poses) >= self.model.n_agents and (
+            self.model.order == 1 or len(self.velocities) >= self.model.n_agents)
 
     def stop(self):
         from std_msgs.msg import String
@@ -183,7 +217,7 @@ class Watcher:
         self.control.publish(String(data=f"start {epoch!r}"))
 
     def final_state(self):
-        """The last pose of every agent as a core State (None if some agent never reported)."""
+        """The final pose of every agent as a core State (None if some agent never reported)."""
         if len(self.poses) < self.model.n_agents:
             return None
         groups = []
@@ -240,7 +274,7 @@ def _run(args, scene, scene_path, the_plan, env, domain):
     common = ["-p", f"scene:={os.path.abspath(scene_path)}", "-p", f"ensemble:={ens}",
               "-p", f"t_end:={scene.t_end!r}", "-p", f"mode:={args.mode}"]
     agent_args = common + ["-p", f"run_id:={run_id}", "-p", f"agents_per_process:={args.agents_per_process}",
-                           "-p", f"pose_subscribers:={2 if args.monitor else 1}",
+                           "-p", f"pose_subscribers:={1 if args.monitor else 0}",
                            "-p", f"integrator:={the_plan.name}",
                            "-p", f"round_timeout:={args.round_timeout!r}",
                            "-p", f"peer_timeout:={args.peer_timeout!r}"]
@@ -305,14 +339,12 @@ def _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, s
     deadline = start + args.timeout
     below_since = None
     stop_sent = 0.0
-    # in realtime the monitor's diameter covers the agents it heard; require all of them, in step
-    fresh = args.peer_timeout * args.time_scale if args.mode == "realtime" else 1.5 * the_plan.dt
     rate_mark = None
     rps = 0.0
     started = args.mode != "realtime"
     while True:
         watcher.spin(0.05)
-        if not started and len(watcher.poses) == scene.model.n_agents:
+        if not started and watcher.agents_up():
             watcher.start(time.time() + 0.5)       # every agent is up: start the clock together
             started = True
         if interrupted:
@@ -327,8 +359,8 @@ def _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, s
             detail = " | ".join(line for line in c.tail(3) if line.strip())
             return 1, f"{c.name} (pid {c.pid}) exited with code {c.poll()}: {detail}"
         if all(c.poll() == 0 for c in children):
-            drain = time.monotonic() + 2.0          # take the last poses still in flight
-            while time.monotonic() < drain and not watcher.in_step():
+            drain = time.monotonic() + 3.0          # the latched final poses may still be in flight
+            while time.monotonic() < drain and not watcher.have_final():
                 watcher.spin(0.05)
             progress.done()
             return 0, ""
@@ -347,7 +379,7 @@ def _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, s
                     rps = (t - rate_mark[1]) / the_plan.dt / (now - rate_mark[0])
                 rate_mark = (now, t)
             progress(t, d, f"  {rps:7.1f} rounds/s")
-            if d < scene.tolerance and watcher.all_fresh(fresh):
+            if d < scene.tolerance and watcher.all_heard():
                 below_since = t if below_since is None else below_since
                 if t - below_since >= args.hold and now - stop_sent > 0.5:
                     watcher.stop()

@@ -11,10 +11,11 @@ Topics (ensemble namespace ``/<ns>``, default ``/polymatch``):
                            centroid velocity, angular = spatial angular velocity, i.e. vee(W_i)).
                            d >= 4: Float64MultiArray dims [("t", 1), ("velocity", d),
                            ("angular_row_major", d*d)].
-``/<ns>/agent_<i>/stage``  lockstep only: ``std_msgs/Float64MultiArray`` with dims
-                           [("header", 7), then any of ("x", d), ("v", d), ("rot", r)]; header =
-                           [format 1, run id, agent, step, stage, flags, t]; rot is the core's
-                           representation (angle in 2-D, row-major matrix otherwise), so the
+``/<ns>/agent_<i>/stage``  lockstep only: ``std_msgs/Float64MultiArray``, no layout dims (they cost
+                           a Python object each on every publish and take), data =
+                           [format 2, run id, agent, step, stage, flags, t, mask] then x (d) if
+                           mask & 1, v (d) if mask & 2, rot (r) (mask & 4, always); rot is the
+                           core's representation (angle in 2-D, row-major matrix otherwise), so the
                            distributed run computes with exactly the numbers the centralised one does.
 
 Every decoder returns ``(value, None)`` or ``(None, reason)``; agents and the
@@ -26,9 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-STAGE_FORMAT = 1
-HEADER = 7
+STAGE_FORMAT = 2
+HEADER = 8
 FLAG_STOP = 1
+FIELDS = (("x", 1), ("v", 2), ("rot", 4))     # field, bit in the header's field mask, in wire order
 QUAT_TOL = 1e-6
 
 
@@ -79,26 +81,27 @@ class Stage:
     rot: np.ndarray = None      # one-row group array
 
 
-def encode_stage(msg_cls, dim_cls, run_id, agent, step, stage, flags, t, fields):
-    """fields: list of (label, values) -> Float64MultiArray."""
-    msg = msg_cls()
-    data = [float(STAGE_FORMAT), float(run_id), float(agent), float(step), float(stage), float(flags), float(t)]
-    dims = [dim_cls(label="header", size=HEADER, stride=HEADER)]
-    for label, values in fields:
-        data.extend(values)
-        dims.append(dim_cls(label=label, size=len(values), stride=len(values)))
-    msg.layout.dim = dims
-    msg.data = data
+def encode_stage(msg, run_id, agent, step, stage, flags, t, fields):
+    """Fill a Float64MultiArray with a stage: fields is a dict label -> values (x, v, rot).
+
+    No layout dimensions: nested messages cost a Python object per dimension on every
+    publish and take; the header's mask says which fields follow, in FIELDS order.
+    """
+    mask = 0
+    body = []
+    for label, bit in FIELDS:
+        if label in fields:
+            mask |= bit
+            body.extend(fields[label])
+    msg.data = [float(STAGE_FORMAT), float(run_id), float(agent), float(step), float(stage), float(flags),
+                float(t), float(mask)] + body
     return msg
 
 
 def decode_stage(msg, grp, dim, run_id, agent, rot_tol):
     """Float64MultiArray -> (Stage, None) or (None, reason)."""
-    data = np.asarray(msg.data, dtype=float)
-    dims = list(msg.layout.dim)
-    if not dims or dims[0].label != "header" or dims[0].size != HEADER:
-        return None, "malformed layout"
-    if sum(int(d.size) for d in dims) != len(data) or msg.layout.data_offset != 0:
+    data = np.frombuffer(msg.data, dtype=float) if len(msg.data) else np.zeros(0)
+    if len(data) < HEADER or msg.layout.dim or msg.layout.data_offset != 0:
         return None, "malformed layout"
     if not np.all(np.isfinite(data)):
         return None, "non-finite value"
@@ -108,21 +111,23 @@ def decode_stage(msg, grp, dim, run_id, agent, rot_tol):
         return None, "unknown sender (run id)"
     if int(data[2]) != agent:
         return None, "unknown sender (agent index)"
+    mask = int(data[7])
+    sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
+    if mask & ~7 or not mask & 4 or len(data) != HEADER + sum(sizes[f] for f, bit in FIELDS if mask & bit):
+        return None, "malformed layout"
     out = Stage(agent, int(data[3]), int(data[4]), int(data[5]), float(data[6]))
     pos = HEADER
-    sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
-    for d in dims[1:]:
-        size = int(d.size)
-        if d.label not in sizes or size != sizes[d.label]:
-            return None, f"unexpected field {d.label!r}"
-        values = data[pos:pos + size]
-        pos += size
-        if d.label == "rot":
+    for label, bit in FIELDS:
+        if not mask & bit:
+            continue
+        values = data[pos:pos + sizes[label]]
+        pos += sizes[label]
+        if label == "rot":
             if grp.name != "angle" and orthogonality(values.reshape(grp.dim, grp.dim)) > rot_tol:
                 return None, "rotation not orthogonal"
             out.rot = rot_from_values(grp, values)
         else:
-            setattr(out, d.label, values.copy())
+            setattr(out, label, values.copy())
     return out, None
 
 

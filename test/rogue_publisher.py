@@ -3,7 +3,7 @@
     python test/rogue_publisher.py ENSEMBLE AGENT SECONDS
 
 Sends, at ~100 Hz each: PoseStamped with NaN positions, PoseStamped with a quaternion of
-norm 2, and lockstep stage messages with NaN data or a foreign run id.  It is started by
+norm 2, and lockstep stage messages with NaN data, a foreign run id, or no header.  It is started by
 the test in the test's own ROS domain (loopback discovery) under `timeout`.
 """
 
@@ -14,7 +14,7 @@ import time
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray
 
 from polymatch_ros import wire
 
@@ -38,10 +38,12 @@ def main():
         else:
             p.pose.orientation.w = 2.0                      # quaternion far from unit norm
         pose.publish(p)
-        fields = [("x", [0.0, 0.0]), ("rot", [math.nan if k % 2 else 0.3])]
-        msg = wire.encode_stage(Float64MultiArray, MultiArrayDimension, 12345 if k % 2 == 0 else 0,
-                                agent, k, 0, 0, 0.0, fields)
+        fields = {"x": [0.0, 0.0], "rot": [math.nan if k % 2 else 0.3]}
+        msg = wire.encode_stage(Float64MultiArray(), 12345 if k % 2 == 0 else 0, agent, k, 0, 0, 0.0, fields)
         stage.publish(msg)
+        junk = Float64MultiArray()                          # no header at all
+        junk.data = [1.0, 2.0]
+        stage.publish(junk)
         k += 1
         rclpy.spin_once(node, timeout_sec=0.01)
     print(f"rogue: sent {k} bad poses and {k} bad stage messages", flush=True)

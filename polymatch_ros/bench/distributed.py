@@ -1,16 +1,18 @@
 """Lockstep rounds per second over the ROS node set, against the bare transport's limit.
 
-For N = 4, 8, 16, 32 agent processes (one agent each) on this machine:
+For N = 4, 8, 16, 32 processes on this machine, alternately (R repeats each, so
+that the machine's drift hits both alike):
 
   bare     ``python -m polymatch_ros.bench.bare_exchange``: N processes exchanging one
-           Float64MultiArray per round all-to-all with the agents' stage QoS and executor,
-           no numerics — the transport's limit;
-  agents   ``polymatch run`` in lockstep without the monitor (the agents alone): congruent
-           triangles, rkmk4 (4 rounds per step), the same number of rounds.
+           Float64MultiArray per round all-to-all with the agents' stage QoS, node and
+           executor, no numerics — the transport's limit;
+  agents   N agent processes started directly (no runner, no monitor): congruent
+           triangles, first-order model, rkmk4 (4 rounds per step), the same number of rounds;
+  deployed the same through ``polymatch run`` with the monitor (what the demo runs).
 
-Each agent reports its own rounds/s and how long after its node was created every
-peer was matched; the table gives the mean rate and the slowest match.  Every ROS
-process runs with loopback discovery, a domain id reserved for the run, and a timeout.
+Each process reports its own rounds/s and how long after its node was created
+every peer was matched.  Every ROS process runs with loopback discovery, a domain
+id reserved for the benchmark, and a timeout.
 """
 
 import os
@@ -18,7 +20,6 @@ import re
 import subprocess
 import sys
 import tempfile
-import time
 
 NAME = "distributed"
 HELP = "lockstep rounds/s of the agent processes vs the bare rclpy exchange, N = 4 ... 32"
@@ -28,10 +29,10 @@ ORDER = 60
 def add_arguments(p):
     from .options import at_least, int_list
     p.add_argument("--agents", type=int_list(2), default=[4, 8, 16, 32], metavar="N,N,...",
-                   help="numbers of agent processes (default 4,8,16,32)")
+                   help="numbers of processes (default 4,8,16,32)")
     p.add_argument("--rounds", type=at_least(8), default=400, help="rounds per run (default 400)")
-    p.add_argument("--executor", choices=("single", "events"), default="single",
-                   help="bare exchange executor (agents use the SingleThreadedExecutor)")
+    p.add_argument("--no-deployed", dest="deployed", action="store_false",
+                   help="skip the runs through `polymatch run` with the monitor")
 
 
 def _scene_yaml(n, steps, dt):
@@ -40,36 +41,49 @@ def _scene_yaml(n, steps, dt):
             f"groups:\n  - {{name: triangles, shape: triangle, count: {n}}}\n")
 
 
-def _run_bare(n, rounds, executor, env, timeout):
-    procs = [subprocess.Popen(["timeout", "-k", "5", str(timeout), sys.executable, "-m",
-                               "polymatch_ros.bench.bare_exchange", str(i), str(n), str(rounds),
-                               "--executor", executor],
-                              env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-             for i in range(n)]
-    rates, matched = [], []
+def _parallel(argvs, env, timeout):
+    procs = [subprocess.Popen(["timeout", "-k", "5", str(timeout)] + argv, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True) for argv in argvs]
+    outs = []
     for p in procs:
-        out, _ = p.communicate(timeout=timeout + 10)
-        m = re.search(r"([0-9.]+) rounds/s .* matched after ([0-9.]+) s", out)
-        if m:
-            rates.append(float(m.group(1)))
-            matched.append(float(m.group(2)))
-    return rates, matched, len(procs)
+        try:
+            out, _ = p.communicate(timeout=timeout + 10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, _ = p.communicate()
+        outs.append(out)
+    return outs
 
 
-def _run_agents(n, rounds, env, timeout, workdir):
-    steps = max(1, rounds // 4)
-    path = os.path.join(workdir, f"bench_{n}.yaml")
-    with open(path, "w") as fh:
-        fh.write(_scene_yaml(n, steps, 0.01))
-    t0 = time.monotonic()
-    proc = subprocess.run(["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli", "run",
-                           path, "--no-monitor", "--no-compare", "--timeout", str(timeout - 10), "-q", "-v"],
-                          env=env, capture_output=True, text=True)
-    wall = time.monotonic() - t0
-    rates = [float(x) for x in re.findall(r"^agent \d+: finished .* \(\d+ rounds, ([0-9.]+) rounds/s", proc.stdout,
-                                          re.M)]
-    matched = [float(x) for x in re.findall(r"peers matched after ([0-9.]+) s", proc.stdout)]
-    return rates, matched, proc.returncode, wall, proc.stdout + proc.stderr
+def _bare(n, rounds, env, timeout):
+    outs = _parallel([[sys.executable, "-m", "polymatch_ros.bench.bare_exchange", str(i), str(n), str(rounds)]
+                      for i in range(n)], env, timeout)
+    found = [re.search(r"([0-9.]+) rounds/s .* matched after ([0-9.]+) s", o) for o in outs]
+    return [float(m.group(1)) for m in found if m], [float(m.group(2)) for m in found if m]
+
+
+def _agents(n, path, env, timeout, run_id):
+    argvs = [[sys.executable, "-m", "polymatch_ros.agent_node", "--ros-args", "-p", f"scene:={path}",
+              "-p", f"agent:={i}", "-p", f"run_id:={run_id}"] for i in range(n)]
+    return _parse_agents("\n".join(_parallel(argvs, env, timeout)))
+
+
+def _parse_agents(text):
+    rates = [float(x) for x in re.findall(r"^agent \d+: finished .*?\(\d+ rounds, ([0-9.]+) rounds/s", text, re.M)]
+    matched = [float(x) for x in re.findall(r"peers matched after ([0-9.]+) s", text)]
+    return rates, matched
+
+
+def _deployed(path, env, timeout):
+    out = subprocess.run(["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli", "run", path,
+                          "--no-compare", "--hold", "1e9", "--timeout", str(timeout - 10), "-q", "-v"],
+                         env=env, capture_output=True, text=True)
+    return _parse_agents(out.stdout)
+
+
+def _stats(values):
+    import numpy as np
+    return (max(values), float(np.median(values))) if values else (float("nan"), float("nan"))
 
 
 def run(args, log):
@@ -81,31 +95,46 @@ def run(args, log):
 
     sizes = [4] if args.quick else args.agents
     rounds = 40 if args.quick else args.rounds
+    repeats = 1 if args.quick else (args.repeats or 3)
     report = Report(NAME, "Lockstep over ROS: agents vs the bare exchange (`polymatch bench distributed`)")
     rows = []
     with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
         env = ros_environment(dom, base={k: v for k, v in os.environ.items()
                                          if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
-        env["PYTHONUNBUFFERED"] = "1"
         for n in sizes:
-            timeout = 60 + int(n * rounds / 20)
-            log(f"bare exchange, {n} processes, {rounds} rounds")
-            b_rates, b_matched, _ = _run_bare(n, rounds, args.executor, env, timeout)
-            log(f"agents, {n} processes, {rounds} rounds")
-            a_rates, a_matched, rc, wall, text = _run_agents(n, rounds, env, timeout, workdir)
-            if rc not in (0, 3) or not a_rates:
-                log(f"agents failed (exit {rc}): {text.strip().splitlines()[-1] if text.strip() else ''}")
-            b = float(np.mean(b_rates)) if b_rates else float("nan")
-            a = float(np.mean(a_rates)) if a_rates else float("nan")
-            rows.append([n, f"{b:.1f}", f"{a:.1f}", f"{a / b:.0%}" if b_rates and a_rates else "-",
-                         f"{max(b_matched):.2f}" if b_matched else "-",
-                         f"{max(a_matched):.2f}" if a_matched else "-"])
-    report.table(["processes", f"bare rounds/s ({args.executor})", "agents rounds/s", "agents / bare",
-                  "bare: slowest match (s)", "agents: slowest match (s)"], rows,
-                 caption=f"{rounds} lockstep rounds, all-to-all, one agent per process; rates are means over "
-                         "processes; 'match' is the time from node creation until every peer's writer and reader "
-                         "were matched (Fast DDS profile polymatch_ros/resources/fastdds_profile.xml)")
-    report.text("- agents: congruent triangles, first-order model, rkmk4 (4 rounds per step), no monitor; "
-                "a round = publish one stage message, take every peer's, run the stage's numerics.",
-                "- bare: the same QoS (RELIABLE, VOLATILE, readers KEEP_ALL) and executor, no numerics.")
+            timeout = 60 + int(n * rounds / 10)
+            path = os.path.join(workdir, f"bench_{n}.yaml")
+            with open(path, "w") as fh:
+                fh.write(_scene_yaml(n, max(1, rounds // 4), 0.01))
+            bare, agents, deployed, b_match, a_match = [], [], [], [], []
+            for r in range(repeats):
+                log(f"N = {n}, repeat {r + 1}/{repeats}: bare, agents" + (", deployed" if args.deployed else ""))
+                rates, matched = _bare(n, rounds, env, timeout)
+                bare.append(np.mean(rates) if len(rates) == n else float("nan"))
+                b_match += matched
+                rates, matched = _agents(n, path, env, timeout, 1000 + r)
+                agents.append(np.mean(rates) if len(rates) == n else float("nan"))
+                a_match += matched
+                if args.deployed:
+                    rates, _ = _deployed(path, env, timeout)
+                    deployed.append(np.mean(rates) if len(rates) == n else float("nan"))
+            ok = lambda xs: [x for x in xs if x == x]                      # noqa: E731  (drop failed runs)
+            (b_best, b_med), (a_best, a_med) = _stats(ok(bare)), _stats(ok(agents))
+            d_best, d_med = _stats(ok(deployed))
+            rows.append([n, f"{b_best:.1f} / {b_med:.1f}", f"{a_best:.1f} / {a_med:.1f}",
+                         f"{a_med / b_med:.0%}" if ok(bare) and ok(agents) else "-",
+                         f"{d_best:.1f} / {d_med:.1f}" if args.deployed else "-",
+                         f"{max(b_match):.2f}" if b_match else "-", f"{max(a_match):.2f}" if a_match else "-",
+                         f"{len(ok(bare))}+{len(ok(agents))}+{len(ok(deployed))} of {repeats}"])
+    report.table(["processes", "bare rounds/s best / median", "agents rounds/s best / median",
+                  "agents / bare (medians)", "deployed (runner + monitor)", "bare: slowest match (s)",
+                  "agents: slowest match (s)", "runs that finished"], rows,
+                 caption=f"{rounds} lockstep rounds, all-to-all, one agent per process, {repeats} alternating repeats; "
+                         "rates are means over the processes of a run; 'match' is the time from node creation "
+                         "until every peer's writer and reader were matched")
+    report.text("- agents: congruent triangles, first-order model, rkmk4 (4 rounds per step); a round = publish one "
+                "stage message, take every peer's, run the stage's numerics; poses are published every step.",
+                "- bare: the same QoS (RELIABLE, VOLATILE, readers KEEP_ALL), node and executor, no numerics.",
+                "- deployed: `polymatch run` with the monitor, which hears every pose and computes the metrics "
+                "each step on the same two cores.")
     return report
