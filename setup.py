@@ -16,6 +16,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         (os.path.join("share", package_name, "config"), glob("config/*.yaml")),
+        (os.path.join("share", package_name, "config", "extremes"), glob("config/extremes/*.yaml")),
     ],
     install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
     extras_require={"plot": ["matplotlib"], "test": ["pytest"]},

@@ -14,7 +14,6 @@ import os
 import sys
 import time
 
-import numpy as np
 
 from . import wire
 from .core.errors import ParameterError, PolymatchError
@@ -201,7 +200,13 @@ class AgentNode:
 
     # -- publishing ------------------------------------------------------------------------------
     def publish_state(self, final=False):
-        """Publish every local agent's pose (and velocity); ``final`` also on the latched final topics."""
+        """Publish every local agent's pose (and velocity); ``final`` also on the latched final topics.
+
+        Per-step poses nobody subscribes to are not even built (the lockstep hot loop).
+        """
+        if not final and not any(p.get_subscription_count() for p in self.pose_pubs.values()):
+            self._maybe_diagnostics()
+            return
         st = self.state
         sec, nsec = wire.stamp_of(st.t)
         for gi in self.layout.local_groups:

@@ -47,7 +47,7 @@ def resolve_scene_path(name):
         return name
     stem = name[:-5] if name.endswith(".yaml") else name
     for d in shipped_config_dirs():
-        cand = os.path.join(d, os.path.basename(stem) + ".yaml")
+        cand = os.path.join(d, stem + ".yaml")          # e.g. congruent_triangles, extremes/stiff_mass
         if os.path.isfile(cand):
             return cand
     raise SceneError(f"{name}: no such scene file (nor a shipped scene of that name; "
@@ -212,13 +212,21 @@ def cmd_scenes(args):
     from .core.scene import load_scene
     rows = []
     for d in shipped_config_dirs()[:1]:
-        for f in sorted(os.listdir(d)):
-            if f.endswith(".yaml"):
+        for sub in ("", "extremes"):
+            folder = os.path.join(d, sub)
+            if not os.path.isdir(folder):
+                continue
+            for f in sorted(os.listdir(folder)):
+                if not f.endswith(".yaml"):
+                    continue
+                name = os.path.join(sub, f[:-5]) if sub else f[:-5]
                 try:
-                    s = load_scene(os.path.join(d, f))
-                    rows.append([f[:-5], s.dim, s.model.n_agents, s.model.order, s.description])
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        s = load_scene(os.path.join(folder, f))
+                    rows.append([name, s.dim, s.model.n_agents, s.model.order, s.description])
                 except PolymatchError as exc:
-                    rows.append([f[:-5], "?", "?", "?", f"invalid: {exc}"])
+                    rows.append([name, "?", "?", "?", f"invalid: {exc}"])
     print(format_table(rows, ["scene", "d", "N", "order", "description"]))
     return 0
 

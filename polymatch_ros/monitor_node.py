@@ -21,7 +21,6 @@ gets the last value.
 import sys
 import time
 from dataclasses import replace
-from types import SimpleNamespace
 
 import numpy as np
 

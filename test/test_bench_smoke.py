@@ -23,14 +23,19 @@ EXPECTED = {
     "longhorizon": ["rel. energy drift up to", "growth p", "orth. defect up to", "lie_verlet", "refused (unstable)",
                     "RK45", "DOP853", "adaptive (ours)"],
     "extremes": ["| extreme", "| expectation", "what happened", "pass/fail", "wall s", "m = 1e-8", "gamma = 0",
-                 "kappa = 1e4", "centroids ~1e9", "one agent", "known defect"],
+                 "kappa = 1e4", "centroids ~1e9", "one agent", "expectations over"],
+    "reductions": ["| reduction", "full / reduced", "angles (Kuramoto) vs 2x2 matrices", "exact flow (Prop. 2.1)",
+                   "O(m/gamma) modelling error"],
+    "distributed": ["| processes", "bare rounds/s best / median", "agents / bare (medians)", "slowest match"],
+    "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)", "injected delay"],
 }
 
 FAMILY_NAMES = [m.NAME for m in families()]
 
 
 def test_shipped_families_are_registered():
-    assert {"step", "meanfield", "dop853", "precision", "longhorizon"} <= set(FAMILY_NAMES)
+    assert {"step", "meanfield", "dop853", "precision", "longhorizon", "extremes", "reductions", "distributed",
+            "trade"} <= set(FAMILY_NAMES)
 
 
 @pytest.mark.parametrize("name", FAMILY_NAMES)

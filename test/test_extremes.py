@@ -47,7 +47,7 @@ import yaml
 from scipy.spatial import ConvexHull
 from scipy.spatial.distance import pdist
 
-from polymatch_ros.core import METHODS, PolymatchError, ShapeError, StabilityError, load_scene, simulate
+from polymatch_ros.core import METHODS, PolymatchError, StabilityError, load_scene, simulate
 
 from core_testlib import (brute_matching_diameter, brute_rotation_diameter, defect, make_scene, rot_matrices,
                           rotation_energy, state_error, vertices)

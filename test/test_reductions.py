@@ -8,7 +8,6 @@ runs reduced and full side by side; `polymatch bench reductions` reports the cos
 """
 
 import numpy as np
-import pytest
 
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate

@@ -5,7 +5,6 @@ agent, or per K agents) in the test's own ROS domain, saves the final poses exac
 they arrived on the pose topics, and compares every vertex with `simulate` computed here.
 """
 
-import os
 import re
 from dataclasses import replace
 

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import yaml
 
+from . import initial
+from .checks import Map, vector
 from .decompose import RotationNotUniqueWarning, decompose
 from .errors import SceneError
 from .model import Group, GroupState, Model, State, validate_model
@@ -53,87 +55,6 @@ class Scene:
     @property
     def dim(self):
         return self.model.dim
-
-
-class _Map:
-    """A mapping with a key path, that refuses unknown keys."""
-
-    def __init__(self, data, path, allowed):
-        if not isinstance(data, dict):
-            raise SceneError(f"{path or 'scene'}: expected a mapping, got {type(data).__name__}")
-        unknown = [k for k in data if k not in allowed]
-        if unknown:
-            raise SceneError(f"{_join(path, unknown[0])}: unknown key (allowed: {', '.join(allowed)})")
-        self.data, self.path = data, path
-
-    def has(self, key):
-        return key in self.data and self.data[key] is not None
-
-    def raw(self, key, default=None):
-        return self.data.get(key, default)
-
-    def at(self, key):
-        return _join(self.path, key)
-
-    def number(self, key, default=None, *, minimum=None, positive=False, integer=False):
-        if not self.has(key):
-            if default is None:
-                raise SceneError(f"{self.at(key)}: required")
-            return default
-        return _number(self.data[key], self.at(key), minimum=minimum, positive=positive, integer=integer)
-
-
-def _join(path, key):
-    if isinstance(key, int):
-        return f"{path}[{key}]"
-    return f"{path}.{key}" if path else str(key)
-
-
-def _number(value, path, *, minimum=None, positive=False, integer=False):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        if isinstance(value, str):
-            try:
-                value = float(value)
-            except ValueError:
-                raise SceneError(f"{path}: expected a number, got {value!r}") from None
-        else:
-            raise SceneError(f"{path}: expected a number, got {value!r}")
-    if not math.isfinite(value):
-        raise SceneError(f"{path}: must be finite, got {value}")
-    if integer:
-        if float(value) != int(value):
-            raise SceneError(f"{path}: expected an integer, got {value}")
-        value = int(value)
-    if positive and not value > 0:
-        raise SceneError(f"{path}: must be > 0, got {value}")
-    if minimum is not None and value < minimum:
-        raise SceneError(f"{path}: must be >= {minimum}, got {value}")
-    return value
-
-
-def _vector(value, path, dim=None):
-    try:
-        v = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise SceneError(f"{path}: expected a list of numbers") from None
-    if v.ndim != 1 or (dim is not None and v.shape[0] != dim):
-        want = f"{dim} numbers" if dim else "a list of numbers"
-        raise SceneError(f"{path}: expected {want}, got {value!r}")
-    if not np.all(np.isfinite(v)):
-        raise SceneError(f"{path}: values must be finite")
-    return v
-
-
-def _matrix_rows(value, path, rows, cols):
-    try:
-        m = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise SceneError(f"{path}: expected a {rows} x {cols} list of lists") from None
-    if m.shape != (rows, cols):
-        raise SceneError(f"{path}: expected {rows} rows of {cols} numbers, got shape {m.shape}")
-    if not np.all(np.isfinite(m)):
-        raise SceneError(f"{path}: values must be finite")
-    return m
 
 
 def load_scene(source, overrides=None):
@@ -179,14 +100,14 @@ def _apply_overrides(data, overrides):
 
 
 def build_scene(data):
-    top = _Map(data, "", ("name", "description", "dimension", "seed", "model", "integrator",
+    top = Map(data, "", ("name", "description", "dimension", "seed", "model", "integrator",
                           "time", "convergence", "groups", "figure"))
     dim = top.number("dimension", integer=True, minimum=2)
     seed = top.number("seed", 0, integer=True, minimum=0)
     rng = np.random.default_rng(seed)
     notes = []
 
-    mm = _Map(top.raw("model", {}), "model",
+    mm = Map(top.raw("model", {}), "model",
               ("order", "kappa", "gamma", "mass", "kappa_2", "L", "representation", "centroids"))
     order = mm.number("order", 1, integer=True)
     if order not in (1, 2):
@@ -235,10 +156,10 @@ def build_scene(data):
         gs.x = gs.x - origin
     initial = State(0.0, tuple(states))
 
-    tm = _Map(top.raw("time", {}), "time", ("t_end", "samples"))
+    tm = Map(top.raw("time", {}), "time", ("t_end", "samples"))
     t_end = tm.number("t_end", 20.0, positive=True)
     samples = _samples(tm.raw("samples"), "time.samples", t_end)
-    im = _Map(top.raw("integrator", {}), "integrator", ("method", "dt", "tolerance", "max_steps"))
+    im = Map(top.raw("integrator", {}), "integrator", ("method", "dt", "tolerance", "max_steps"))
     method = im.raw("method", "auto")
     if not isinstance(method, str):
         raise SceneError(f"integrator.method: expected a name, got {method!r}")
@@ -249,14 +170,14 @@ def build_scene(data):
     if tol is not None and not 0 < tol < 1:
         raise SceneError(f"integrator.tolerance: must be in (0, 1), got {tol}")
     max_steps = im.number("max_steps", 10_000_000, integer=True, minimum=1)
-    cm = _Map(top.raw("convergence", {}), "convergence", ("tolerance", "expected"))
+    cm = Map(top.raw("convergence", {}), "convergence", ("tolerance", "expected"))
     conv_tol = cm.number("tolerance", 1e-6, positive=True)
     expected = cm.raw("expected", True)
     if not isinstance(expected, bool):
         raise SceneError(f"convergence.expected: expected true or false, got {expected!r}")
-    fm = _Map(top.raw("figure", {}), "figure", ("snapshots",))
+    fm = Map(top.raw("figure", {}), "figure", ("snapshots",))
     snaps = fm.raw("snapshots", [0, 3, 6, 12])
-    snapshots = tuple(float(t) for t in _vector(snaps, "figure.snapshots") if t <= t_end)
+    snapshots = tuple(float(t) for t in vector(snaps, "figure.snapshots") if t <= t_end)
     name = top.raw("name", "scene")
     return Scene(name=str(name), description=str(top.raw("description", "")), model=model,
                  initial=initial, origin=origin,
@@ -269,7 +190,7 @@ def _samples(raw, path, t_end):
     if raw is None:
         return np.linspace(0.0, t_end, 101)
     if isinstance(raw, dict):
-        sm = _Map(raw, path, ("every", "count"))
+        sm = Map(raw, path, ("every", "count"))
         if sm.has("every") == sm.has("count"):
             raise SceneError(f"{path}: give exactly one of 'every' or 'count'")
         if sm.has("every"):
@@ -279,14 +200,14 @@ def _samples(raw, path, t_end):
             return np.unique(np.append(times[times <= t_end], t_end))
         count = sm.number("count", integer=True, minimum=2)
         return np.linspace(0.0, t_end, count)
-    times = _vector(raw, path)
+    times = vector(raw, path)
     if np.any(times < 0) or np.any(times > t_end):
         raise SceneError(f"{path}: sample times must lie in [0, t_end = {t_end}]")
     return np.unique(np.concatenate([[0.0], times, [t_end]]))
 
 
 def _build_group(raw, path, dim, order, rng, rotations, start, notes):
-    gm = _Map(raw, path, ("name", "shape", "size", "count", "centroids", "rotations", "scales",
+    gm = Map(raw, path, ("name", "shape", "size", "count", "centroids", "rotations", "scales",
                           "velocities", "agents", "similar"))
     name = str(gm.raw("name", f"group{start}"))
     explicit = gm.has("agents")
@@ -316,7 +237,7 @@ def _build_group(raw, path, dim, order, rng, rotations, start, notes):
             raise SceneError(f"{gm.at('agents')}: expected a non-empty list of {{vertices: ...}}")
         verts, vels, omegas = [], [], []
         for ai, a in enumerate(agents):
-            am = _Map(a, f"{gm.at('agents')}[{ai}]", ("vertices", "velocity", "angular_velocity"))
+            am = Map(a, f"{gm.at('agents')}[{ai}]", ("vertices", "velocity", "angular_velocity"))
             if not am.has("vertices"):
                 raise SceneError(f"{am.at('vertices')}: required")
             verts.append(am.raw("vertices"))
@@ -337,8 +258,8 @@ def _build_group(raw, path, dim, order, rng, rotations, start, notes):
             shape = type(shape)(shape.name, ref, shape.edges)
         count = len(verts)
         rot = rotations.from_matrices(mats)
-        v = _explicit_vectors(vels, f"{gm.at('agents')}", "velocity", dim, order)
-        w = _explicit_omegas(omegas, f"{gm.at('agents')}", dim, order, rotations)
+        v = initial.explicit_vectors(vels, f"{gm.at('agents')}", "velocity", dim, order)
+        w = initial.explicit_omegas(omegas, f"{gm.at('agents')}", dim, order, rotations)
         group = Group(name, count, shape.vertices, shape.edges,
                       scales if similar else None, start)
         if order == 1 and (v is not None or w is not None):
@@ -354,205 +275,21 @@ def _build_group(raw, path, dim, order, rng, rotations, start, notes):
                      + ("its rotation is still unique (det +1 fixes the normal)"
                         if shape.rank == dim - 1 else
                         "rotations that differ only in the complement leave its vertices in place"))
-    cents = _centroids(gm.raw("centroids", {"box": [-5.0, 5.0]}), gm.at("centroids"), dim, count, rng)
-    mats = _rotations(gm.raw("rotations", "uniform"), gm.at("rotations"), dim, count, rng)
+    cents = initial.centroids(gm.raw("centroids", {"box": [-5.0, 5.0]}), gm.at("centroids"), dim, count, rng)
+    mats = initial.rotations(gm.raw("rotations", "uniform"), gm.at("rotations"), dim, count, rng)
     scales = None
     if similar:
         if not gm.has("scales"):
             raise SceneError(f"{gm.at('scales')}: required when similar is true")
-        scales = _scales(gm.raw("scales"), gm.at("scales"), count, rng)
+        scales = initial.scales(gm.raw("scales"), gm.at("scales"), count, rng)
     vel = gm.raw("velocities")
     if order == 1 and vel is not None:
         raise SceneError(f"{gm.at('velocities')}: only meaningful for model.order = 2")
     v = w = None
     if order == 2:
-        v, wm = _velocities(vel or {}, gm.at("velocities"), dim, count, rng)
+        v, wm = initial.velocities(vel or {}, gm.at("velocities"), dim, count, rng)
         w = rotations.algebra_from_skew(wm)
     group = Group(name, count, shape.vertices, shape.edges, scales, start)
     return group, GroupState(cents, rotations.from_matrices(mats), v, w)
 
 
-def _centroids(raw, path, dim, count, rng):
-    if isinstance(raw, dict) and len(raw) == 1:
-        (kind, val), = raw.items()
-        p = f"{path}.{kind}"
-        if kind == "box":
-            b = np.array(val, dtype=float) if isinstance(val, list) else None
-            if b is None or b.size == 0:
-                raise SceneError(f"{p}: expected [lo, hi] or one [lo, hi] per dimension")
-            if b.shape == (2,):
-                b = np.tile(b, (dim, 1))
-            if b.shape != (dim, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 1] < b[:, 0]):
-                raise SceneError(f"{p}: expected [lo, hi] or {dim} pairs [lo, hi] with lo <= hi")
-            return b[:, 0] + (b[:, 1] - b[:, 0]) * rng.random((count, dim))
-        if kind == "points":
-            return _matrix_rows(val, p, count, dim)
-        if kind == "normal":
-            nm = _Map(val, p, ("mean", "std"))
-            mean = _vector(nm.raw("mean", [0.0] * dim), nm.at("mean"), dim)
-            std = nm.number("std", 1.0, minimum=0)
-            return mean + std * rng.standard_normal((count, dim))
-        if kind == "at":
-            return np.tile(_vector(val, p, dim), (count, 1))
-    raise SceneError(f"{path}: expected one of {{box: ...}}, {{points: ...}}, {{normal: ...}}, {{at: [...]}}")
-
-
-def _base_rotation(raw, path, dim):
-    if raw is None or raw == "identity":
-        return np.eye(dim)
-    if isinstance(raw, dict) and len(raw) == 1:
-        (kind, val), = raw.items()
-        p = f"{path}.{kind}"
-        if kind == "angle":
-            if dim != 2:
-                raise SceneError(f"{p}: an angle defines a rotation only for dimension 2")
-            a = _number(val, p)
-            return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-        if kind == "rotvec":
-            from scipy.spatial.transform import Rotation
-            if dim != 3:
-                raise SceneError(f"{p}: a rotation vector defines a rotation only for dimension 3")
-            return Rotation.from_rotvec(_vector(val, p, 3)).as_matrix()
-        if kind == "matrix":
-            return _check_rotation(_matrix_rows(val, p, dim, dim), p)
-    raise SceneError(f"{path}: expected identity, {{angle: a}}, {{rotvec: [...]}} or {{matrix: [[...]]}}")
-
-
-def _check_rotation(m, path):
-    err = np.abs(m.T @ m - np.eye(len(m))).max()
-    if err > 1e-9:
-        raise SceneError(f"{path}: not orthogonal (|O^T O - I| = {err:.3g})")
-    if np.linalg.det(m) < 0:
-        raise SceneError(f"{path}: a reflection (det -1), not a rotation")
-    return m
-
-
-def random_rotation_within(dim, count, angle, rng):
-    """Rotations exp(theta A) with A a uniformly random unit-spectral-norm skew matrix, theta ~ U[0, angle]."""
-    from scipy.linalg import expm
-    out = np.empty((count, dim, dim))
-    for i in range(count):
-        a = rng.standard_normal((dim, dim))
-        a = a - a.T
-        a /= np.linalg.norm(a, 2)
-        out[i] = expm(rng.uniform(0.0, angle) * a)
-    return out
-
-
-def _rotations(raw, path, dim, count, rng):
-    if raw == "uniform":
-        if dim == 2:
-            a = rng.uniform(-np.pi, np.pi, count)
-            return np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)], -1)], -2)
-        if dim == 3:
-            from scipy.spatial.transform import Rotation
-            return Rotation.random(count, random_state=rng).as_matrix().reshape(count, 3, 3)
-        from scipy.stats import special_ortho_group   # slow to import: only when needed
-        return special_ortho_group.rvs(dim, size=count, random_state=rng).reshape(count, dim, dim)
-    if raw == "identity":
-        return np.repeat(np.eye(dim)[None], count, axis=0)
-    if isinstance(raw, dict):
-        if "within" in raw:
-            rm = _Map(raw, path, ("within", "base"))
-            angle = rm.number("within", minimum=0)
-            base = _base_rotation(rm.raw("base"), rm.at("base"), dim)
-            return random_rotation_within(dim, count, angle, rng) @ base
-        if len(raw) == 1:
-            (kind, val), = raw.items()
-            p = f"{path}.{kind}"
-            if kind == "angles":
-                if dim != 2:
-                    raise SceneError(f"{p}: angles define rotations only for dimension 2")
-                a = _vector(val, p, count)
-                return np.stack([np.stack([np.cos(a), -np.sin(a)], -1),
-                                 np.stack([np.sin(a), np.cos(a)], -1)], -2)
-            if kind == "rotvecs":
-                from scipy.spatial.transform import Rotation
-                if dim != 3:
-                    raise SceneError(f"{p}: rotation vectors define rotations only for dimension 3")
-                return Rotation.from_rotvec(_matrix_rows(val, p, count, 3)).as_matrix()
-            if kind == "matrices":
-                if not isinstance(val, list) or len(val) != count:
-                    raise SceneError(f"{p}: expected {count} matrices")
-                return np.array([_check_rotation(_matrix_rows(m, f"{p}[{i}]", dim, dim), f"{p}[{i}]")
-                                 for i, m in enumerate(val)])
-    raise SceneError(f"{path}: expected uniform, identity, {{within: angle, base: ...}}, "
-                     f"{{angles: [...]}}, {{rotvecs: [...]}} or {{matrices: [...]}}")
-
-
-def _scales(raw, path, count, rng):
-    if isinstance(raw, list):
-        s = _vector(raw, path, count)
-    elif isinstance(raw, dict) and len(raw) == 1:
-        (kind, val), = raw.items()
-        b = _vector(val, f"{path}.{kind}", 2)
-        if not 0 < b[0] <= b[1]:
-            raise SceneError(f"{path}.{kind}: expected [lo, hi] with 0 < lo <= hi")
-        if kind == "uniform":
-            s = rng.uniform(b[0], b[1], count)
-        elif kind == "log_uniform":
-            s = np.exp(rng.uniform(np.log(b[0]), np.log(b[1]), count))
-        else:
-            raise SceneError(f"{path}: expected a list, {{uniform: [lo, hi]}} or {{log_uniform: [lo, hi]}}")
-    else:
-        raise SceneError(f"{path}: expected a list, {{uniform: [lo, hi]}} or {{log_uniform: [lo, hi]}}")
-    if np.any(s <= 0):
-        raise SceneError(f"{path}: scales must be > 0")
-    return s
-
-
-def _velocities(raw, path, dim, count, rng):
-    vm = _Map(raw, path, ("centroid", "angular"))
-    v = _random_vectors(vm.raw("centroid", "zero"), vm.at("centroid"), (count, dim), rng)
-    k = dim * (dim - 1) // 2
-    comps = _random_vectors(vm.raw("angular", "zero"), vm.at("angular"), (count, k), rng)
-    return v, skew_from_components(comps, dim)
-
-
-def _random_vectors(raw, path, shape, rng):
-    if raw == "zero" or raw == 0:
-        return np.zeros(shape)
-    if isinstance(raw, dict) and len(raw) == 1:
-        (kind, val), = raw.items()
-        if kind == "normal":
-            return _number(val, f"{path}.normal", minimum=0) * rng.standard_normal(shape)
-        if kind == "values":
-            return _matrix_rows(val, f"{path}.values", *shape)
-    raise SceneError(f"{path}: expected zero, {{normal: std}} or {{values: [[...], ...]}}")
-
-
-def _explicit_vectors(values, path, key, dim, order):
-    if all(v is None for v in values):
-        return None
-    return np.array([np.zeros(dim) if v is None else _vector(v, f"{path}[{i}].{key}", dim)
-                     for i, v in enumerate(values)])
-
-
-def _explicit_omegas(values, path, dim, order, rotations):
-    if all(v is None for v in values):
-        return None
-    k = dim * (dim - 1) // 2
-    rows = [np.zeros(k) if v is None else _vector(v, f"{path}[{i}].angular_velocity", k)
-            for i, v in enumerate(values)]
-    w = skew_from_components(np.array(rows), dim)
-    return rotations.algebra_from_skew(w)
-
-
-def skew_from_components(comps, dim):
-    """(N, d(d-1)/2) components -> (N, d, d) skew matrices.
-
-    For d = 3 the components are the angular-velocity vector (w_x, w_y, w_z);
-    for d = 2 the single component is the rate about z; otherwise they are the
-    strictly lower-triangular entries W[j, i] (i < j) in row-major order.
-    """
-    comps = np.asarray(comps, dtype=float)
-    w = np.zeros((comps.shape[0], dim, dim))
-    if dim == 3:
-        x, y, z = comps.T
-        w[:, 0, 1], w[:, 0, 2], w[:, 1, 2] = -z, y, -x
-        w[:, 1, 0], w[:, 2, 0], w[:, 2, 1] = z, -y, x
-        return w
-    iu = np.triu_indices(dim, 1)
-    w[:, iu[1], iu[0]] = comps
-    w[:, iu[0], iu[1]] = -comps
-    return w

@@ -1,0 +1,197 @@
+"""Initial states of a scene's groups: seeded random draws or explicit values, validated.
+
+Centroids in a box, a ball or at given points; rotations uniform (Haar), within an angle
+of a base rotation, or given (angles, rotation vectors, matrices); scales for similar
+ensembles (F-1); centroid and angular velocities for the second-order model (A-1).
+"""
+
+import numpy as np
+
+from .checks import Map, matrix_rows, number, vector
+from .errors import SceneError
+
+
+def centroids(raw, path, dim, count, rng):
+    if isinstance(raw, dict) and len(raw) == 1:
+        (kind, val), = raw.items()
+        p = f"{path}.{kind}"
+        if kind == "box":
+            b = np.array(val, dtype=float) if isinstance(val, list) else None
+            if b is None or b.size == 0:
+                raise SceneError(f"{p}: expected [lo, hi] or one [lo, hi] per dimension")
+            if b.shape == (2,):
+                b = np.tile(b, (dim, 1))
+            if b.shape != (dim, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 1] < b[:, 0]):
+                raise SceneError(f"{p}: expected [lo, hi] or {dim} pairs [lo, hi] with lo <= hi")
+            return b[:, 0] + (b[:, 1] - b[:, 0]) * rng.random((count, dim))
+        if kind == "points":
+            return matrix_rows(val, p, count, dim)
+        if kind == "normal":
+            nm = Map(val, p, ("mean", "std"))
+            mean = vector(nm.raw("mean", [0.0] * dim), nm.at("mean"), dim)
+            std = nm.number("std", 1.0, minimum=0)
+            return mean + std * rng.standard_normal((count, dim))
+        if kind == "at":
+            return np.tile(vector(val, p, dim), (count, 1))
+    raise SceneError(f"{path}: expected one of {{box: ...}}, {{points: ...}}, {{normal: ...}}, {{at: [...]}}")
+
+
+def base_rotation(raw, path, dim):
+    if raw is None or raw == "identity":
+        return np.eye(dim)
+    if isinstance(raw, dict) and len(raw) == 1:
+        (kind, val), = raw.items()
+        p = f"{path}.{kind}"
+        if kind == "angle":
+            if dim != 2:
+                raise SceneError(f"{p}: an angle defines a rotation only for dimension 2")
+            a = number(val, p)
+            return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        if kind == "rotvec":
+            from scipy.spatial.transform import Rotation
+            if dim != 3:
+                raise SceneError(f"{p}: a rotation vector defines a rotation only for dimension 3")
+            return Rotation.from_rotvec(vector(val, p, 3)).as_matrix()
+        if kind == "matrix":
+            return check_rotation(matrix_rows(val, p, dim, dim), p)
+    raise SceneError(f"{path}: expected identity, {{angle: a}}, {{rotvec: [...]}} or {{matrix: [[...]]}}")
+
+
+def check_rotation(m, path):
+    err = np.abs(m.T @ m - np.eye(len(m))).max()
+    if err > 1e-9:
+        raise SceneError(f"{path}: not orthogonal (|O^T O - I| = {err:.3g})")
+    if np.linalg.det(m) < 0:
+        raise SceneError(f"{path}: a reflection (det -1), not a rotation")
+    return m
+
+
+def random_rotation_within(dim, count, angle, rng):
+    """Rotations exp(theta A) with A a uniformly random unit-spectral-norm skew matrix, theta ~ U[0, angle]."""
+    from scipy.linalg import expm
+    out = np.empty((count, dim, dim))
+    for i in range(count):
+        a = rng.standard_normal((dim, dim))
+        a = a - a.T
+        a /= np.linalg.norm(a, 2)
+        out[i] = expm(rng.uniform(0.0, angle) * a)
+    return out
+
+
+def rotations(raw, path, dim, count, rng):
+    if raw == "uniform":
+        if dim == 2:
+            a = rng.uniform(-np.pi, np.pi, count)
+            return np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)], -1)], -2)
+        if dim == 3:
+            from scipy.spatial.transform import Rotation
+            return Rotation.random(count, random_state=rng).as_matrix().reshape(count, 3, 3)
+        from scipy.stats import special_ortho_group   # slow to import: only when needed
+        return special_ortho_group.rvs(dim, size=count, random_state=rng).reshape(count, dim, dim)
+    if raw == "identity":
+        return np.repeat(np.eye(dim)[None], count, axis=0)
+    if isinstance(raw, dict):
+        if "within" in raw:
+            rm = Map(raw, path, ("within", "base"))
+            angle = rm.number("within", minimum=0)
+            base = base_rotation(rm.raw("base"), rm.at("base"), dim)
+            return random_rotation_within(dim, count, angle, rng) @ base
+        if len(raw) == 1:
+            (kind, val), = raw.items()
+            p = f"{path}.{kind}"
+            if kind == "angles":
+                if dim != 2:
+                    raise SceneError(f"{p}: angles define rotations only for dimension 2")
+                a = vector(val, p, count)
+                return np.stack([np.stack([np.cos(a), -np.sin(a)], -1),
+                                 np.stack([np.sin(a), np.cos(a)], -1)], -2)
+            if kind == "rotvecs":
+                from scipy.spatial.transform import Rotation
+                if dim != 3:
+                    raise SceneError(f"{p}: rotation vectors define rotations only for dimension 3")
+                return Rotation.from_rotvec(matrix_rows(val, p, count, 3)).as_matrix()
+            if kind == "matrices":
+                if not isinstance(val, list) or len(val) != count:
+                    raise SceneError(f"{p}: expected {count} matrices")
+                return np.array([check_rotation(matrix_rows(m, f"{p}[{i}]", dim, dim), f"{p}[{i}]")
+                                 for i, m in enumerate(val)])
+    raise SceneError(f"{path}: expected uniform, identity, {{within: angle, base: ...}}, "
+                     f"{{angles: [...]}}, {{rotvecs: [...]}} or {{matrices: [...]}}")
+
+
+def scales(raw, path, count, rng):
+    if isinstance(raw, list):
+        s = vector(raw, path, count)
+    elif isinstance(raw, dict) and len(raw) == 1:
+        (kind, val), = raw.items()
+        b = vector(val, f"{path}.{kind}", 2)
+        if not 0 < b[0] <= b[1]:
+            raise SceneError(f"{path}.{kind}: expected [lo, hi] with 0 < lo <= hi")
+        if kind == "uniform":
+            s = rng.uniform(b[0], b[1], count)
+        elif kind == "log_uniform":
+            s = np.exp(rng.uniform(np.log(b[0]), np.log(b[1]), count))
+        else:
+            raise SceneError(f"{path}: expected a list, {{uniform: [lo, hi]}} or {{log_uniform: [lo, hi]}}")
+    else:
+        raise SceneError(f"{path}: expected a list, {{uniform: [lo, hi]}} or {{log_uniform: [lo, hi]}}")
+    if np.any(s <= 0):
+        raise SceneError(f"{path}: scales must be > 0")
+    return s
+
+
+def velocities(raw, path, dim, count, rng):
+    vm = Map(raw, path, ("centroid", "angular"))
+    v = random_vectors(vm.raw("centroid", "zero"), vm.at("centroid"), (count, dim), rng)
+    k = dim * (dim - 1) // 2
+    comps = random_vectors(vm.raw("angular", "zero"), vm.at("angular"), (count, k), rng)
+    return v, skew_from_components(comps, dim)
+
+
+def random_vectors(raw, path, shape, rng):
+    if raw == "zero" or raw == 0:
+        return np.zeros(shape)
+    if isinstance(raw, dict) and len(raw) == 1:
+        (kind, val), = raw.items()
+        if kind == "normal":
+            return number(val, f"{path}.normal", minimum=0) * rng.standard_normal(shape)
+        if kind == "values":
+            return matrix_rows(val, f"{path}.values", *shape)
+    raise SceneError(f"{path}: expected zero, {{normal: std}} or {{values: [[...], ...]}}")
+
+
+def explicit_vectors(values, path, key, dim, order):
+    if all(v is None for v in values):
+        return None
+    return np.array([np.zeros(dim) if v is None else vector(v, f"{path}[{i}].{key}", dim)
+                     for i, v in enumerate(values)])
+
+
+def explicit_omegas(values, path, dim, order, rotations):
+    if all(v is None for v in values):
+        return None
+    k = dim * (dim - 1) // 2
+    rows = [np.zeros(k) if v is None else vector(v, f"{path}[{i}].angular_velocity", k)
+            for i, v in enumerate(values)]
+    w = skew_from_components(np.array(rows), dim)
+    return rotations.algebra_from_skew(w)
+
+
+def skew_from_components(comps, dim):
+    """(N, d(d-1)/2) components -> (N, d, d) skew matrices.
+
+    For d = 3 the components are the angular-velocity vector (w_x, w_y, w_z);
+    for d = 2 the single component is the rate about z; otherwise they are the
+    strictly lower-triangular entries W[j, i] (i < j) in row-major order.
+    """
+    comps = np.asarray(comps, dtype=float)
+    w = np.zeros((comps.shape[0], dim, dim))
+    if dim == 3:
+        x, y, z = comps.T
+        w[:, 0, 1], w[:, 0, 2], w[:, 1, 2] = -z, y, -x
+        w[:, 1, 0], w[:, 2, 0], w[:, 2, 1] = z, -y, x
+        return w
+    iu = np.triu_indices(dim, 1)
+    w[:, iu[1], iu[0]] = comps
+    w[:, iu[0], iu[1]] = -comps
+    return w
