@@ -277,6 +277,8 @@ def _run(args, scene, scene_path, the_plan, env, domain):
                            "-p", f"pose_subscribers:={1 if args.monitor else 0}",
                            "-p", f"integrator:={the_plan.name}",
                            "-p", f"round_timeout:={args.round_timeout!r}",
+                           # start-up of many processes on few cores takes a while: scale the patience
+                           "-p", f"discovery_timeout:={30.0 + 2.0 * len(partition(n, args.agents_per_process))!r}",
                            "-p", f"peer_timeout:={args.peer_timeout!r}"]
     if rt:
         agent_args += ["-p", f"rate:={args.rate!r}", "-p", f"time_scale:={args.time_scale!r}",
