@@ -281,26 +281,12 @@ class PeerTable:
         return self.latest.setdefault(agent, SimpleNamespace(t=-np.inf, x=None, rot=None, v=None, heard=0.0))
 
     def _pose_cb(self, agent):
-        dim = self.model.dim
-
         def receive(msg):
-            if dim <= 3:
-                if msg.header.frame_id != self.frame_id:
-                    self.drops(f"agent {agent}", f"unknown frame {msg.header.frame_id!r}")
-                    return
-                p, q = msg.pose.position, msg.pose.orientation
-                val, reason = wire.pose_to_state(self.grp, dim, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
-                t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-            else:
-                res, reason = wire.array_to_state(msg, dim)
-                val = None
-                if res is not None:
-                    t, x, mat = res
-                    val = (x, self.grp.from_matrices(mat[None]))
-            if val is None:
+            got, reason = wire.decode_pose_msg(msg, self.grp, self.model.dim, self.frame_id)
+            if got is None:
                 self.drops(f"agent {agent}", reason)
                 return
-            self.pending[agent].append((time.monotonic(), "pose", (t, val[0] - self.origin, val[1])))
+            self.pending[agent].append((time.monotonic(), "pose", (got.t, got.vec - self.origin, got.rot)))
         return receive
 
     def _deliver(self, now):
@@ -326,19 +312,12 @@ class PeerTable:
             queue[:] = keep
 
     def _twist_cb(self, agent):
-        dim = self.model.dim
-
         def receive(msg):
-            if dim <= 3:
-                lin, ang = msg.twist.linear, msg.twist.angular
-                val, reason = wire.twist_to_state(self.grp, dim, (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z))
-            else:
-                res, reason = wire.array_to_state(msg, dim, rot_check=False)
-                val = None if res is None else (res[1], None)
-            if val is None:
+            got, reason = wire.decode_twist_msg(msg, self.grp, self.model.dim)
+            if got is None:
                 self.drops(f"agent {agent}", reason)
                 return
-            self.pending[agent].append((time.monotonic(), "twist", val[0]))
+            self.pending[agent].append((time.monotonic(), "twist", got.vec))
         return receive
 
     def active(self):

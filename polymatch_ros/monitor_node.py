@@ -110,55 +110,31 @@ class MonitorNode:
                            if self.params["markers"] else None)
 
     def _pose_cb(self, agent):
-        dim = self.model.dim
-
         def receive(msg):
-            if dim <= 3:
-                if msg.header.frame_id != self.params["frame_id"]:
-                    self.drops(f"agent {agent}", f"unknown frame {msg.header.frame_id!r}")
-                    return
-                p, q = msg.pose.position, msg.pose.orientation
-                val, reason = wire.pose_to_state(self.grp, dim, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
-                key = wire.time_key(msg.header.stamp.sec, msg.header.stamp.nanosec)
-            else:
-                res, reason = wire.array_to_state(msg, dim)
-                val = None
-                if res is not None:
-                    key = int(round(res[0] * 1e9))
-                    val = (res[1], self.grp.from_matrices(res[2][None]))
-            if val is None:
+            got, reason = wire.decode_pose_msg(msg, self.grp, self.model.dim, self.params["frame_id"])
+            if got is None:
                 self.drops(f"agent {agent}", reason)
                 return
-            x, rot = val
-            self.latest[agent] = (key, x - self.scene.origin, rot, time.monotonic())
+            key, x, rot = got.key, got.vec - self.scene.origin, got.rot
+            self.latest[agent] = (key, x, rot, time.monotonic())
             if self.params["mode"] == "lockstep":
                 if key <= self.reported:
                     self.drops(f"agent {agent}", "stale pose (a stamp from the past)")
                     return
-                self.pending.setdefault(key, {})[agent] = (x - self.scene.origin, rot)
+                self.pending.setdefault(key, {})[agent] = (x, rot)
                 self._report_complete()
         return receive
 
     def _twist_cb(self, agent):
-        dim = self.model.dim
-
         def receive(msg):
-            if dim <= 3:
-                lin, ang = msg.twist.linear, msg.twist.angular
-                val, reason = wire.twist_to_state(self.grp, dim, (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z))
-                key = wire.time_key(msg.header.stamp.sec, msg.header.stamp.nanosec)
-            else:
-                res, reason = wire.array_to_state(msg, dim, rot_check=False)
-                val = None
-                if res is not None:
-                    key = int(round(res[0] * 1e9))
-                    val = (res[1], self.grp.algebra_from_skew(res[2][None]))
-            if val is None:
+            got, reason = wire.decode_twist_msg(msg, self.grp, self.model.dim)
+            if got is None:
                 self.drops(f"agent {agent}", reason)
                 return
-            self.velocity[agent] = (key,) + tuple(val)
-            if self.params["mode"] == "lockstep" and key > self.reported:
-                self.pending_v.setdefault(key, {})[agent] = val
+            val = (got.vec, got.rot)
+            self.velocity[agent] = (got.key,) + val
+            if self.params["mode"] == "lockstep" and got.key > self.reported:
+                self.pending_v.setdefault(got.key, {})[agent] = val
                 self._report_complete()
         return receive
 

@@ -153,33 +153,17 @@ class Watcher:
                         self.agent_t[int(a)] = t
 
     def _pose(self, agent):
-        dim = self.model.dim
-
         def receive(msg):
-            if dim <= 3:
-                p, q = msg.pose.position, msg.pose.orientation
-                val, _ = wire.pose_to_state(self.grp, dim, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
-                t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-            else:
-                res, _ = wire.array_to_state(msg, dim)
-                val = None if res is None else (res[1], self.grp.from_matrices(res[2][None]))
-                t = None if res is None else res[0]
-            if val is not None:
-                self.poses[agent] = (t, val[0] - self.scene.origin, val[1])
+            got, _ = wire.decode_pose_msg(msg, self.grp, self.model.dim)
+            if got is not None:
+                self.poses[agent] = (got.t, got.vec - self.scene.origin, got.rot)
         return receive
 
     def _twist(self, agent):
-        dim = self.model.dim
-
         def receive(msg):
-            if dim <= 3:
-                lin, ang = msg.twist.linear, msg.twist.angular
-                val, _ = wire.twist_to_state(self.grp, dim, (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z))
-            else:
-                res, _ = wire.array_to_state(msg, dim, rot_check=False)
-                val = None if res is None else (res[1], self.grp.algebra_from_skew(res[2][None]))
-            if val is not None:
-                self.velocities[agent] = val
+            got, _ = wire.decode_twist_msg(msg, self.grp, self.model.dim)
+            if got is not None:
+                self.velocities[agent] = (got.vec, got.rot)
         return receive
 
     def spin(self, timeout):

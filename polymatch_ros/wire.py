@@ -215,6 +215,52 @@ def twist_to_state(grp, dim, linear, angular):
     return (lin[:3].copy(), grp.algebra_from_skew(skew)), None
 
 
+@dataclass
+class Received:
+    """A decoded pose or twist: stamp (s and integer ns key), vector, rotation or algebra row."""
+    t: float
+    key: int
+    vec: np.ndarray
+    rot: np.ndarray
+
+
+def decode_pose_msg(msg, grp, dim, frame_id=None):
+    """PoseStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) or (None, reason).
+
+    ``frame_id`` (d <= 3): a pose in any other frame is refused.
+    """
+    if dim <= 3:
+        if frame_id is not None and msg.header.frame_id != frame_id:
+            return None, f"unknown frame {msg.header.frame_id!r}"
+        p, q = msg.pose.position, msg.pose.orientation
+        val, reason = pose_to_state(grp, dim, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
+        if val is None:
+            return None, reason
+        sec, nsec = msg.header.stamp.sec, msg.header.stamp.nanosec
+        return Received(sec + 1e-9 * nsec, time_key(sec, nsec), val[0], val[1]), None
+    res, reason = array_to_state(msg, dim)
+    if res is None:
+        return None, reason
+    t, x, mat = res
+    return Received(t, int(round(t * 1e9)), x, grp.from_matrices(mat[None])), None
+
+
+def decode_twist_msg(msg, grp, dim):
+    """TwistStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) or (None, reason)."""
+    if dim <= 3:
+        lin, ang = msg.twist.linear, msg.twist.angular
+        val, reason = twist_to_state(grp, dim, (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z))
+        if val is None:
+            return None, reason
+        sec, nsec = msg.header.stamp.sec, msg.header.stamp.nanosec
+        return Received(sec + 1e-9 * nsec, time_key(sec, nsec), val[0], val[1]), None
+    res, reason = array_to_state(msg, dim, rot_check=False)
+    if res is None:
+        return None, reason
+    t, v, skew = res
+    return Received(t, int(round(t * 1e9)), v, grp.algebra_from_skew(skew[None])), None
+
+
 # -- topic names and QoS ------------------------------------------------------------------
 
 
