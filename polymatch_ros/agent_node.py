@@ -10,7 +10,6 @@ to round-off; ``realtime`` steps on a wall-clock timer with the latest pose of
 each peer, dropping peers that fall silent and re-admitting them when they speak.
 """
 
-import os
 import sys
 import time
 
@@ -20,6 +19,7 @@ from .core.errors import ParameterError, PolymatchError
 from .core.model import GroupState, State, System
 from .core.simulate import plan, prepare, step_grid
 from .exchange import DropCounter, Layout, LockstepExchange, PeerTable, RoundTimeout
+from .ros_env import teardown_watchdog
 
 # name, default, description, (min, max) or None
 PARAMETERS = (
@@ -40,7 +40,8 @@ PARAMETERS = (
      (0.001, 1e6)),
     ("delay", 0.0, "realtime: injected transport delay (s) before a peer's pose is used (experiments)",
      (0.0, 1e6)),
-    ("round_timeout", 10.0, "lockstep: seconds to wait for a round before giving up", (0.001, 1e6)),
+    ("round_timeout", 10.0, "lockstep: seconds to wait for a round before giving up (the first round: "
+                            "plus discovery_timeout)", (0.001, 1e6)),
     ("discovery_timeout", 30.0, "seconds to wait until every peer is matched", (0.0, 1e6)),
     ("pose_subscribers", 0, "do not start before this many subscribers listen to the poses", (0, 100000)),
     ("frame_id", "world", "frame_id of published poses", None),
@@ -315,6 +316,9 @@ class AgentNode:
         method = self.plan.method
         prev = 0.0
         timeout = self.params["round_timeout"]
+        # matching is not simultaneous: a peer that matched us may still be matching others and
+        # start later, so the first round also allows the peers' discovery time
+        first_wait = timeout + self.params["discovery_timeout"]
         start = last_spin = time.monotonic()
         for k, t_next in enumerate(grid):
             gen = method.step(self.system, self.state, t_next - prev)
@@ -323,7 +327,8 @@ class AgentNode:
             try:
                 request = next(gen)
                 while True:
-                    ensemble, stop_seen = self.exchange.round(k, stage, request, self.stop_requested, timeout)
+                    wait = first_wait if k == 0 and stage == 0 else timeout
+                    ensemble, stop_seen = self.exchange.round(k, stage, request, self.stop_requested, wait)
                     stop = stop or (request.boundary and stop_seen)
                     stage += 1
                     self.rounds += 1
@@ -373,6 +378,7 @@ class AgentNode:
         period = 1.0 / p["rate"]
         next_tick = time.monotonic()
         t0 = time.monotonic()
+        late = 0
         while self.state.t < self.scene.t_end - 1e-12 and not self.stop_requested:
             next_tick += period
             while True:
@@ -380,11 +386,11 @@ class AgentNode:
                 if left <= 0 or self.stop_requested:
                     break
                 self.spin_once(min(left, 0.05))
+            if time.monotonic() - next_tick > period:               # behind schedule: the CPU is short
+                late += 1
             for _ in range(len(self.peers.subs) + 2):                 # drain what is ready
                 self.spin_once(0.0)
             alive = self.peers.active()
-            if os.environ.get("POLYMATCH_DEBUG") and self.steps % 25 == 0:
-                print("DEBUG", self.state.t, alive, flush=True)
             self.state.coupling = None
             gen = method.step(self.system, self.state, h)
             try:
@@ -401,7 +407,8 @@ class AgentNode:
             self.publish_state()
         self.publish_state(final=True)
         self.flush_poses()
-        return f"finished at t = {self.state.t:.6g} after {self.steps} realtime steps"
+        return (f"finished at t = {self.state.t:.6g} after {self.steps} realtime steps, "
+                f"{late} started more than one period late")
 
     def run(self):
         text = self.run_lockstep() if self.mode == "lockstep" else self.run_realtime()
@@ -451,10 +458,11 @@ def main(args=None):
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 130
     finally:
-        if agent is not None:
-            agent.destroy()
-        if rclpy.ok():
-            rclpy.shutdown()
+        with teardown_watchdog():
+            if agent is not None:
+                agent.destroy()
+            if rclpy.ok():
+                rclpy.shutdown()
     return code
 
 

@@ -16,6 +16,7 @@ import sys
 import time
 
 from .core.errors import ParameterError, PolymatchError
+from .ros_env import teardown_watchdog
 
 
 def message_to_lines(msg, indent=""):
@@ -92,9 +93,10 @@ def echo(topic, count=None, until_below=None, timeout=None, stream=sys.stdout):
             rclpy.spin_once(node, timeout_sec=0.1)
         code = 0
     finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        with teardown_watchdog():
+            node.destroy_node()
+            if rclpy.ok():
+                rclpy.shutdown()
     return code
 
 

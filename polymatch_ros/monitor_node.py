@@ -30,6 +30,7 @@ from .core.errors import ParameterError, PolymatchError
 from .core.metrics import ensemble_metrics
 from .core.model import GroupState, State
 from .exchange import DropCounter
+from .ros_env import teardown_watchdog
 
 PARAMETERS = (
     ("scene", "", "scene file (YAML); required", None),
@@ -287,9 +288,11 @@ def main(args=None):
                 t, met, heard = mon.last_metrics
                 print(f"monitor: last report t = {t:.6g}, matching diameter {met['diameter']:.3e}, "
                       f"{heard} agents heard, {mon.reports} reports; {mon.drops.summary()}", flush=True)
-            mon.destroy()
-        if rclpy.ok():
-            rclpy.shutdown()
+        with teardown_watchdog():
+            if mon is not None:
+                mon.destroy()
+            if rclpy.ok():
+                rclpy.shutdown()
     return code
 
 

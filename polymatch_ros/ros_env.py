@@ -8,6 +8,7 @@ the user has set them.  The shipped Fast DDS profile shortens discovery.
 
 import contextlib
 import os
+import re
 
 PROFILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "resources", "fastdds_profile.xml")
 
@@ -34,3 +35,34 @@ def reserved_domain_id():
     from domain_coordinator import domain_id
     with domain_id() as dom:
         yield dom
+
+
+# -- bounded teardown ----------------------------------------------------------------------
+
+TEARDOWN_SECONDS = 10.0
+TEARDOWN_MARK = "Timeout ("        # the first line faulthandler writes when the watchdog fires
+FINAL_LINE = re.compile(r"^(agent [0-9,]+|monitor): (?!error)")
+
+
+@contextlib.contextmanager
+def teardown_watchdog(seconds=TEARDOWN_SECONDS):
+    """Bound the DDS teardown inside the block: past ``seconds``, end the process.
+
+    With Fast DDS 2.14 the last node's teardown can, rarely, spin forever at 100% CPU
+    in ``DomainParticipant::set_listener`` (inside ``rmw_destroy_node``), holding the GIL and
+    deaf to SIGINT/SIGTERM.  faulthandler's watchdog is a C thread that needs no GIL:
+    it writes ``Timeout (...)!`` and the Python stack to stderr and exits with code 1.
+    Enter it after the work is done and reported, around the teardown only.
+    """
+    import faulthandler
+    faulthandler.dump_traceback_later(seconds, exit=True)
+    try:
+        yield
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+
+
+def hung_in_teardown(code, lines):
+    """True when a child reported its final line, then was ended by the teardown watchdog."""
+    return (code == 1 and any(line.startswith(TEARDOWN_MARK) for line in lines)
+            and any(FINAL_LINE.match(line) for line in lines))

@@ -28,7 +28,7 @@ from .core.errors import PolymatchError
 from .core.metrics import ensemble_metrics
 from .core.model import GroupState, State
 from .core.simulate import plan, prepare, simulate
-from .ros_env import reserved_domain_id, ros_environment
+from .ros_env import hung_in_teardown, reserved_domain_id, ros_environment, teardown_watchdog
 
 
 def _die_with_parent():
@@ -81,6 +81,13 @@ class Child:
 
     def tail(self, n=5):
         return list(self.lines)[-n:]
+
+    def hung_in_teardown(self):
+        """Reported its final line, then its DDS teardown hung and its watchdog ended it."""
+        return hung_in_teardown(self.proc.poll(), list(self.lines))
+
+    def ended_well(self):
+        return self.proc.poll() == 0 or self.hung_in_teardown()
 
 
 def partition(n_agents, k):
@@ -304,18 +311,27 @@ def _run(args, scene, scene_path, the_plan, env, domain):
             while watcher is not None and time.monotonic() - t0 < 0.5:
                 watcher.spin(0.05)
             monitor.stop()
-        if watcher is not None:
-            watcher.destroy()
-        if rclpy.ok():
-            rclpy.shutdown()
         for s, h in old.items():
             signal.signal(s, h)
     wall = time.monotonic() - start
-    final = watcher.final_state() if watcher is not None else None
-    if code == 0 and final is not None:
-        code, message = _summary(args, scene, the_plan, final, children, monitor, wall, quiet, watcher)
-    elif message:
-        print(f"polymatch: error: {message}", file=sys.stderr)
+    try:
+        final = watcher.final_state() if watcher is not None else None
+        if code == 0 and final is not None:
+            code, message = _summary(args, scene, the_plan, final, children, monitor, wall, quiet, watcher)
+        elif message:
+            print(f"polymatch: error: {message}", file=sys.stderr)
+        for c in children + ([monitor] if monitor is not None else []):
+            if c.hung_in_teardown():
+                print(f"note: {c.name} reported its result, then its DDS teardown hung (a rare Fast DDS "
+                      f"shutdown spin); its watchdog ended it", file=sys.stderr)
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        with teardown_watchdog():
+            if watcher is not None:
+                watcher.destroy()
+            if rclpy.ok():
+                rclpy.shutdown()
     return code
 
 
@@ -336,15 +352,15 @@ def _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, s
         if interrupted:
             progress.done()
             return 130, "interrupted: stopped every process"
-        failed = [c for c in children if c.poll() not in (None, 0)]
-        if monitor is not None and monitor.poll() not in (None, 0):
+        failed = [c for c in children if not c.ended_well() and c.poll() is not None]
+        if monitor is not None and not monitor.ended_well() and monitor.poll() is not None:
             failed.append(monitor)
         if failed:
             progress.done()
             c = failed[0]
             detail = " | ".join(line for line in c.tail(3) if line.strip())
             return 1, f"{c.name} (pid {c.pid}) exited with code {c.poll()}: {detail}"
-        if all(c.poll() == 0 for c in children):
+        if all(c.ended_well() for c in children):
             drain = time.monotonic() + 3.0          # the latched final poses may still be in flight
             while time.monotonic() < drain and not watcher.have_final():
                 watcher.spin(0.05)

@@ -60,5 +60,19 @@ def test_all_writes_one_report(tmp_path, capsys):
     assert "![" in text
 
 
+def test_all_only_keeps_the_other_families_reports(tmp_path, capsys):
+    out_dir = tmp_path / "bench"
+    out_dir.mkdir()
+    (out_dir / "reductions.md").write_text("# Reductions from an earlier run\n\nkept figure 1.23x\n",
+                                           encoding="utf-8")
+    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield", "--out", str(out_dir)]) == 0
+    text = (out_dir / "report.md").read_text(encoding="utf-8")
+    assert "mean field best ms" in text                       # the family just run
+    assert "## Reductions from an earlier run" in text         # the earlier one, one heading level down
+    assert "kept figure 1.23x" in text
+    assert "[reductions](reductions.md)" in text
+    assert "[step](step.md)" not in text                      # never run here: not listed
+
+
 def test_all_rejects_unknown_family(tmp_path, capsys):
     assert cli.main(["bench", "all", "--quick", "--only", "nope", "--out", str(tmp_path)]) == 2

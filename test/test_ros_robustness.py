@@ -159,3 +159,29 @@ def test_runner_ends_every_process_it_started(ros, how):
     assert expect_text in ros.output(proc)
     time.sleep(0.5)
     assert not [p for p in kids if _alive(p)], "a process outlived the runner"
+
+
+def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
+    """Lockstep: SIGKILL one agent mid-run; its neighbours stop with a one-line error naming it."""
+    scene = tmp_path / "three.yaml"
+    scene.write_text(textwrap.dedent("""\
+        name: three
+        dimension: 2
+        seed: 3
+        model: {order: 1}
+        integrator: {method: rkmk4, dt: 0.01}
+        time: {t_end: 1000.0}
+        groups:
+          - {name: triangles, shape: triangle, count: 3}
+        """), encoding="utf-8")
+    agents = [ros.agent(str(scene), i, timeout=90, round_timeout=2.0) for i in range(3)]
+    victim = agents[2]
+    time.sleep(8.0)          # discovery (about 1 s here) and well into the rounds: t_end needs ~1e5 steps
+    assert all(a.poll() is None for a in agents), [ros.output(a) for a in agents]
+    ros.kill(victim)
+    for a in agents[:2]:
+        assert ros.wait(a, 30) == 1, ros.output(a)
+        text = ros.output(a)
+        errors = [line for line in text.splitlines() if line.startswith("agent: error:")]
+        assert len(errors) == 1 and "timed out after 2 s waiting for agent(s) 2" in errors[0], text
+        assert "Traceback" not in text

@@ -91,7 +91,8 @@ def add_parser(subparsers):
         parsers[mod.NAME] = fp
     ap = sub.add_parser("all", help="run every family and write one report DIR/report.md")
     ap.add_argument("--out", metavar="DIR", required=True, help="output directory")
-    ap.add_argument("--only", metavar="A,B", help="only these families (comma separated)")
+    ap.add_argument("--only", metavar="A,B", help="only these families (comma separated); report.md keeps the "
+                    "other families' last reports found in DIR")
     ap.add_argument("--quick", action="store_true", help="tiny sizes for every family")
     ap.add_argument("--repeats", type=_positive_int, metavar="R", help="timing repeats for every family")
     ap.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
@@ -167,6 +168,10 @@ def cmd_all(args):
     head = ["# polymatch benchmark report", ""] + [f"- {line}" for line in machine] + [""]
     if args.quick:
         head += ["**--quick: tiny sizes; these figures only show that the benchmarks run.**", ""]
+    if args.only:                       # keep the other families' last reports: report.md stays whole
+        fresh = dict(sections)
+        sections = [(n, fresh[n] if n in fresh else _previous_section(args.out, n)) for n in parsers]
+        sections = [(n, text) for n, text in sections if text is not None]
     head += ["Families: " + ", ".join(f"[{n}]({n}.md)" for n, _ in sections), ""]
     text = "\n".join(head) + "\n" + "\n".join(s for _, s in sections)
     path = os.path.join(args.out, "report.md")
@@ -175,3 +180,15 @@ def cmd_all(args):
     print(text, end="")
     print(f"written: {path}", file=sys.stderr)
     return 1 if failed else 0
+
+
+def _previous_section(out_dir, name):
+    """A family's report from an earlier run in ``out_dir``, as a level-2 section (None if absent)."""
+    path = os.path.join(out_dir, f"{name}.md")
+    if not os.path.isfile(path):
+        return None
+    with open(path, encoding="utf-8") as fh:
+        text = fh.read()
+    if text.startswith("# "):           # written by `polymatch bench NAME --out`: one level up
+        text = "\n".join("#" + line if line.startswith("#") else line for line in text.splitlines()) + "\n"
+    return text

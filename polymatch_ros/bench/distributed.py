@@ -78,7 +78,11 @@ def _deployed(path, env, timeout):
     out = subprocess.run(["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli", "run", path,
                           "--no-compare", "--hold", "1e9", "--timeout", str(timeout - 10), "-q", "-v"],
                          env=env, capture_output=True, text=True)
-    return _parse_agents(out.stdout)
+    rates, matched = _parse_agents(out.stdout)
+    errors = [line for line in out.stderr.splitlines() if line.startswith("polymatch: error:")]
+    if out.returncode in (0, 3):           # 3: ran to t_end without matching yet (t_end is short here)
+        return rates, None
+    return rates, errors[-1] if errors else f"exit code {out.returncode}"
 
 
 def _stats(values):
@@ -97,7 +101,7 @@ def run(args, log):
     rounds = 40 if args.quick else args.rounds
     repeats = 1 if args.quick else (args.repeats or 3)
     report = Report(NAME, "Lockstep over ROS: agents vs the bare exchange (`polymatch bench distributed`)")
-    rows = []
+    rows, failures = [], []
     with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
         env = ros_environment(dom, base={k: v for k, v in os.environ.items()
                                          if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
@@ -116,8 +120,10 @@ def run(args, log):
                 agents.append(np.mean(rates) if len(rates) == n else float("nan"))
                 a_match += matched
                 if args.deployed:
-                    rates, _ = _deployed(path, env, timeout)
-                    deployed.append(np.mean(rates) if len(rates) == n else float("nan"))
+                    rates, failure = _deployed(path, env, timeout)
+                    deployed.append(np.mean(rates) if len(rates) == n and not failure else float("nan"))
+                    if failure:
+                        failures.append(f"N = {n}, repeat {r + 1}, deployed: {failure}")
             ok = lambda xs: [x for x in xs if x == x]                      # noqa: E731  (drop failed runs)
             (b_best, b_med), (a_best, a_med) = _stats(ok(bare)), _stats(ok(agents))
             d_best, d_med = _stats(ok(deployed))
@@ -137,4 +143,6 @@ def run(args, log):
                 "- bare: the same QoS (RELIABLE, VOLATILE, readers KEEP_ALL), node and executor, no numerics.",
                 "- deployed: `polymatch run` with the monitor, which hears every pose and computes the metrics "
                 "each step on the same two cores.")
+    if failures:
+        report.text("Failed runs:", *[f"- {f}" for f in failures])
     return report

@@ -138,6 +138,10 @@ def headline(args, log, report):
                      "their difference shows the measurement noise.")
     elif dim == 2:
         lines.append("- rk4_proj needs matrices: in 2-D it always runs on the 2x2 matrix representation.")
+    lines.append("- \"One step\" rows are interleaved with the other configurations, whose arrays evict this "
+                 "one's from the CPU caches between repeats: a cold-cache step. The consecutive-step column "
+                 "and the N x d grid below (one configuration at a time) time the warm step of a running "
+                 "simulation.")
     report.text(*lines)
     return configs, n, dim
 
