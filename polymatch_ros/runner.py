@@ -239,16 +239,44 @@ def vertex_deviation(model, a, b):
     return worst
 
 
+# rmw_fastrtps, under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, probes the first 32 participant
+# ports on 127.0.0.1 (its UDP maxInitialPeersRange): two participants beyond that never meet.
+LOCALHOST_PARTICIPANTS = 32
+
+
+def _agents_per_process(args, n_agents, localhost):
+    """-k as given (checked against the participant limit), or 1 if it fits, else the fewest that fit."""
+    own = 1 + (1 if args.monitor else 0)                      # the runner's node, the monitor
+    room = LOCALHOST_PARTICIPANTS - own
+    need = -(-n_agents // room)
+    if args.agents_per_process is None:
+        if localhost and need > 1:
+            if not args.quiet:
+                print(f"polymatch run: {n_agents} agents + {own} own processes exceed the {LOCALHOST_PARTICIPANTS} "
+                      f"DDS participants LOCALHOST discovery reaches: {need} agents per process (-k {need})",
+                      file=sys.stderr)
+            return need
+        return 1
+    procs = -(-n_agents // args.agents_per_process)
+    if localhost and procs + own > LOCALHOST_PARTICIPANTS:
+        raise PolymatchError(f"{procs} agent processes + {own} own = {procs + own} DDS participants, but LOCALHOST "
+                             f"discovery reaches {LOCALHOST_PARTICIPANTS} per domain (rmw_fastrtps' initial-peer "
+                             f"range); use -k {need} or more")
+    return args.agents_per_process
+
+
 def cmd_run(args):
     scene_path = resolve_scene_path(args.scene)
     scene = load(scene_path, {"time.t_end": args.t_end})
     rt = args.mode == "realtime"
     dt = args.time_scale / args.rate if rt else args.dt
     the_plan = plan(scene, args.integrator, dt, distributed=True)     # one-line errors before spawning
-    if args.agents_per_process < 1:
+    if args.agents_per_process is not None and args.agents_per_process < 1:
         raise PolymatchError("--agents-per-process must be >= 1")
     with reserved_domain_id() as domain:
         env = ros_environment(domain)
+        args.agents_per_process = _agents_per_process(args, scene.model.n_agents,
+                                                      env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST")
         for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID", "RMW_IMPLEMENTATION",
                     "FASTRTPS_DEFAULT_PROFILES_FILE"):
             os.environ[key] = env[key]
@@ -452,7 +480,9 @@ def add_parser(sub):
     p.add_argument("--integrator", "-i", metavar="NAME", help="fixed-step integrator (default: the scene's)")
     p.add_argument("--dt", type=positive_float, help="lockstep step size (default: the scene's)")
     p.add_argument("--t-end", type=positive_float, help="override time.t_end")
-    p.add_argument("--agents-per-process", "-k", type=int, default=1, metavar="K")
+    p.add_argument("--agents-per-process", "-k", type=int, default=None, metavar="K",
+                   help="agents per process (default 1, or the fewest that keep the processes within the 32 "
+                        "DDS participants that LOCALHOST discovery reaches)")
     p.add_argument("--rate", type=positive_float, default=50.0, help="realtime: steps per second (default 50)")
     p.add_argument("--time-scale", type=positive_float, default=1.0,
                    help="realtime: simulated seconds per wall-clock second")

@@ -69,20 +69,30 @@ def _agents(n, path, env, timeout, run_id):
 
 
 def _parse_agents(text):
-    rates = [float(x) for x in re.findall(r"^agent \d+: finished .*?\(\d+ rounds, ([0-9.]+) rounds/s", text, re.M)]
+    rates = [float(x) for x in re.findall(r"^agent [0-9,]+: finished .*?\(\d+ rounds, ([0-9.]+) rounds/s", text,
+                                          re.M)]
     matched = [float(x) for x in re.findall(r"peers matched after ([0-9.]+) s", text)]
     return rates, matched
 
 
-def _deployed(path, env, timeout):
+def _deployed(path, env, timeout, per_process):
     out = subprocess.run(["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli", "run", path,
-                          "--no-compare", "--hold", "1e9", "--timeout", str(timeout - 10), "-q", "-v"],
+                          "--no-compare", "--hold", "1e9", "--timeout", str(timeout - 10), "-q", "-v",
+                          "-k", str(per_process)],
                          env=env, capture_output=True, text=True)
     rates, matched = _parse_agents(out.stdout)
     errors = [line for line in out.stderr.splitlines() if line.startswith("polymatch: error:")]
     if out.returncode in (0, 3):           # 3: ran to t_end without matching yet (t_end is short here)
         return rates, None
     return rates, errors[-1] if errors else f"exit code {out.returncode}"
+
+
+def _deployed_per_process(n):
+    """Agents per process for the deployed run: 1 unless runner + monitor + n processes exceed
+    the participants LOCALHOST discovery reaches (then what `polymatch run` itself would pick)."""
+    from ..runner import LOCALHOST_PARTICIPANTS
+    room = LOCALHOST_PARTICIPANTS - 2
+    return -(-n // room)
 
 
 def _stats(values):
@@ -120,8 +130,10 @@ def run(args, log):
                 agents.append(np.mean(rates) if len(rates) == n else float("nan"))
                 a_match += matched
                 if args.deployed:
-                    rates, failure = _deployed(path, env, timeout)
-                    deployed.append(np.mean(rates) if len(rates) == n and not failure else float("nan"))
+                    per_process = _deployed_per_process(n)
+                    rates, failure = _deployed(path, env, timeout, per_process)
+                    procs = -(-n // per_process)
+                    deployed.append(np.mean(rates) if len(rates) == procs and not failure else float("nan"))
                     if failure:
                         failures.append(f"N = {n}, repeat {r + 1}, deployed: {failure}")
             ok = lambda xs: [x for x in xs if x == x]                      # noqa: E731  (drop failed runs)
@@ -143,6 +155,13 @@ def run(args, log):
                 "- bare: the same QoS (RELIABLE, VOLATILE, readers KEEP_ALL), node and executor, no numerics.",
                 "- deployed: `polymatch run` with the monitor, which hears every pose and computes the metrics "
                 "each step on the same two cores.")
+    packed = [n for n in sizes if _deployed_per_process(n) > 1]
+    if packed and args.deployed:
+        report.text("- deployed at " + ", ".join(f"N = {n}: {_deployed_per_process(n)} agents per process "
+                                                    f"({-(-n // _deployed_per_process(n))} processes)" for n in packed)
+                    + ": with the runner and the monitor, one process per agent would exceed the 32 DDS participants "
+                      "that LOCALHOST discovery reaches (rmw_fastrtps probes 32 participant ports on 127.0.0.1); "
+                      "`polymatch run` picks this itself. Its rate is per process.")
     if failures:
         report.text("Failed runs:", *[f"- {f}" for f in failures])
     return report
