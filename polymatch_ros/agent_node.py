@@ -372,11 +372,16 @@ class AgentNode:
             start = p["start_time"] or time.time()
         while time.time() < start and not self.stop_requested:      # the ensemble starts together
             self.spin_once(min(0.05, max(0.0, start - time.time())))
-        self.state.t = max(0.0, (time.time() - start) * p["time_scale"])
         h = self.plan.dt
         method = self.plan.method
         period = 1.0 / p["rate"]
-        next_tick = time.monotonic()
+        # tick k is due at start + k * period on every agent.  An agent a little late (a loaded
+        # CPU) catches up tick by tick; one (re)joining a running ensemble - later than the peer
+        # timeout - takes the shared clock with its initial state instead of replaying the past.
+        behind = max(0.0, time.time() - start)
+        skipped = int(behind / period) if behind > p["peer_timeout"] else 0
+        self.state.t = skipped * h
+        next_tick = time.monotonic() - (behind - skipped * period)
         t0 = time.monotonic()
         late = 0
         while self.state.t < self.scene.t_end - 1e-12 and not self.stop_requested:
