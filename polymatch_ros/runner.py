@@ -244,11 +244,15 @@ def vertex_deviation(model, a, b):
 LOCALHOST_PARTICIPANTS = 32
 
 
+def fewest_agents_per_process(n_agents, own):
+    """Agents per process that keep ``own`` + the agent processes within LOCALHOST_PARTICIPANTS."""
+    return -(-n_agents // (LOCALHOST_PARTICIPANTS - own))
+
+
 def _agents_per_process(args, n_agents, localhost):
     """-k as given (checked against the participant limit), or 1 if it fits, else the fewest that fit."""
     own = 1 + (1 if args.monitor else 0)                      # the runner's node, the monitor
-    room = LOCALHOST_PARTICIPANTS - own
-    need = -(-n_agents // room)
+    need = fewest_agents_per_process(n_agents, own)
     if args.agents_per_process is None:
         if localhost and need > 1:
             if not args.quiet:

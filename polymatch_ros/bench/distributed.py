@@ -90,9 +90,8 @@ def _deployed(path, env, timeout, per_process):
 def _deployed_per_process(n):
     """Agents per process for the deployed run: 1 unless runner + monitor + n processes exceed
     the participants LOCALHOST discovery reaches (then what `polymatch run` itself would pick)."""
-    from ..runner import LOCALHOST_PARTICIPANTS
-    room = LOCALHOST_PARTICIPANTS - 2
-    return -(-n // room)
+    from ..runner import fewest_agents_per_process
+    return fewest_agents_per_process(n, own=2)
 
 
 def _stats(values):
