@@ -17,7 +17,7 @@ import time
 from . import wire
 from .core.errors import ParameterError, PolymatchError
 from .core.model import GroupState, State, System
-from .core.simulate import plan, prepare, step_grid
+from .core.simulate import drive, plan, prepare, step_grid
 from .exchange import DropCounter, Layout, LockstepExchange, PeerTable, RoundTimeout
 from .ros_env import teardown_watchdog
 
@@ -321,20 +321,17 @@ class AgentNode:
         first_wait = timeout + self.params["discovery_timeout"]
         start = last_spin = time.monotonic()
         for k, t_next in enumerate(grid):
-            gen = method.step(self.system, self.state, t_next - prev)
             stop = False
-            stage = 0
-            try:
-                request = next(gen)
-                while True:
-                    wait = first_wait if k == 0 and stage == 0 else timeout
-                    ensemble, stop_seen = self.exchange.round(k, stage, request, self.stop_requested, wait)
-                    stop = stop or (request.boundary and stop_seen)
-                    stage += 1
-                    self.rounds += 1
-                    request = gen.send(ensemble)
-            except StopIteration as done:
-                self.state = done.value
+
+            def answer(request, stage):
+                nonlocal stop
+                wait = first_wait if k == 0 and stage == 0 else timeout
+                ensemble, stop_seen = self.exchange.round(k, stage, request, self.stop_requested, wait)
+                stop = stop or (request.boundary and stop_seen)
+                self.rounds += 1
+                return ensemble
+
+            self.state = drive(method, self.system, self.state, t_next - prev, answer)
             self.state.t = t_next
             prev = t_next
             self.steps += 1
@@ -397,15 +394,10 @@ class AgentNode:
                 self.spin_once(0.0)
             alive = self.peers.active()
             self.state.coupling = None
-            gen = method.step(self.system, self.state, h)
-            try:
-                request = next(gen)
-                while True:
-                    request = gen.send(self.peers.ensemble(request, alive))
-            except StopIteration as done:
-                t = self.state.t
-                self.state = done.value
-                self.state.t = t + h
+            t = self.state.t
+            self.state = drive(method, self.system, self.state, h,
+                               lambda request, stage: self.peers.ensemble(request, alive))
+            self.state.t = t + h
             self.steps += 1
             self.rounds += 1
             self.round_time = time.monotonic() - t0

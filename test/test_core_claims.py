@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.integrate import simpson
 
-from polymatch_ros.core import METHODS, System, advance, load_scene, point_set_diameter, simulate
+from polymatch_ros.core import METHODS, System, drive, load_scene, point_set_diameter, simulate
 
 from core_testlib import (brute_diameter, brute_matching_diameter, brute_rotation_diameter, make_scene,
                           rot_matrices, rotation_energy, skew_matrices)
@@ -149,7 +149,7 @@ def _energy_run(method, dt, t_end=100.0, every=0.1):
     stride = int(round(every / dt))
     energies = [rotation_energy(scene.model, state.groups[0])]
     for k in range(int(round(t_end / dt))):
-        state = advance(meth, system, state, dt)
+        state = drive(meth, system, state, dt)
         if (k + 1) % stride == 0:
             energies.append(rotation_energy(scene.model, state.groups[0]))
     e = np.array(energies)

@@ -43,23 +43,23 @@ def add_arguments(p):
 
 
 def _stepper(meth, scene, dt):
-    """(fn, setup) timing one ``advance`` from a fresh State (no cached coupling)."""
-    from ..core import State, System, advance
+    """(fn, setup) timing one ``drive`` from a fresh State (no cached coupling)."""
+    from ..core import State, System, drive
     system = System(scene.model)
     groups = scene.initial.groups
-    return (lambda st: advance(meth, system, st, dt)), (lambda: State(0.0, groups))
+    return (lambda st: drive(meth, system, st, dt)), (lambda: State(0.0, groups))
 
 
 def _consecutive(meth, scene, dt, steps, repeats):
     """Seconds per step over ``steps`` consecutive steps of an evolving state (as in a run)."""
-    from ..core import State, System, advance
+    from ..core import State, System, drive
     from .timing import measure
     system = System(scene.model)
 
     def chain(_):
         st = State(0.0, scene.initial.groups)
         for _k in range(steps):
-            st = advance(meth, system, st, dt)
+            st = drive(meth, system, st, dt)
 
     return measure(chain, repeats).scaled(1.0 / steps)
 

@@ -6,7 +6,7 @@
 
 The ROS agents, the monitor and the benchmarks use exactly these pieces:
 ``System`` (model + mean field), the integrator registry ``METHODS``,
-``advance`` (one step) and ``ensemble_metrics``.
+``drive`` (one step) and ``ensemble_metrics``.
 """
 
 from .decompose import decompose
@@ -15,7 +15,7 @@ from .integrators import METHODS, check_stability, get_method, max_stable_dt
 from .metrics import ensemble_metrics, point_set_diameter
 from .model import Coupling, GroupState, Model, State, System
 from .scene import Scene, load_scene
-from .simulate import Trajectory, advance, explain, plan, recommend, simulate, with_representation
+from .simulate import Trajectory, drive, explain, plan, recommend, simulate, with_representation
 
 
 def __getattr__(name):
@@ -28,7 +28,7 @@ def __getattr__(name):
 
 __all__ = [
     "AdaptiveLie", "Coupling", "GroupState", "METHODS", "Model", "ParameterError", "PolymatchError",
-    "Scene", "SceneError", "ShapeError", "StabilityError", "State", "System", "Trajectory", "advance",
+    "Scene", "SceneError", "ShapeError", "StabilityError", "State", "System", "Trajectory", "drive",
     "check_stability", "decompose", "ensemble_metrics", "explain", "get_method", "load_scene",
     "max_stable_dt", "plan", "point_set_diameter", "recommend", "simulate", "with_representation",
 ]

@@ -1,6 +1,6 @@
 """The centralised simulator: scene -> trajectory at the sample times, with per-group metrics.
 
-``simulate`` runs the same steppers the ROS agents run (``advance`` answers
+``simulate`` runs the same steppers the ROS agents run (``drive`` answers
 each stage with the simulator's own arrays), picks the integrator the scene
 asks for (or the recommended one for its kind), refuses unstable fixed steps,
 and records metrics only at sample times so they never dominate the run.
@@ -20,13 +20,24 @@ from .model import GroupState, State, System
 from .so import group_for
 
 
-def advance(method, system, state, h):
-    """One step of ``method`` with every stage answered by the state's own arrays."""
+def drive(method, system, state, h, answer=None):
+    """Advance ``state`` by one step ``h`` of ``method``: the one driver of every stepper.
+
+    A method's step is a generator: each stage yields a request (what the mean field of
+    (A-1)/(A-2) needs from the ensemble at that stage) and is sent back the ensemble's
+    arrays; it returns the new state.  ``answer(request, stage_index)`` supplies those
+    arrays: the centralised simulator answers from the request's own arrays (the default),
+    a lockstep agent with its peers' messages of that round, a realtime agent with the
+    newest poses it has heard.
+    """
     gen = method.step(system, state, h)
+    stage = 0
     try:
         request = next(gen)
         while True:
-            request = gen.send(request.stage.groups)
+            groups = request.stage.groups if answer is None else answer(request, stage)
+            stage += 1
+            request = gen.send(groups)
     except StopIteration as stop:
         return stop.value
 
@@ -195,7 +206,7 @@ def simulate(scene, method=None, dt=None, tolerance=None, *, samples=None, keep_
         for k, t_next in enumerate(grid):
             if stop:
                 break
-            state = advance(meth, system, state, t_next - prev)
+            state = drive(meth, system, state, t_next - prev)
             state.t = t_next
             prev = t_next
             traj.steps += 1
