@@ -87,12 +87,32 @@ def vertex_points(grp, gs, reference, scales=None):
     return out
 
 
+def vertices(centroids, mats, reference, scales=None):
+    """Vertices x^i_a = xbar_i + s_i O_i r_a for arrays with any leading axes.
+
+    ``centroids`` (..., d), ``mats`` (..., d, d), ``reference`` (n_a, d) and optional
+    ``scales`` (...,) give (..., n_a, d): the one vertex assembly of the package.
+    """
+    rotated = np.einsum("...ij,aj->...ai", np.asarray(mats), np.asarray(reference))
+    if scales is not None:
+        rotated = np.asarray(scales)[..., None, None] * rotated
+    return np.asarray(centroids)[..., None, :] + rotated
+
+
+def orthogonality(mats):
+    """max over all leading axes of |O^T O - I|_F: the defect Lemma 2.1 says stays zero."""
+    mats = np.asarray(mats, dtype=float)
+    if mats.size == 0:
+        return 0.0
+    gram = np.swapaxes(mats, -1, -2) @ mats
+    return float(np.linalg.norm(gram - np.eye(mats.shape[-1]), axis=(-2, -1)).max())
+
+
 def orthogonality_defect(grp, g):
+    """Lemma 2.1's defect of one group's rotations in ``grp``'s representation."""
     if grp.name == "angle":           # angles are rotations by construction
         return 0.0
-    mats = grp.to_matrices(g)
-    gram = np.swapaxes(mats, 1, 2) @ mats
-    return float(np.max(np.linalg.norm(gram - np.eye(grp.dim), axis=(1, 2)))) if len(mats) else 0.0
+    return orthogonality(grp.to_matrices(g))
 
 
 def rotation_energy(model, gs):
