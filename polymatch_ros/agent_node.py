@@ -372,13 +372,7 @@ class AgentNode:
         h = self.plan.dt
         method = self.plan.method
         period = 1.0 / p["rate"]
-        # tick k is due at start + k * period on every agent.  An agent a little late (a loaded
-        # CPU) catches up tick by tick; one (re)joining a running ensemble - later than the peer
-        # timeout - takes the shared clock with its initial state instead of replaying the past.
-        behind = max(0.0, time.time() - start)
-        skipped = int(behind / period) if behind > p["peer_timeout"] else 0
-        self.state.t = skipped * h
-        next_tick = time.monotonic() - (behind - skipped * period)
+        next_tick = self._join_clock(start, period, h)
         t0 = time.monotonic()
         late = 0
         while self.state.t < self.scene.t_end - 1e-12 and not self.stop_requested:
@@ -406,6 +400,28 @@ class AgentNode:
         self.flush_poses()
         return (f"finished at t = {self.state.t:.6g} after {self.steps} realtime steps, "
                 f"{late} started more than one period late")
+
+    def _join_clock(self, start, period, h):
+        """Set the initial simulated time of a realtime run; return the monotonic time of tick 0.
+
+        Tick k is due at ``start + k * period`` on every agent, and an agent a little late (a
+        loaded CPU) catches up tick by tick.  An agent (re)joining a running ensemble - later
+        than the peer timeout - starts from its initial state on the ensemble's clock instead of
+        replaying the past: the newest simulated time its peers publish, so that it agrees with
+        an ensemble that runs behind the wall-clock schedule (a CPU short of the rate), or the
+        wall-clock schedule when it hears no peer within the peer timeout.
+        """
+        behind = max(0.0, time.time() - start)
+        if behind <= self.params["peer_timeout"]:
+            self.state.t = 0.0
+            return time.monotonic() - behind
+        heard_by = time.monotonic() + self.params["peer_timeout"]
+        while self.peers.newest_time() is None and time.monotonic() < heard_by and not self.stop_requested:
+            self.spin_once(0.05)
+        newest = self.peers.newest_time()
+        skipped = int(round(newest / h)) if newest is not None else int(behind / period)
+        self.state.t = skipped * h
+        return time.monotonic() if newest is not None else time.monotonic() - (behind - skipped * period)
 
     def run(self):
         text = self.run_lockstep() if self.mode == "lockstep" else self.run_realtime()

@@ -302,9 +302,11 @@ class PeerTable:
                     e.v = values
                     continue
                 t, x, rot = values
-                if t < e.t:
+                if t < e.t and agent not in self.silent:
                     self.drops(f"agent {agent}", "out-of-order pose")
                     continue
+                # an older stamp from a peer that had fallen silent is a restarted peer: a new
+                # incarnation, admitted from its own clock
                 e.t, e.x, e.rot, e.heard = t, x, rot, arrival + self.delay
                 if agent in self.silent:
                     self.silent.discard(agent)
@@ -319,6 +321,12 @@ class PeerTable:
                 return
             self.pending[agent].append((time.monotonic(), "twist", got.vec))
         return receive
+
+    def newest_time(self):
+        """The newest simulated time heard from any peer (None if none heard): the ensemble's clock."""
+        self._deliver(time.monotonic())
+        times = [e.t for e in self.latest.values() if e.x is not None and np.isfinite(e.t)]
+        return max(times) if times else None
 
     def active(self):
         """Peers heard within the timeout; logs once when one falls silent."""

@@ -278,12 +278,13 @@ def cmd_run(args):
     if args.agents_per_process is not None and args.agents_per_process < 1:
         raise PolymatchError("--agents-per-process must be >= 1")
     with reserved_domain_id() as domain:
-        env = ros_environment(domain)
+        env = ros_environment(domain, mode=args.mode)
         args.agents_per_process = _agents_per_process(args, scene.model.n_agents,
                                                       env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST")
         for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID", "RMW_IMPLEMENTATION",
-                    "FASTRTPS_DEFAULT_PROFILES_FILE"):
-            os.environ[key] = env[key]
+                    "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_BUILTIN_TRANSPORTS"):
+            if key in env:
+                os.environ[key] = env[key]
         return _run(args, scene, scene_path, the_plan, env, domain)
 
 

@@ -10,6 +10,7 @@ afterwards (only new ones that no live process still maps).
 import contextlib
 import glob
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -62,6 +63,12 @@ class Ros:
         self.procs = []
         self.shm_before = set(glob.glob("/dev/shm/fastrtps_*"))
 
+    def realtime(self):
+        """From now on start processes with the environment of a realtime ensemble (transports)."""
+        from polymatch_ros.ros_env import ros_environment
+        self.env = ros_environment(self.domain, base=self.env, mode="realtime")
+        return self
+
     def start(self, argv, timeout, name=""):
         """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file."""
         log = open(os.path.join(os.environ.get("TMPDIR", "/tmp"),
@@ -101,7 +108,8 @@ class Ros:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(proc.pid, sig)
 
-    def close(self):
+    def close(self, keep_logs=None):
+        """End every process by PID; with ``keep_logs`` (a directory) keep each one's output there."""
         for proc in self.procs:
             if proc.poll() is None:
                 self.kill(proc, signal.SIGINT)
@@ -112,6 +120,10 @@ class Ros:
                 self.kill(proc, signal.SIGKILL)
                 self.wait(proc, 5)
             proc.log.close()
+            if keep_logs:
+                os.makedirs(keep_logs, exist_ok=True)
+                label = (proc.name or "process").replace(" ", "_")
+                shutil.copy(proc.log.name, os.path.join(keep_logs, f"{self.procs.index(proc):02d}_{label}.log"))
             with contextlib.suppress(OSError):
                 os.unlink(proc.log.name)
         held = _mapped_shm()
@@ -141,11 +153,15 @@ def node_argv(module, scene, **params):
 
 
 @pytest.fixture
-def ros():
+def ros(request):
+    """A private ROS world; with POLYMATCH_KEEP_LOGS=DIR the processes' output of a failed test is kept
+    in DIR/<test name>/ (what test/repeat_ros_tests.py uses to look into a failure)."""
     from domain_coordinator import domain_id
     with domain_id() as dom:
         world = Ros(dom)
         try:
             yield world
         finally:
-            world.close()
+            keep = os.environ.get("POLYMATCH_KEEP_LOGS")
+            failed = getattr(request.node, "rep_call", None) is not None and request.node.rep_call.failed
+            world.close(os.path.join(keep, request.node.name) if keep and failed else None)

@@ -21,21 +21,37 @@ def _heard(text):
     return out
 
 
-def _wait_for(ros, proc, predicate, timeout):
+def _wait_for(ros, proc, predicate, timeout, unless_all_ended=()):
+    """Poll the monitor's record until ``predicate`` holds; False after ``timeout`` s, or as soon as
+    every process in ``unless_all_ended`` has exited without it holding."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
+        ended = unless_all_ended and all(p.poll() is not None for p in unless_all_ended)
         if predicate(_heard(ros.output(proc))):
             return True
+        if ended:
+            time.sleep(0.5)                       # the monitor's last reports of the run
+            return predicate(_heard(ros.output(proc)))
         time.sleep(0.2)
     return False
 
 
+# 20 steps per wall-clock second: 8 agents, the monitor and an echo hold it on 2 loaded cores
+# (measured while other test suites ran beside: at most 10 of 600 ticks late per agent, against
+# 1499 of 1500 at 50 Hz, where the ensemble ran at 19 steps/s and 2.6 times slower than wall clock)
+RATE = 20.0
+RUN_BOUND = 180          # s: only a hang takes this long; the run itself ends at t_end (simulated)
+
+
 def test_realtime_converges_survives_sigkill_and_rejoin_theorem_4_2(ros):
+    ros.realtime()                                  # the transports a realtime ensemble runs on
     start = time.time() + 10.0                      # every process is up well before t = 0
-    common = dict(mode="realtime", time_scale=3.0, start_time=start, t_end=90.0, peer_timeout=1.0)
-    ros.monitor(SCENE, mode="realtime", rate=5.0, peer_timeout=1.0, t_end=90.0)
-    agents = [ros.agent(SCENE, i, **common) for i in range(N)]
-    diag = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/diagnostics", "--timeout", "80"], timeout=90)
+    common = dict(mode="realtime", rate=RATE, time_scale=3.0, start_time=start, t_end=90.0,
+                  peer_timeout=1.0)
+    ros.monitor(SCENE, timeout=RUN_BOUND + 20, mode="realtime", rate=5.0, peer_timeout=1.0, t_end=90.0)
+    agents = [ros.agent(SCENE, i, timeout=RUN_BOUND + 20, **common) for i in range(N)]
+    diag = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/diagnostics", "--timeout", str(RUN_BOUND)],
+                     timeout=RUN_BOUND + 10)
 
     # all eight run and are heard
     assert _wait_for(ros, diag, lambda h: any(n == 8 for n, _, _ in h), 25), ros.output(diag)[-2000:]
@@ -44,15 +60,16 @@ def test_realtime_converges_survives_sigkill_and_rejoin_theorem_4_2(ros):
     marked = len(_heard(ros.output(diag)))
     # the monitor reports one agent fewer, and the others keep converging
     assert _wait_for(ros, diag, lambda h: any(n == 7 for n, _, _ in h[marked:]), 10), ros.output(diag)[-2000:]
-    seven = [d for n, d, _ in _heard(ros.output(diag))[marked:] if n == 7]
     time.sleep(2.0)
     seven = [d for n, d, _ in _heard(ros.output(diag))[marked:] if n == 7]
     assert len(seven) >= 3 and seven[-1] < seven[0], seven
     assert all(a.poll() is None for i, a in enumerate(agents) if i != 5), "the survivors keep running"
 
-    # restart agent 5: it rejoins (from its initial state, on the shared clock) and matches
+    # restart agent 5: it rejoins (from its initial state, on the ensemble's clock) and matches
+    # before the run ends at t_end - however long a loaded machine takes to get there
     marked = len(_heard(ros.output(diag)))
-    agents[5] = ros.agent(SCENE, 5, **common)
-    assert _wait_for(ros, diag, lambda h: any(n == 8 for n, _, _ in h[marked:]), 20), ros.output(diag)[-2000:]
-    assert _wait_for(ros, diag, lambda h: any(n == 8 and below for n, _, below in h[marked:]), 45), \
-        ros.output(diag)[-3000:]
+    agents[5] = ros.agent(SCENE, 5, timeout=RUN_BOUND + 20, **common)
+    assert _wait_for(ros, diag, lambda h: any(n == 8 for n, _, _ in h[marked:]), 30, agents), \
+        ros.output(diag)[-2000:]
+    assert _wait_for(ros, diag, lambda h: any(n == 8 and below for n, _, below in h[marked:]), RUN_BOUND,
+                     agents), ros.output(diag)[-3000:] + "".join(ros.output(a)[-300:] for a in agents)

@@ -174,9 +174,14 @@ def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
         groups:
           - {name: triangles, shape: triangle, count: 3}
         """), encoding="utf-8")
-    agents = [ros.agent(str(scene), i, timeout=90, round_timeout=2.0) for i in range(3)]
+    agents = [ros.agent(str(scene), i, timeout=90, round_timeout=2.0, discovery_timeout=20.0)
+              for i in range(3)]
     victim = agents[2]
-    time.sleep(8.0)          # discovery (about 1 s here) and well into the rounds: t_end needs ~1e5 steps
+    diag = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/diagnostics", "--timeout", "80"], timeout=90)
+    # kill only once every agent is well into its rounds (t_end needs ~1e5 steps): a fixed sleep
+    # could strike during discovery on a loaded machine, where the first round also allows
+    # discovery_timeout and the error would name no lockstep round
+    assert _wait_until_all_step(ros, diag, agents, 3, t_min=0.5, timeout=40), ros.output(diag)[-2000:]
     assert all(a.poll() is None for a in agents), [ros.output(a) for a in agents]
     ros.kill(victim)
     for a in agents[:2]:
@@ -185,3 +190,17 @@ def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
         errors = [line for line in text.splitlines() if line.startswith("agent: error:")]
         assert len(errors) == 1 and "timed out after 2 s waiting for agent(s) 2" in errors[0], text
         assert "Traceback" not in text
+
+
+def _wait_until_all_step(ros, diag, agents, n, t_min, timeout):
+    """True once each of agents 0..n-1 has reported (diagnostics) a simulated time above t_min."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        reached = {int(a) for a, t in re.findall(r"agent_(\d+)\s*\n\s*message: lockstep: t = ([0-9.e+-]+)",
+                                                    ros.output(diag)) if float(t) > t_min}
+        if reached >= set(range(n)):
+            return True
+        if any(a.poll() is not None for a in agents):
+            return False
+        time.sleep(0.2)
+    return False
