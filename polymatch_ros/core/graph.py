@@ -1,0 +1,203 @@
+"""Communication graphs: which agents of a group couple, with which weights a_ik.
+
+The paper couples every pair of a group (the complete graph, kappa/N sum_k in (A-1),
+(A-2)).  A graph generalises the sums to ``sum_k a_ik (...)`` with a_ik >= 0 the weight
+with which agent i hears agent k (row i is the receiver):
+
+    centroids  kappa/N_g sum_k a_ik (xbar_k - xbar_i)
+    rotations  kappa/(2 N_g) sum_k a_ik (O_k O_i^T - O_i O_k^T) = kappa/(2 N_g) (S_i O_i^T - O_i S_i^T),
+               S_i = sum_k a_ik O_k
+
+so one sparse product ``A @ O`` gives every agent's weighted field in O(|E| d^2).  With
+a_ik = 1 for all k != i this is the paper's model exactly (S_i = S - O_i and the O_i O_i^T
+terms cancel), which is why the complete graph keeps the mean field and carries no matrix.
+
+Graph specifications (a scene's ``graph`` key):
+``complete`` | ``{ring: k}`` (k neighbours on each side) | ``{k_nearest: k}`` (undirected
+union of each agent's k nearest by initial centroid distance) | ``{random: {p: P, seed: S}}``
+(Erdos-Renyi) | ``{edges: [[i, k], ...], weights: [...], directed: false}``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse import csgraph
+from scipy.spatial import cKDTree
+
+from .checks import Map, number
+from .errors import SceneError
+
+KINDS = ("complete", "ring", "k_nearest", "random", "edges")
+
+
+@dataclass(frozen=True)
+class Graph:
+    """A group's coupling graph; ``weights`` is None for the complete graph (the mean field)."""
+
+    kind: str
+    size: int
+    weights: sparse.csr_matrix | None = None
+    directed: bool = False
+
+    @property
+    def complete(self) -> bool:
+        return self.weights is None
+
+    def matrix(self) -> sparse.csr_matrix:
+        """The weights a_ik as a sparse matrix (the complete graph's too: ones off the diagonal)."""
+        if self.weights is not None:
+            return self.weights
+        full = np.ones((self.size, self.size)) - np.eye(self.size)
+        return sparse.csr_matrix(full)
+
+    def in_neighbours(self, i: int) -> np.ndarray:
+        """The agents (indices in the group) whose state agent ``i`` needs."""
+        if self.weights is None:
+            return np.delete(np.arange(self.size), i)
+        row = self.weights.getrow(i)
+        return row.indices[row.data != 0]
+
+    def weighted_sums(self, values: np.ndarray) -> np.ndarray:
+        """sum_k a_ik values_k for every i, for values of shape (N, ...)."""
+        flat = np.asarray(values, dtype=float).reshape(self.size, -1)
+        if self.weights is None:
+            out = flat.sum(axis=0)[None, :] - flat
+        else:
+            out = self.weights @ flat
+        return out.reshape(np.shape(values))
+
+    def degrees(self) -> np.ndarray:
+        """sum_k a_ik for every i (the weighted in-degree)."""
+        if self.weights is None:
+            return np.full(self.size, self.size - 1.0)
+        return np.asarray(self.weights.sum(axis=1)).ravel()
+
+
+def build_graph(spec, path: str, size: int, centroids: np.ndarray | None = None) -> Graph:
+    """A validated ``Graph`` of ``size`` agents from a scene's ``graph`` value at ``path``."""
+    if spec is None or spec == "complete":
+        return Graph("complete", size)
+    if isinstance(spec, str):
+        raise SceneError(f"{path}: unknown graph {spec!r} (expected complete or a mapping with one of "
+                         f"{', '.join(KINDS[1:])})")
+    m = Map(spec, path, KINDS[1:] + ("weights", "directed"))
+    kinds = [k for k in KINDS[1:] if k in spec]
+    if len(kinds) != 1:
+        raise SceneError(f"{path}: expected exactly one of {', '.join(KINDS[1:])}")
+    kind = kinds[0]
+    if kind != "edges" and any(k in spec for k in ("weights", "directed")):
+        raise SceneError(f"{path}: weights and directed go with edges")
+    if kind == "ring":
+        adjacency = _ring(number(spec["ring"], m.at("ring"), minimum=1, integer=True), size)
+    elif kind == "k_nearest":
+        k = number(spec["k_nearest"], m.at("k_nearest"), minimum=1, integer=True)
+        adjacency = _k_nearest(k, size, centroids, m.at("k_nearest"))
+    elif kind == "random":
+        adjacency = _random(spec["random"], m.at("random"), size)
+    else:
+        return _edges(m, size)
+    return Graph(kind, size, sparse.csr_matrix(adjacency))
+
+
+def _ring(k: int, size: int) -> np.ndarray:
+    a = np.zeros((size, size))
+    idx = np.arange(size)
+    for step in range(1, min(k, size // 2) + 1):
+        a[idx, (idx + step) % size] = 1.0
+        a[idx, (idx - step) % size] = 1.0
+    np.fill_diagonal(a, 0.0)
+    return a
+
+
+def _k_nearest(k: int, size: int, centroids, path: str) -> np.ndarray:
+    if centroids is None:
+        raise SceneError(f"{path}: needs the agents' initial centroids")
+    if k >= size:
+        raise SceneError(f"{path}: must be < the group's {size} agents, got {k}")
+    _, nearest = cKDTree(np.asarray(centroids, dtype=float)).query(centroids, k=k + 1)
+    a = np.zeros((size, size))
+    for i, row in enumerate(np.atleast_2d(nearest)):
+        a[i, [j for j in row if j != i][:k]] = 1.0
+    return np.maximum(a, a.T)                    # the undirected union
+
+
+def _random(raw, path: str, size: int) -> np.ndarray:
+    m = Map(raw, path, ("p", "seed"))
+    p = m.number("p", minimum=0.0)
+    if p > 1.0:
+        raise SceneError(f"{m.at('p')}: must be <= 1, got {p}")
+    seed = m.number("seed", 0, minimum=0, integer=True)
+    upper = np.triu(np.random.default_rng(seed).random((size, size)) < p, k=1)
+    return (upper | upper.T).astype(float)
+
+
+def _edges(m: Map, size: int) -> Graph:
+    raw = m.raw("edges")
+    if not isinstance(raw, list) or not raw:
+        raise SceneError(f"{m.at('edges')}: expected a list of [i, k] pairs")
+    pairs = []
+    for e, pair in enumerate(raw):
+        where = f"{m.at('edges')}[{e}]"
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise SceneError(f"{where}: expected [i, k], got {pair!r}")
+        i, k = (number(v, where, minimum=0, integer=True) for v in pair)
+        if i >= size or k >= size:
+            raise SceneError(f"{where}: agent indices must be < the group's {size} agents")
+        if i == k:
+            raise SceneError(f"{where}: an agent is not its own neighbour")
+        pairs.append((i, k))
+    weights = m.raw("weights")
+    if weights is None:
+        weights = [1.0] * len(pairs)
+    if not isinstance(weights, list) or len(weights) != len(pairs):
+        raise SceneError(f"{m.at('weights')}: expected one positive weight per edge ({len(pairs)})")
+    w = [number(v, f"{m.at('weights')}[{j}]", positive=True) for j, v in enumerate(weights)]
+    directed = m.raw("directed", False)
+    if not isinstance(directed, bool):
+        raise SceneError(f"{m.at('directed')}: expected true or false, got {directed!r}")
+    rows, cols = zip(*pairs)
+    # edge [i, k]: agent i hears agent k (and k hears i unless directed)
+    a = sparse.coo_matrix((w, (rows, cols)), shape=(size, size)).toarray()
+    if not directed:
+        a = np.maximum(a, a.T)
+    return Graph("edges", size, sparse.csr_matrix(a), directed)
+
+
+def check_connected(graph: Graph, path: str) -> None:
+    """Refuse a graph on which the group cannot match as one.
+
+    Undirected: one connected component.  Directed: some agent must reach all others
+    along the flow of information (k -> i where a_ik > 0): exactly one strongly connected
+    component of the information flow has no incoming edge.
+    """
+    if graph.complete or graph.size <= 1:
+        return
+    flow = graph.weights.T.tocsr()                   # k -> i when i hears k
+    if not graph.directed:
+        count, labels = csgraph.connected_components(flow, directed=False)
+        if count > 1:
+            raise SceneError(f"{path}: the graph is disconnected: components {_components(labels, count)}")
+        return
+    count, labels = csgraph.connected_components(flow, directed=True, connection="strong")
+    reached = np.zeros(count, dtype=bool)
+    src, dst = flow.nonzero()
+    reached[labels[dst][labels[src] != labels[dst]]] = True
+    roots = np.flatnonzero(~reached)
+    if len(roots) > 1:
+        groups = "; ".join(_members(labels, r) for r in roots)
+        raise SceneError(f"{path}: no agent reaches all others along the directed edges "
+                         f"(independent sources: {groups})")
+
+
+def _members(labels: np.ndarray, component: int) -> str:
+    members = np.flatnonzero(labels == component)
+    shown = ", ".join(map(str, members[:8])) + (", ..." if len(members) > 8 else "")
+    return "{" + shown + "}"
+
+
+def _components(labels: np.ndarray, count: int) -> str:
+    parts = [_members(labels, c) for c in range(min(count, 4))]
+    return " ".join(parts) + (f" and {count - 4} more" if count > 4 else "")
