@@ -288,8 +288,11 @@ def qos_profiles():
         # poses: the monitor must see every lockstep pose; echo and RViz match RELIABLE/VOLATILE
         "pose": QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.VOLATILE),
-        # realtime peers: only the newest pose matters; a deeper queue would feed stale poses
-        "latest": QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+        # realtime peers: only the newest pose matters; a deeper queue would feed stale poses.
+        # BEST_EFFORT (as sensor data): a lost pose is replaced by the next one, whereas a
+        # RELIABLE reader holds every later pose back until the lost one is repaired (seconds
+        # on a loaded machine, where loopback UDP drops datagrams)
+        "latest": QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.VOLATILE),
         # headline values: a late `ros2 topic echo` still gets the last one
         "latched": QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,

@@ -45,6 +45,8 @@ def main():
         junk.data = [1.0, 2.0]
         stage.publish(junk)
         k += 1
+        if k == 20:
+            print("rogue: flooding", flush=True)           # the test starts the run after this
         rclpy.spin_once(node, timeout_sec=0.01)
     print(f"rogue: sent {k} bad poses and {k} bad stage messages", flush=True)
     node.destroy_node()

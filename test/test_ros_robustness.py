@@ -27,11 +27,15 @@ pytestmark = needs_ros
 
 
 def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
-    rogue = ros.start([PY, os.path.join(REPO, "test", "rogue_publisher.py"), "polymatch", "3", "60"], timeout=70)
-    time.sleep(2.0)
+    rogue = ros.start([PY, os.path.join(REPO, "test", "rogue_publisher.py"), "polymatch", "3", "120"], timeout=130)
+    deadline = time.monotonic() + 30                  # the flood is on before the run starts
+    while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert "rogue: flooding" in ros.output(rogue), ros.output(rogue)
     out = tmp_path / "final.npz"
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path("congruent_triangles"), "--t-end", "1.0",
-                      "--integrator", "rkmk4", "--no-compare", "--save", str(out), "--timeout", "150", "-q"],
+                      "--integrator", "rkmk4", "--no-compare", "--save", str(out), "--timeout", "150", "-q",
+                      "--round-timeout", "60"],          # the flood is under test, not the timeout
                      timeout=180)
     rc = ros.wait(proc, 190)
     text = ros.output(proc)
