@@ -11,7 +11,7 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*"]),
-    package_data={package_name: ["resources/*.xml"]},
+    package_data={package_name: ["ros/resources/*.xml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -29,8 +29,8 @@ setup(
     entry_points={
         "console_scripts": [
             "polymatch = polymatch_ros.cli:main",
-            "agent = polymatch_ros.agent_node:main",
-            "monitor = polymatch_ros.monitor_node:main",
+            "agent = polymatch_ros.ros.agent_node:main",
+            "monitor = polymatch_ros.ros.monitor_node:main",
         ],
     },
 )

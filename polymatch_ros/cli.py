@@ -22,122 +22,14 @@ import warnings
 
 import numpy as np
 
-from .core.errors import PolymatchError, SceneError
-
-EXIT_NOT_CONVERGED = 3
-
-
-def shipped_config_dirs():
-    """Where shipped scenes live: the repository's config/, then the installed share/ directory."""
-    dirs = []
-    here = os.path.dirname(os.path.abspath(__file__))
-    dirs.append(os.path.join(os.path.dirname(here), "config"))
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        dirs.append(os.path.join(get_package_share_directory("polymatch_ros"), "config"))
-    except Exception:   # no ament index (plain pip install): the repository copy is all there is
-        pass
-    dirs.append(os.path.join(sys.prefix, "share", "polymatch_ros", "config"))
-    return [d for d in dirs if os.path.isdir(d)]
-
-
-def resolve_scene_path(name):
-    """A path as given, or a shipped scene by name (``congruent_triangles``)."""
-    if os.path.isfile(name):
-        return name
-    stem = name[:-5] if name.endswith(".yaml") else name
-    for d in shipped_config_dirs():
-        cand = os.path.join(d, stem + ".yaml")          # e.g. congruent_triangles, extremes/stiff_mass
-        if os.path.isfile(cand):
-            return cand
-    raise SceneError(f"{name}: no such scene file (nor a shipped scene of that name; "
-                         f"see `polymatch scenes`)")
-
-
-def load(args_scene, overrides=None):
-    from .core.scene import load_scene
-    return load_scene(resolve_scene_path(args_scene), overrides)
-
-
-def positive_float(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
-    return value
-
-
-def format_table(rows, header):
-    widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(len(header))]
-    line = "  ".join(h.ljust(w) for h, w in zip(header, widths))
-    out = [line, "  ".join("-" * w for w in widths)]
-    out += ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)) for r in rows]
-    return "\n".join(out)
-
-
-class Progress:
-    """One updating line on a terminal, a line every few seconds otherwise."""
-
-    def __init__(self, t_end, quiet=False, stream=sys.stderr):
-        import time
-        self.t_end, self.quiet, self.stream = t_end, quiet, stream
-        self.tty = stream.isatty()
-        self._time = time.monotonic
-        self.start = self._time()
-        self.last = -1e9
-
-    def __call__(self, t, diameter, extra=""):
-        if self.quiet:
-            return
-        now = self._time()
-        if not self.tty and now - self.last < 2.0 and t < self.t_end:
-            return
-        if not self.tty and t >= self.t_end and getattr(self, "_ended", False):
-            return
-        self._ended = t >= self.t_end
-        self.last = now
-        pct = 100.0 * t / self.t_end if self.t_end else 100.0
-        text = f"t = {t:8.3f} / {self.t_end:g} ({pct:5.1f}%)  diameter = {diameter:.3e}{extra}"
-        if self.tty:
-            self.stream.write("\r" + text + " " * 4)
-            self.stream.flush()
-        else:
-            self.stream.write(text + "\n")
-
-    def done(self):
-        if self.tty and not self.quiet:
-            self.stream.write("\n")
-
-
-def summary_rows(scene, metrics):
-    rows = []
-    for g, m in zip(scene.model.groups, metrics["groups"]):
-        rows.append([g.name, g.size, f"{m['centroid_diameter']:.3e}", f"{m['rotation_diameter']:.3e}",
-                     f"{m['matching_diameter']:.3e}", f"{m['energy']:.3e}", f"{m['orthogonality']:.1e}"])
-    return rows
-
-
-SUMMARY_HEADER = ["group", "N", "centroid diam", "rotation diam", "matching diam", "energy", "orth. defect"]
-
-
-def convergence_verdict(scene, diameter, converged_at, stationarity=None):
-    """(exit code, message) for the end of a run."""
-    if converged_at is not None:
-        return 0, f"converged: matching diameter < {scene.tolerance:g} from t = {converged_at:g}"
-    msg = f"did not converge: matching diameter {diameter:.3e} >= tolerance {scene.tolerance:g} at t_end"
-    if stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
-        msg += (f"; the rotations sit at an equilibrium that is not consensus (|W| = {stationarity:.1e}),"
-                " e.g. antipodal or splay states of the Lohe model")
-    if not scene.expect_convergence:
-        return 0, msg + " (the scene expects this: convergence.expected = false)"
-    return EXIT_NOT_CONVERGED, msg
-
+from .console import SUMMARY_HEADER, Progress, format_table, positive_float, summary_rows
+from .core.errors import PolymatchError
+from .core.scene import load_scene, shipped_config_dirs
+from .core.simulate import convergence_verdict
 
 def cmd_simulate(args):
     from .core.simulate import explain, simulate
-    scene = load(args.scene, {"time.t_end": args.t_end})
+    scene = load_scene(args.scene, {"time.t_end": args.t_end})
     if args.explain:
         print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
         return 0
@@ -191,7 +83,7 @@ def save_npz(traj, path):
 
 def cmd_explain(args):
     from .core.simulate import explain
-    scene = load(args.scene)
+    scene = load_scene(args.scene)
     print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed)))
     return 0
 
@@ -209,7 +101,6 @@ def cmd_integrators(args):
 
 
 def cmd_scenes(args):
-    from .core.scene import load_scene
     rows = []
     for d in shipped_config_dirs()[:1]:
         for sub in ("", "extremes"):
@@ -267,7 +158,7 @@ def build_parser():
     for name, module in PASSTHROUGH.items():
         sub.add_parser(name, help=f"one {name} node (ROS 2); takes the same arguments as "
                                   f"`ros2 run polymatch_ros {name}`, e.g. --ros-args -p scene:=FILE")
-    for name, module in (("run", "runner"), ("echo", "echo"), ("bench", "bench")):
+    for name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("bench", "bench")):
         try:
             mod = __import__(f"polymatch_ros.{module}", fromlist=["add_parser"])
         except ImportError as exc:
@@ -278,7 +169,7 @@ def build_parser():
     return parser
 
 
-PASSTHROUGH = {"agent": "agent_node", "monitor": "monitor_node"}
+PASSTHROUGH = {"agent": "ros.agent_node", "monitor": "ros.monitor_node"}
 
 
 def main(argv=None):

@@ -16,7 +16,7 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
-from polymatch_ros import wire
+from polymatch_ros.ros import wire
 
 
 def main():

@@ -55,7 +55,7 @@ class Ros:
     """A test's private ROS world: one domain id, loopback discovery, processes ended by PID."""
 
     def __init__(self, domain):
-        from polymatch_ros.ros_env import ros_environment
+        from polymatch_ros.ros.ros_env import ros_environment
         self.domain = domain
         self.env = ros_environment(domain, base={k: v for k, v in os.environ.items()
                                                  if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
@@ -65,7 +65,7 @@ class Ros:
 
     def realtime(self):
         """From now on start processes with the environment of a realtime ensemble (transports)."""
-        from polymatch_ros.ros_env import ros_environment
+        from polymatch_ros.ros.ros_env import ros_environment
         self.env = ros_environment(self.domain, base=self.env, mode="realtime")
         return self
 
@@ -142,7 +142,7 @@ def _children(pid):
 
 
 def node_argv(module, scene, **params):
-    argv = [PY, "-m", f"polymatch_ros.{module}", "--ros-args", "-p", f"scene:={scene_path(scene)}"]
+    argv = [PY, "-m", f"polymatch_ros.ros.{module}", "--ros-args", "-p", f"scene:={scene_path(scene)}"]
     for key, value in params.items():
         if isinstance(value, (list, tuple)):
             value = "[" + ",".join(map(str, value)) + "]"

@@ -71,7 +71,7 @@ def test_bad_agent_parameter_is_one_line_and_exit_code_2(ros, params, expect):
 
 
 def test_missing_scene_is_one_line_and_exit_code_2(ros):
-    proc = ros.start([PY, "-m", "polymatch_ros.monitor_node", "--ros-args", "-p", "scene:=/nonexistent.yaml"],
+    proc = ros.start([PY, "-m", "polymatch_ros.ros.monitor_node", "--ros-args", "-p", "scene:=/nonexistent.yaml"],
                      timeout=60)
     assert ros.wait(proc, 70) == 2
     text = ros.output(proc).strip()

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import pytest
 
 from polymatch_ros.core.errors import PolymatchError
-from polymatch_ros.runner import LOCALHOST_PARTICIPANTS, _agents_per_process
+from polymatch_ros.ros.runner import LOCALHOST_PARTICIPANTS, _agents_per_process
 
 
 def _args(k=None, monitor=True):

@@ -9,10 +9,10 @@ import subprocess
 import sys
 import textwrap
 
-from polymatch_ros.ros_env import hung_in_teardown
+from polymatch_ros.ros.ros_env import hung_in_teardown
 
 HUNG = textwrap.dedent("""
-    from polymatch_ros.ros_env import teardown_watchdog
+    from polymatch_ros.ros.ros_env import teardown_watchdog
     print("agent 3: finished at t = 1 (20 rounds, 50.0 rounds/s); no messages dropped", flush=True)
     with teardown_watchdog(0.5):
         while True:
@@ -21,7 +21,7 @@ HUNG = textwrap.dedent("""
 
 CLEAN = textwrap.dedent("""
     import time
-    from polymatch_ros.ros_env import teardown_watchdog
+    from polymatch_ros.ros.ros_env import teardown_watchdog
     print("agent 3: finished", flush=True)
     with teardown_watchdog(0.3):
         pass

@@ -31,10 +31,10 @@ def main(argv=None):
     from rclpy.duration import Duration
     from std_msgs.msg import Float64MultiArray
 
-    from .. import wire
+    from ..ros import wire
 
     rclpy.init()
-    from ..exchange import lean_node, quiet_events
+    from ..ros.exchange import lean_node, quiet_events
     node, executor = lean_node(f"bare_{me}")
     pub_events, sub_events = quiet_events()
     qos = wire.qos_profiles()

@@ -63,7 +63,7 @@ def _bare(n, rounds, env, timeout):
 
 
 def _agents(n, path, env, timeout, run_id):
-    argvs = [[sys.executable, "-m", "polymatch_ros.agent_node", "--ros-args", "-p", f"scene:={path}",
+    argvs = [[sys.executable, "-m", "polymatch_ros.ros.agent_node", "--ros-args", "-p", f"scene:={path}",
               "-p", f"agent:={i}", "-p", f"run_id:={run_id}"] for i in range(n)]
     return _parse_agents("\n".join(_parallel(argvs, env, timeout)))
 
@@ -90,7 +90,7 @@ def _deployed(path, env, timeout, per_process):
 def _deployed_per_process(n):
     """Agents per process for the deployed run: 1 unless runner + monitor + n processes exceed
     the participants LOCALHOST discovery reaches (then what `polymatch run` itself would pick)."""
-    from ..runner import fewest_agents_per_process
+    from ..ros.runner import fewest_agents_per_process
     return fewest_agents_per_process(n, own=2)
 
 
@@ -103,7 +103,7 @@ def run(args, log):
     import numpy as np
     from domain_coordinator import domain_id
 
-    from ..ros_env import ros_environment
+    from ..ros.ros_env import ros_environment
     from .report import Report
 
     sizes = [4] if args.quick else args.agents

@@ -237,7 +237,7 @@ def _target_rows(results, solvers, target, wall_key, err_key, evals_key):
 def run(args, log):
     import numpy as np
 
-    from ..cli import resolve_scene_path
+    from ..core.scene import resolve_scene_path
     from ..core import load_scene, with_representation
     from .report import Report
     from .timing import fmt_ms

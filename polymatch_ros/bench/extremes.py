@@ -559,7 +559,7 @@ def scale_ratios(ctx):
 def equilibria(ctx):
     import math
     import numpy as np
-    from ..cli import convergence_verdict
+    from ..core.simulate import convergence_verdict
     from ..core import simulate
     from dataclasses import replace
 

@@ -82,7 +82,7 @@ def run(args, log):
     from domain_coordinator import domain_id
 
     from ..core.scene import load_scene
-    from ..ros_env import ros_environment
+    from ..ros.ros_env import ros_environment
     from .report import Report
 
     report = Report(NAME, "Speed against accuracy over the ROS node set (`polymatch bench trade`)")

@@ -12,6 +12,7 @@ its own size even when coordinates are of magnitude 1e9.
 
 import math
 import os
+import sys
 import warnings
 from dataclasses import dataclass, field
 
@@ -57,17 +58,42 @@ class Scene:
         return self.model.dim
 
 
+def shipped_config_dirs():
+    """Where shipped scenes live: the repository's config/, then the installed share/ directory."""
+    dirs = []
+    here = os.path.dirname(os.path.abspath(__file__))
+    dirs.append(os.path.join(os.path.dirname(os.path.dirname(here)), "config"))
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        dirs.append(os.path.join(get_package_share_directory("polymatch_ros"), "config"))
+    except Exception:   # no ament index (plain pip install): the repository copy is all there is
+        pass
+    dirs.append(os.path.join(sys.prefix, "share", "polymatch_ros", "config"))
+    return [d for d in dirs if os.path.isdir(d)]
+
+
+def resolve_scene_path(name):
+    """A path as given, or a shipped scene by name (``congruent_triangles``)."""
+    if os.path.isfile(name):
+        return name
+    stem = name[:-5] if name.endswith(".yaml") else name
+    for d in shipped_config_dirs():
+        cand = os.path.join(d, stem + ".yaml")          # e.g. congruent_triangles, extremes/stiff_mass
+        if os.path.isfile(cand):
+            return cand
+    raise SceneError(f"{name}: no such scene file (nor a shipped scene of that name; "
+                         f"see `polymatch scenes`)")
+
+
 def load_scene(source, overrides=None):
-    """Load and validate a scene from a file path, a YAML string or a dict."""
+    """Load and validate a scene from a file path, a shipped scene name, a YAML string or a dict."""
     path = None
     if isinstance(source, dict):
         data = source
     else:
         text = source
         if isinstance(source, os.PathLike) or (isinstance(source, str) and "\n" not in source):
-            path = os.fspath(source)
-            if not os.path.isfile(path):
-                raise SceneError(f"{path}: no such scene file")
+            path = resolve_scene_path(os.fspath(source))
             with open(path, encoding="utf-8") as fh:
                 text = fh.read()
         try:

@@ -19,6 +19,8 @@ from .metrics import ensemble_metrics, stationarity
 from .model import GroupState, State, System
 from .so import group_for
 
+EXIT_NOT_CONVERGED = 3
+
 
 def drive(method, system, state, h, answer=None):
     """Advance ``state`` by one step ``h`` of ``method``: the one driver of every stepper.
@@ -263,3 +265,16 @@ def explain(scene, method=None, dt=None, tolerance=None, distributed=False):
         lines.append(f"integrator: adaptive DOP853-Lie, tolerance {p.tolerance:g} — {p.reason}")
     lines.extend(f"note: {n}" for n in scene.notes)
     return lines
+
+
+def convergence_verdict(scene, diameter, converged_at, stationarity=None):
+    """(exit code, message) for the end of a run."""
+    if converged_at is not None:
+        return 0, f"converged: matching diameter < {scene.tolerance:g} from t = {converged_at:g}"
+    msg = f"did not converge: matching diameter {diameter:.3e} >= tolerance {scene.tolerance:g} at t_end"
+    if stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
+        msg += (f"; the rotations sit at an equilibrium that is not consensus (|W| = {stationarity:.1e}),"
+                " e.g. antipodal or splay states of the Lohe model")
+    if not scene.expect_convergence:
+        return 0, msg + " (the scene expects this: convergence.expected = false)"
+    return EXIT_NOT_CONVERGED, msg

@@ -15,7 +15,7 @@ import importlib
 import sys
 import time
 
-from .core.errors import ParameterError, PolymatchError
+from ..core.errors import ParameterError, PolymatchError
 from .ros_env import teardown_watchdog
 
 

@@ -22,12 +22,12 @@ from dataclasses import replace
 import numpy as np
 
 from . import wire
-from .cli import (Progress, SUMMARY_HEADER, convergence_verdict, format_table, load, positive_float,
-                  resolve_scene_path, summary_rows)
-from .core.errors import PolymatchError
-from .core.metrics import ensemble_metrics
-from .core.model import GroupState, State
-from .core.simulate import plan, prepare, simulate
+from ..console import SUMMARY_HEADER, Progress, format_table, positive_float, summary_rows
+from ..core.errors import PolymatchError
+from ..core.scene import load_scene, resolve_scene_path
+from ..core.metrics import ensemble_metrics
+from ..core.model import GroupState, State
+from ..core.simulate import convergence_verdict, plan, prepare, simulate
 from .ros_env import hung_in_teardown, reserved_domain_id, ros_environment, teardown_watchdog
 
 
@@ -271,7 +271,7 @@ def _agents_per_process(args, n_agents, localhost):
 
 def cmd_run(args):
     scene_path = resolve_scene_path(args.scene)
-    scene = load(scene_path, {"time.t_end": args.t_end})
+    scene = load_scene(scene_path, {"time.t_end": args.t_end})
     rt = args.mode == "realtime"
     dt = args.time_scale / args.rate if rt else args.dt
     the_plan = plan(scene, args.integrator, dt, distributed=True)     # one-line errors before spawning
@@ -327,13 +327,13 @@ def _run(args, scene, scene_path, the_plan, env, domain):
             mon_args = common + ["-p", f"peer_timeout:={args.peer_timeout!r}"]
             if rt:
                 mon_args += ["-p", "rate:=10.0"]
-            monitor = Child("monitor", py + ["polymatch_ros.monitor_node", "--ros-args"] + mon_args
+            monitor = Child("monitor", py + ["polymatch_ros.ros.monitor_node", "--ros-args"] + mon_args
                             + ["-r", "__node:=polymatch_monitor"], env)
         for agents in partition(n, args.agents_per_process):
             name = f"agent_{agents[0]}" if len(agents) == 1 else f"agents_{agents[0]}_{agents[-1]}"
             sel = ["-p", f"agent:={agents[0]}"] if len(agents) == 1 else \
                 ["-p", "agents:=[" + ",".join(map(str, agents)) + "]"]
-            children.append(Child(name, py + ["polymatch_ros.agent_node", "--ros-args"] + agent_args + sel
+            children.append(Child(name, py + ["polymatch_ros.ros.agent_node", "--ros-args"] + agent_args + sel
                                   + ["-r", f"__node:={name}"], env))
         code, message = _supervise(args, scene, the_plan, watcher, children, monitor, interrupted, start, say)
     finally:

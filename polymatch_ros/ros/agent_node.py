@@ -15,9 +15,9 @@ import time
 
 
 from . import wire
-from .core.errors import ParameterError, PolymatchError
-from .core.model import GroupState, State, System
-from .core.simulate import drive, plan, prepare, step_grid
+from ..core.errors import ParameterError, PolymatchError
+from ..core.model import GroupState, State, System
+from ..core.simulate import drive, plan, prepare, step_grid
 from .exchange import DropCounter, Layout, LockstepExchange, PeerTable, RoundTimeout
 from .ros_env import teardown_watchdog
 
@@ -115,8 +115,8 @@ class AgentNode:
 
     # -- configuration --------------------------------------------------------------------------
     def _configure(self, p):
-        from .cli import resolve_scene_path
-        from .core.scene import load_scene
+        from ..core.scene import resolve_scene_path
+        from ..core.scene import load_scene
         if not p["scene"]:
             raise ParameterError("parameter 'scene' is required (a scene file)")
         if p["mode"] not in ("lockstep", "realtime"):

@@ -26,9 +26,9 @@ import numpy as np
 
 from . import wire
 from .agent_node import declare
-from .core.errors import ParameterError, PolymatchError
-from .core.metrics import ensemble_metrics
-from .core.model import GroupState, State
+from ..core.errors import ParameterError, PolymatchError
+from ..core.metrics import ensemble_metrics
+from ..core.model import GroupState, State
 from .exchange import DropCounter
 from .ros_env import teardown_watchdog
 
@@ -53,8 +53,8 @@ class MonitorNode:
     def __init__(self):
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
-        from .cli import resolve_scene_path
-        from .core.scene import load_scene
+        from ..core.scene import resolve_scene_path
+        from ..core.scene import load_scene
         self.node = Node("polymatch_monitor")
         self.log = self.node.get_logger()
         self.executor = SingleThreadedExecutor()

@@ -1,0 +1,68 @@
+"""What people read: progress lines, tables, command-line number types (no numerics here)."""
+
+import argparse
+import math
+import sys
+
+
+def positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
+    return value
+
+
+def format_table(rows, header):
+    widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(len(header))]
+    line = "  ".join(h.ljust(w) for h, w in zip(header, widths))
+    out = [line, "  ".join("-" * w for w in widths)]
+    out += ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)) for r in rows]
+    return "\n".join(out)
+
+
+class Progress:
+    """One updating line on a terminal, a line every few seconds otherwise."""
+
+    def __init__(self, t_end, quiet=False, stream=sys.stderr):
+        import time  # noqa: PLC0415
+        self.t_end, self.quiet, self.stream = t_end, quiet, stream
+        self.tty = stream.isatty()
+        self._time = time.monotonic
+        self.start = self._time()
+        self.last = -1e9
+
+    def __call__(self, t, diameter, extra=""):
+        if self.quiet:
+            return
+        now = self._time()
+        if not self.tty and now - self.last < 2.0 and t < self.t_end:
+            return
+        if not self.tty and t >= self.t_end and getattr(self, "_ended", False):
+            return
+        self._ended = t >= self.t_end
+        self.last = now
+        pct = 100.0 * t / self.t_end if self.t_end else 100.0
+        text = f"t = {t:8.3f} / {self.t_end:g} ({pct:5.1f}%)  diameter = {diameter:.3e}{extra}"
+        if self.tty:
+            self.stream.write("\r" + text + " " * 4)
+            self.stream.flush()
+        else:
+            self.stream.write(text + "\n")
+
+    def done(self):
+        if self.tty and not self.quiet:
+            self.stream.write("\n")
+
+
+def summary_rows(scene, metrics):
+    rows = []
+    for g, m in zip(scene.model.groups, metrics["groups"]):
+        rows.append([g.name, g.size, f"{m['centroid_diameter']:.3e}", f"{m['rotation_diameter']:.3e}",
+                     f"{m['matching_diameter']:.3e}", f"{m['energy']:.3e}", f"{m['orthogonality']:.1e}"])
+    return rows
+
+
+SUMMARY_HEADER = ["group", "N", "centroid diam", "rotation diam", "matching diam", "energy", "orth. defect"]
