@@ -27,8 +27,10 @@ NAME = "extremes"
 HELP = "stability at the extremes: expectation, what happened, pass/fail and wall time per extreme"
 ORDER = 50
 
-KEYS = ("stiff_mass", "undamped", "stiff_coupling", "large_n", "dim10", "long_horizon", "huge_coords",
-        "scale_ratios", "equilibria", "d0_random", "coincident", "collinear", "dt_gt_t_end", "one_agent")
+KEYS = ("stiff_mass", "undamped", "stiff_coupling", "large_n", "dim10", "long_horizon",
+        "huge_coords",
+        "scale_ratios", "equilibria", "d0_random", "coincident", "collinear", "dt_gt_t_end",
+        "one_agent")
 
 #: the detail table of an extreme: (caption, formatted with Variant.fields(), header)
 DETAILS = {
@@ -36,22 +38,26 @@ DETAILS = {
                    "(reference rkmk4 dt = 1e-3 on the first-order scene)",
                    ["dt", "max error (state, diameters)", "ratio", "wall s", "finite"]),
     "undamped": ("gamma = 0: relative energy deviation, N = 5, d = 2, dt = 0.1, t_end = {t_undamped:g}",
-                 ["method", "max, first tenth", "max, last tenth", "E(t_end)/E0 - 1", "steps", "wall s"]),
+                 ["method", "max, first tenth", "max, last tenth", "E(t_end)/E0 - 1", "steps",
+                  "wall s"]),
     "stiff_coupling": ("kappa = 1e4, first order, N = {n_coupling}, t_end = 0.005 (50 time constants 1/kappa): "
                        "cost and error against rkmk4 h = 2.5e-6",
                        ["method", "setting", "steps", "evaluations", "max error", "wall s"]),
     "large_n": ("N = {n_large}, d = 3 (regular tetrahedra), rkmk4 dt = 0.1",
-                ["order", "N", "steps", "D(0)", "D(t_end)", "converged at", "max orth. defect", "wall s"]),
+                ["order", "N", "steps", "D(0)", "D(t_end)", "converged at", "max orth. defect",
+                 "wall s"]),
     "long_horizon": ("long horizon t_end = {t_long:g}, N = 6, matrix representation",
                      ["d", "order", "method", "setting", "steps", "orth. defect (first sample)",
                       "orth. defect (t_end)", "converged at", "max D after t = 100", "wall s"]),
     "equilibria": ("Non-consensus equilibria: deviation eps(t) from the equilibrium, fitted eps0 e^{{rate t}} for "
                    "1e-11 < eps < 1e-3 (rkmk4, dt = 0.05, kappa = gamma = 1, m = 0.5)",
-                   ["equilibrium", "order", "representation", "eps(0)", "linear rate", "measured rate",
+                   ["equilibrium", "order", "representation", "eps(0)", "linear rate",
+                    "measured rate",
                     "fitted eps0", "escape (eps > 0.5) at t", "predicted ln(0.5/eps0)/rate",
                     "converged by t_end"]),
     "coincident": ("Coincident centroids: one centroid moved by eps (second order, kappa_2 = 0.5, L = 3)",
-                   ["eps", "separation at t = 0", "separation > 1 at t", "separation at t_end", "t_end"]),
+                   ["eps", "separation at t = 0", "separation > 1 at t", "separation at t_end",
+                    "t_end"]),
     "collinear": ("Nearly collinear triangles (length 1, height h), explicit vertices, 5 agents, first order",
                   ["d", "height", "outcome"]),
 }
@@ -60,7 +66,8 @@ DETAILS = {
 def add_arguments(p):
     from .options import at_least
     p.add_argument("--only", metavar="A,B", help="only these extremes: " + ", ".join(KEYS))
-    p.add_argument("--n-large", type=at_least(2), default=10_000, help="N of the large-N run (default 10000)")
+    p.add_argument("--n-large", type=at_least(2), default=10_000,
+                   help="N of the large-N run (default 10000)")
     p.add_argument("--t-long", type=at_least(1.0, float), default=1e4,
                    help="t_end of the long-horizon runs (default 1e4)")
 
@@ -93,7 +100,8 @@ def run(args, log):
         unknown = [k for k in wanted if k not in KEYS]
         if unknown:
             from ..core import ParameterError
-            raise ParameterError(f"--only: unknown extreme {unknown[0]!r}; known: {', '.join(KEYS)}")
+            raise ParameterError(
+                f"--only: unknown extreme {unknown[0]!r}; known: {', '.join(KEYS)}")
         keys = [k for k in keys if k in wanted]
     variant = Variant(quick=args.quick, n_large=args.n_large, t_long=args.t_long)
     t0 = time.perf_counter()

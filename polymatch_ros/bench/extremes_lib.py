@@ -29,7 +29,8 @@ class Variant:
         q = self.quick
         return {"n_large": 200 if q else self.n_large, "t_long": 200.0 if q else self.t_long,
                 "t_undamped": 50.0 if q else self.t_long, "n_stiff": 6 if q else 50,
-                "t_stiff": 2.0 if q else 10.0, "n_coupling": 6 if q else 100, "n_dim10": 4 if q else 100,
+                "t_stiff": 2.0 if q else 10.0, "n_coupling": 6 if q else 100,
+                "n_dim10": 4 if q else 100,
                 "budget": 300 if q else 20000}
 
 
@@ -46,14 +47,16 @@ class Outcome:
 
 
 def scene(dim, order=1, *, count=6, seed=1, kappa=1.0, gamma=1.0, mass=0.5, shape=None,
-          rotations="uniform", centroids=None, velocities=None, t_end=10.0, samples=None, scales=None,
+          rotations="uniform", centroids=None, velocities=None, t_end=10.0, samples=None,
+          scales=None,
           representation="auto", max_steps=None):
     """One group of ``count`` polytopes (regular d-simplices unless ``shape``), model (A-1)/(A-2)/(F-1)."""
     from ..core import load_scene
     model = {"order": order, "kappa": kappa, "gamma": gamma, "representation": representation}
     if order == 2:
         model["mass"] = mass
-    group = {"name": "g", "shape": shape or {"simplex": dim}, "count": count, "rotations": rotations,
+    group = {"name": "g", "shape": shape or {"simplex": dim}, "count": count,
+             "rotations": rotations,
              "centroids": centroids or {"box": [-2.0, 2.0]}}
     if scales is not None:
         group["scales"] = scales
@@ -75,7 +78,8 @@ def stiff_mass_scene(order, count, mass=1e-8, **kw):
 
 def undamped_scene(t_end, dim=2):
     """gamma = 0, m = kappa = 1, N = 5, angular velocities ~ N(0, 0.7^2), 200 samples."""
-    return scene(dim, 2, count=5, seed=11, gamma=0.0, mass=1.0, t_end=t_end, samples={"every": t_end / 200},
+    return scene(dim, 2, count=5, seed=11, gamma=0.0, mass=1.0, t_end=t_end,
+                 samples={"every": t_end / 200},
                  velocities={"angular": {"normal": 0.7}})
 
 
@@ -86,7 +90,8 @@ def stiff_coupling_scene(order, count, t_end, **kw):
 
 def scale_ratio_scene(order, t_end=1.0, **kw):
     """Similar ensemble (F-1), scales log-uniform in 1e-6 .. 1e6, N = 6 triangles."""
-    return scene(2, order, count=6, seed=5, scales={"log_uniform": [1e-6, 1e6]}, mass=0.5, t_end=t_end,
+    return scene(2, order, count=6, seed=5, scales={"log_uniform": [1e-6, 1e6]}, mass=0.5,
+                 t_end=t_end,
                  shape="triangle", **kw)
 
 
@@ -149,7 +154,8 @@ def collinear_agents(dim, height, count=5, seed=0):
     tri[1, 0], tri[2, 0], tri[2, 1] = 1.0, 0.5, height
     if dim == 2:
         a = rng.uniform(-np.pi, np.pi, count)
-        rots = np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)], -1)], -2)
+        rots = np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)],
+                                                                         -1)], -2)
     else:
         from scipy.spatial.transform import Rotation
         rots = Rotation.random(count, random_state=1).as_matrix()
@@ -160,8 +166,10 @@ def collinear_agents(dim, height, count=5, seed=0):
 def collinear_scene(dim, verts, order=1, every=5.0):
     from ..core import load_scene
     model = {"order": order} if order == 1 else {"order": 2, "mass": 0.5}
-    return load_scene({"dimension": dim, "model": model, "time": {"t_end": 40.0, "samples": {"every": every}},
-                       "groups": [{"name": "slivers", "agents": [{"vertices": v.tolist()} for v in verts]}]})
+    return load_scene({"dimension": dim, "model": model, "time": {"t_end": 40.0,
+                                                                  "samples": {"every": every}},
+                       "groups": [{"name": "slivers",
+                                   "agents": [{"vertices": v.tolist()} for v in verts]}]})
 
 
 # ---------------------------------------------------------------------------------------------
@@ -241,10 +249,13 @@ def splay_deviation(rep, state):
 
 #: name: (label, d, shape, rotations, deviation, linear rate of the unstable mode at first order / kappa)
 EQUILIBRIA = {
-    "antipodal_2d": ("antipodal SO(2)", 2, "triangle", {"angles": [0.0, math.pi]}, antipodal_deviation, 1.0),
-    "antipodal_3d": ("antipodal SO(3)", 3, "tetrahedron", {"rotvecs": [[0, 0, 0], [0, 0, math.pi]]},
+    "antipodal_2d": ("antipodal SO(2)", 2, "triangle", {"angles": [0.0, math.pi]},
                      antipodal_deviation, 1.0),
-    "splay_2d": ("splay SO(2), N = 3", 2, "triangle", {"angles": [0.0, 2 * math.pi / 3, 4 * math.pi / 3]},
+    "antipodal_3d": ("antipodal SO(3)", 3, "tetrahedron", {"rotvecs": [[0, 0, 0], [0, 0,
+                                                                                   math.pi]]},
+                     antipodal_deviation, 1.0),
+    "splay_2d": ("splay SO(2), N = 3", 2, "triangle", {"angles": [0.0, 2 * math.pi / 3,
+                                                                  4 * math.pi / 3]},
                  splay_deviation, 0.5),
 }
 
@@ -255,7 +266,8 @@ def equilibrium_run(name, order, rep, t_rates, every, m=0.5, gamma=1.0):
     _label, dim, shape, rots, deviation, c = EQUILIBRIA[name]
     rate = c if order == 1 else (-gamma + math.sqrt(gamma ** 2 + 4 * m * c)) / (2 * m)
     sc = scene(dim, order, count=len(next(iter(rots.values()))), shape=shape, rotations=rots,
-               representation=rep, mass=m, gamma=gamma, t_end=t_rates / rate, samples={"every": every},
+               representation=rep, mass=m, gamma=gamma, t_end=t_rates / rate,
+               samples={"every": every},
                centroids={"box": [-1.0, 1.0]})
     traj = simulate(sc, "rkmk4", 0.05)
     eps = np.array([deviation(sc.model.rotations, st) for st in traj.states])

@@ -30,14 +30,16 @@ def stiff_mass_refusals(v):
             limit = lib.refusal_limit(msg)
             want = lib.rk_stability_limit(METHODS[name].info.order, lam)
             ok &= (exc is not None and exc.exit_code == 2 and "\n" not in msg and limit is not None
-                   and abs(limit / want - 1) < 5e-3 and all(w in msg for w in (name, "m/gamma", "etd2")))
+                   and abs(limit / want - 1) < 5e-3 and all(w in msg for w in (name, "m/gamma",
+                                                                               "etd2")))
             if dt == 0.01:
                 parts.append(f"{name} dt < {limit:.3g}" if limit else f"{name}: ran")
     return Outcome("all refuse (exit 2, one line): " + ", ".join(parts) + " (m/gamma = 5e-9)", ok)
 
 
 def stiff_mass_verlet(v):
-    msg = str(lib.refusal(lib.stiff_mass_scene(2, v.fields()["n_stiff"], t_end=2.0), "lie_verlet", 0.02))
+    msg = str(lib.refusal(lib.stiff_mass_scene(2, v.fields()["n_stiff"], t_end=2.0), "lie_verlet",
+                          0.02))
     limit = lib.refusal_limit(msg)
     ok = limit is not None and abs(limit / (2.0 / np.sqrt(1.5 / 1e-8)) - 1) < 5e-3 and "etd2" in msg
     return Outcome(f"refuses: dt < {limit:.3g} = 2 sqrt(m/kappa); message blames 'damping stiff' "
@@ -107,13 +109,16 @@ def energy_deviation(method, t_end, dt=0.1):
 
 def undamped_energy(v, method):
     early, late, final, traj = energy_deviation(method, v.fields()["t_undamped"])
-    rows = ((method, f"{early:.2e}", f"{late:.2e}", f"{final:+.2e}", traj.steps, f"{traj.wall_time:.2f}"),)
+    rows = ((method, f"{early:.2e}", f"{late:.2e}", f"{final:+.2e}", traj.steps,
+             f"{traj.wall_time:.2f}"),)
     if method != "lie_verlet":
-        return Outcome(f"energy drifts: {early:.1e} -> {late:.1e} (not symplectic; shown for contrast)",
-                       lib.finite(traj), rows)
-    return Outcome(f"{traj.steps} steps: relative energy error <= {early:.1e} in the first tenth, {late:.1e} "
-                   "in the last (bounded oscillation, no drift)",
-                   late < 2.0 * early and max(early, late) < 2e-3 and lib.finite(traj), rows)
+        return Outcome(
+            f"energy drifts: {early:.1e} -> {late:.1e} (not symplectic; shown for contrast)",
+            lib.finite(traj), rows)
+    return Outcome(
+        f"{traj.steps} steps: relative energy error <= {early:.1e} in the first tenth, {late:.1e} "
+        "in the last (bounded oscillation, no drift)",
+        late < 2.0 * early and max(early, late) < 2e-3 and lib.finite(traj), rows)
 
 
 def undamped_refusals(v):
@@ -127,8 +132,10 @@ def undamped_refusals(v):
 
 
 def undamped_no_stable_step(v):
-    msgs = [str(lib.refusal(lib.undamped_scene(10.0), m, 0.05) or "") for m in ("lie_euler", "lie_heun")]
-    return Outcome(f"'{msgs[0]}'", all("no stable step" in m and not lib.refusal_limit(m) for m in msgs))
+    msgs = [str(lib.refusal(lib.undamped_scene(10.0), m, 0.05) or "") for m in ("lie_euler",
+                                                                                "lie_heun")]
+    return Outcome(f"'{msgs[0]}'",
+                   all("no stable step" in m and not lib.refusal_limit(m) for m in msgs))
 
 
 # -- kappa = 1e4 --------------------------------------------------------------------------------
@@ -139,7 +146,8 @@ def stiff_coupling_refusals(v):
     for order, dt in ((1, 0.01), (2, 0.05)):
         lam = [-kappa] if order == 1 else list(np.roots([1.0, 1.0, kappa])) + [-1.0]
         for name in lib.EXPLICIT:
-            msg = str(lib.refusal(lib.stiff_coupling_scene(order, v.fields()["n_coupling"], 1.0), name, dt))
+            msg = str(lib.refusal(lib.stiff_coupling_scene(order, v.fields()["n_coupling"], 1.0),
+                                  name, dt))
             limit = lib.refusal_limit(msg)
             want = lib.rk_stability_limit(METHODS[name].info.order, lam)
             ok &= limit is not None and abs(limit / want - 1) < 5e-3 and "kappa" in msg
@@ -161,8 +169,9 @@ def stiff_coupling_compliant(v):
         errs.append(lib.max_error(sc, traj.final, sc, ref.final))
         rows.append(("rkmk4", f"h = {h:g} (h kappa = {h * 1e4:g})", traj.steps, traj.rhs_evals,
                      f"{errs[-1]:.1e}", f"{traj.wall_time:.2f}"))
-    return Outcome(f"rkmk4 error {errs[0]:.1e} at h kappa = 1 .. {errs[-1]:.1e} at h kappa = 0.1 or 0.2",
-                   errs[2] < 1e-6, tuple(rows))
+    return Outcome(
+        f"rkmk4 error {errs[0]:.1e} at h kappa = 1 .. {errs[-1]:.1e} at h kappa = 0.1 or 0.2",
+        errs[2] < 1e-6, tuple(rows))
 
 
 def stiff_coupling_adaptive(v):
@@ -190,14 +199,16 @@ def f1_stiffness(sc):
 def scale_refusals(v):
     parts, ok = [], True
     for order in (1, 2):
-        for name in ("lie_euler", "rkmk4", "rk4_proj") + (("etd2", "lie_verlet") if order == 2 else ()):
+        for name in ("lie_euler", "rkmk4", "rk4_proj") + (("etd2",
+                                                           "lie_verlet") if order == 2 else ()):
             msg = str(lib.refusal(lib.scale_ratio_scene(order), name, 0.05) or "")
             ok &= "scale ratios" in msg and "s_k/s_i" in msg
             if name == "rkmk4":
                 parts.append(f"order {order}: rkmk4 dt < {lib.refusal_limit(msg):.3g}")
     s = lib.scale_ratio_scene(1).model.groups[0].scales
-    return Outcome(f"all refuse naming 's_k/s_i' (s_max/s_min = {s.max() / s.min():.1e}, stiffness "
-                   f"{f1_stiffness(lib.scale_ratio_scene(1)):.2e}); " + ", ".join(parts), ok)
+    return Outcome(
+        f"all refuse naming 's_k/s_i' (s_max/s_min = {s.max() / s.min():.1e}, stiffness "
+        f"{f1_stiffness(lib.scale_ratio_scene(1)):.2e}); " + ", ".join(parts), ok)
 
 
 def scale_compliant(v):
@@ -205,15 +216,17 @@ def scale_compliant(v):
     sc = lib.scale_ratio_scene(1, t_end=t_end, samples=[0.0, t_end / 2, t_end])
     ref, run = _sim(sc, "rkmk4", 1.25e-10), _sim(sc, "rkmk4", 1e-9)
     err = lib.max_error(sc, run.final, sc, ref.final)
-    return Outcome(f"rkmk4 h = 1e-9 (h k = {1e-9 * f1_stiffness(sc):.2f}): error {err:.1e} vs h/8 over "
-                   f"{run.steps} steps", err < 1e-9)
+    return Outcome(
+        f"rkmk4 h = 1e-9 (h k = {1e-9 * f1_stiffness(sc):.2f}): error {err:.1e} vs h/8 over "
+        f"{run.steps} steps", err < 1e-9)
 
 
 def scale_adaptive(v):
     from ..core import PolymatchError
     budget = v.fields()["budget"]
     try:
-        _sim(lib.scale_ratio_scene(1, max_steps=budget), "adaptive", tolerance=1e-8, keep_states=False,
+        _sim(lib.scale_ratio_scene(1, max_steps=budget), "adaptive", tolerance=1e-8,
+             keep_states=False,
              samples=[0.0])
     except PolymatchError as exc:
         msg = str(exc)

@@ -8,7 +8,6 @@ congruent scene and returns the sample times, absolute centroids, rotation matri
 alike); a refusal (``StabilityError``) or a failure is a result, not a crash.
 """
 
-import statistics
 import time
 from dataclasses import dataclass, field
 
@@ -40,7 +39,7 @@ class Solver:
     status: str = "ok"
     walls: list = field(default_factory=list)
     out: Solution = None
-    err: float = None            # scores a family gives the first run
+    err: float = None  # scores a family gives the first run
     orth: float = None
 
     @property
@@ -52,19 +51,30 @@ class Solver:
         return self.status == "ok"
 
     @property
+    def timing(self):
+        from .timing import Timing
+
+        return Timing(tuple(self.walls))
+
+    @property
     def best(self):
-        return min(self.walls)
+        return self.timing.best
 
     @property
     def median(self):
-        return statistics.median(self.walls)
+        return self.timing.median
 
 
 def solvers_for(order, steps, tolerances, scipy=SCIPY_METHODS):
     """Every registered integrator accepting the model at each step, ours adaptive and scipy at each tol."""
     from ..core import METHODS
-    out = [Solver(name, "fixed", h) for name, meth in METHODS.items() if order in meth.info.models
-           for h in steps]
+
+    out = [
+        Solver(name, "fixed", h)
+        for name, meth in METHODS.items()
+        if order in meth.info.models
+        for h in steps
+    ]
     out += [Solver("adaptive (ours)", "adaptive", tol) for tol in tolerances]
     return out + [Solver(name, "scipy", tol) for name in scipy for tol in tolerances]
 
@@ -86,17 +96,28 @@ def solve(scene, solver, times, flat=None):
         from scipy.integrate import solve_ivp
 
         from .flat import FlatSystem
+
         flat = flat or FlatSystem.for_scene(scene)
         y0 = flat.initial(scene)
         t0 = time.perf_counter()
-        sol = solve_ivp(flat.rhs, (0.0, scene.t_end), y0, method=solver.name, rtol=solver.value,
-                        atol=solver.value, t_eval=times)
+        sol = solve_ivp(
+            flat.rhs,
+            (0.0, scene.t_end),
+            y0,
+            method=solver.name,
+            rtol=solver.value,
+            atol=solver.value,
+            t_eval=times,
+        )
         wall = time.perf_counter() - t0
         if not sol.success:
-            raise RuntimeError(f"scipy {solver.name} failed at tol {solver.value:g}: {sol.message}")
+            raise RuntimeError(
+                f"scipy {solver.name} failed at tol {solver.value:g}: {sol.message}"
+            )
         u = flat.unpack(sol.y)
         return Solution(sol.t, u["x"], u["rot"], u.get("w"), int(sol.nfev), len(sol.t) - 1, wall)
     from ..core import simulate
+
     if solver.kind == "fixed":
         kw = {"method": solver.name, "dt": solver.value}
     else:
@@ -105,8 +126,9 @@ def solve(scene, solver, times, flat=None):
     traj = simulate(scene, samples=times, metrics=False, keep_states=True, **kw)
     wall = time.perf_counter() - t0
     cents, mats, w = state_arrays(traj.scene, traj.states)
-    return Solution(np.array(traj.times, dtype=float), cents, mats, w, int(traj.rhs_evals), traj.steps,
-                    wall)
+    return Solution(
+        np.array(traj.times, dtype=float), cents, mats, w, int(traj.rhs_evals), traj.steps, wall
+    )
 
 
 def refusal_status(exc):
@@ -120,12 +142,13 @@ def measure(solvers, scene, times, repeats, log, warmup=False):
     """Run every live solver ``repeats`` times round-robin; ``solver.out`` keeps the first run."""
     from ..core import StabilityError
     from .flat import FlatSystem
+
     flat = FlatSystem.for_scene(scene)
-    if warmup:     # untimed, each solver once at its first setting: imports, caches, first calls
+    if warmup:  # untimed, each solver once at its first setting: imports, caches, first calls
         for solver in {s.name: s for s in reversed(solvers)}.values():
             try:
                 solve(scene, solver, times, flat)
-            except Exception:          # the timed rounds record what goes wrong
+            except Exception:  # the timed rounds record what goes wrong
                 pass
     for r in range(repeats):
         live = [s for s in solvers if s.ok]
@@ -136,7 +159,7 @@ def measure(solvers, scene, times, repeats, log, warmup=False):
             except StabilityError as exc:
                 solver.status = refusal_status(exc)
                 continue
-            except Exception as exc:    # a solver that fails is a result, not a crash
+            except Exception as exc:  # a solver that fails is a result, not a crash
                 solver.status = f"failed: {str(exc).splitlines()[0][:60]}"
                 continue
             solver.walls.append(out.wall)
