@@ -47,61 +47,64 @@ import yaml
 from scipy.spatial import ConvexHull
 from scipy.spatial.distance import pdist
 
+from polymatch_ros.bench import extremes_lib as lib
+from polymatch_ros.bench.extremes_cases import CASES
+from polymatch_ros.bench.extremes_lib import EQUILIBRIA, QUICK
+from polymatch_ros.bench.extremes_lib import finite as all_finite
 from polymatch_ros.core import METHODS, PolymatchError, StabilityError, load_scene, simulate
 
 from core_testlib import (brute_matching_diameter, brute_rotation_diameter, defect, make_scene, rot_matrices,
                           rotation_energy, state_error, vertices)
 
 ROOT = Path(__file__).resolve().parent.parent
-EXTREMES = ROOT / "config" / "extremes"
+EXTREMES = lib.EXTREMES_DIR
 POLYMATCH = Path(sys.executable).with_name("polymatch")
 
 EXPLICIT = ["lie_euler", "lie_heun", "rkmk4", "euler_proj", "rk4_proj"]
-#: stability polynomials R(z) of the explicit Runge-Kutta tableaux, by order
-RK_POLY = {1: [1, 1], 2: [1, 1, 1 / 2], 4: [1, 1, 1 / 2, 1 / 6, 1 / 24]}
+#: Butcher tableaux (A, b) of the explicit Runge-Kutta methods, by order (independent of the package)
+TABLEAUX = {1: ([[0.0]], [1.0]),
+            2: ([[0.0, 0.0], [1.0, 0.0]], [0.5, 0.5]),
+            4: ([[0, 0, 0, 0], [0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 1.0, 0]], [1 / 6, 1 / 3, 1 / 3, 1 / 6])}
 
 
 # ---------------------------------------------------------------------------------------------
-# independent helpers
+# independent oracles (the package's refusals and metrics are checked against these)
 
 
-def rk_limit(method, eigenvalues):
-    """Largest h with |R(h lambda)| <= 1 for every eigenvalue, from the method's stability polynomial."""
-    coefs = RK_POLY[METHODS[method].info.order]
+def tableau_limit(a, b, eigenvalues, hi=100.0):
+    """Largest h with |R(h lambda)| <= 1 for every eigenvalue, R(z) = 1 + z b^T (I - z A)^{-1} 1 from
+    the Butcher tableau (the bench's oracle uses the truncated exponential series instead)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    ones, eye = np.ones(len(b)), np.eye(len(b))
 
     def ok(h):
-        return all(abs(sum(c * (h * lam) ** k for k, c in enumerate(coefs))) <= 1.0 for lam in eigenvalues)
+        return all(abs(1.0 + h * lam * (b @ np.linalg.solve(eye - h * lam * a, ones))) <= 1.0
+                   for lam in eigenvalues)
 
-    lo, hi = 0.0, 100.0 / max(abs(lam) for lam in eigenvalues)
+    lo, hi = 0.0, hi / max(abs(lam) for lam in eigenvalues)
     for _ in range(200):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if ok(mid) else (lo, mid)
     return lo
 
 
+def rk_limit(method, eigenvalues):
+    """The stability limit of ``method`` from its order's tableau."""
+    return tableau_limit(*TABLEAUX[METHODS[method].info.order], eigenvalues)
+
+
 def refusal_limit(exc):
     """The limit named in a StabilityError: the number after 'dt <'."""
     msg = str(exc)
     assert "\n" not in msg, msg
-    found = re.search(r"dt < ([0-9.eE+-]+)", msg)
-    assert found, msg
-    return float(found.group(1))
+    limit = lib.refusal_limit(msg)
+    assert limit is not None, msg
+    return limit
 
 
 def second_order_eigenvalues(m, gamma, k):
     """Roots of m l^2 + gamma l + k = 0 (the linearised rotation modes of (A-1))."""
     return list(np.roots([m, gamma, k]))
-
-
-def all_finite(traj):
-    for st in traj.states + [traj.final]:
-        for gs in st.groups:
-            for a in (gs.x, gs.v, gs.w):
-                if a is not None and not np.all(np.isfinite(a)):
-                    return False
-            if not np.all(np.isfinite(np.asarray(gs.rot))):
-                return False
-    return all(np.isfinite(m["diameter"]) for m in traj.metrics)
 
 
 def hull_diameter(points):
@@ -134,13 +137,23 @@ def run_cli(*args, timeout=120):
 
 
 # ---------------------------------------------------------------------------------------------
+# the table of `polymatch bench extremes`, fast variants: every stated expectation holds
+
+QUICK_CASES = [c for c in CASES if c.quick]
+
+
+@pytest.mark.parametrize("case", QUICK_CASES, ids=[f"{c.key}:{c.title(QUICK)}" for c in QUICK_CASES])
+def test_extreme_table_expectation_holds_fast_variant(case):
+    out = case.run(QUICK)
+    assert out.ok, f"{case.title(QUICK)}: expected {case.expectation}; {out.happened}"
+    assert "nan" not in out.happened.lower()
+
+
+# ---------------------------------------------------------------------------------------------
 # m = 1e-8: stiff damping (Proposition 2.1 rates, first-order limit A-2)
 
-STIFF = dict(count=5, seed=7, kappa=1.5, gamma=2.0)
-
-
 def _stiff_scene(order, t_end=2.0, **kw):
-    return make_scene(3, order, mass=1e-8, t_end=t_end, **STIFF, **kw)
+    return lib.stiff_mass_scene(order, 5, t_end=t_end, **kw)
 
 
 @pytest.mark.parametrize("dt", [0.01, 0.05])
@@ -171,7 +184,7 @@ def test_extreme_stiff_mass_m_1e_8_etd2_runs_matches_first_order_limit_A_2():
     """etd2 at dt = 0.04 / 0.02 / 0.01 against an accurate first-order (A-2) reference:
     error = O(m/gamma) + O(dt^2) with m/gamma = 5e-9, so second order in dt."""
     samples = [0.0, 1.0, 2.0]
-    first = make_scene(3, 1, t_end=2.0, samples=samples, **STIFF)
+    first = _stiff_scene(1, samples=samples)
     ref = simulate(first, "rkmk4", 0.002)
     errs = []
     for dt in (0.04, 0.02, 0.01):
@@ -208,9 +221,7 @@ def test_extreme_stiff_mass_m_1e_8_auto_with_tolerance_finishes_or_refuses_promp
 # gamma = 0: undamped second order (Proposition 2.2 i: E is conserved)
 
 
-def _undamped(t_end, dim=2):
-    return make_scene(dim, 2, count=5, seed=11, gamma=0.0, kappa=1.0, mass=1.0, t_end=t_end,
-                      samples={"every": t_end / 200}, velocities={"angular": {"normal": 0.7}})
+_undamped = lib.undamped_scene
 
 
 def _energy_deviation(method, t_end, dt, dim=2):
@@ -261,7 +272,7 @@ def test_extreme_undamped_gamma_0_rkmk4_has_finite_limit_on_imaginary_axis_prop_
 
 
 def _stiff_coupling(order, t_end=5e-3, **kw):
-    return make_scene(3, order, count=5, seed=7, kappa=1e4, gamma=1.0, mass=1.0, t_end=t_end, **kw)
+    return lib.stiff_coupling_scene(order, 5, t_end, **kw)
 
 
 @pytest.mark.parametrize("order", [1, 2])
@@ -397,17 +408,7 @@ def test_extreme_long_horizon_t_end_2e3_adaptive_second_order_stays_converged_th
 
 
 def _placed_scene(offset, points_a, points_b, dim, order, kappa_2):
-    model = {"order": order, "kappa": 1.0, "gamma": 1.0}
-    if order == 2:
-        model["mass"] = 0.5
-    groups = [{"name": "a", "shape": "triangle", "count": len(points_a), "rotations": "uniform",
-               "centroids": {"points": (points_a + offset).tolist()}}]
-    if kappa_2:
-        model.update(kappa_2=kappa_2, L=3.0)
-        groups.append({"name": "b", "shape": "square", "count": len(points_b), "rotations": "uniform",
-                       "centroids": {"points": (points_b + offset).tolist()}})
-    return load_scene({"dimension": dim, "seed": 4, "model": model,
-                       "time": {"t_end": 20.0, "samples": {"every": 0.5}}, "groups": groups})
+    return lib.placed_scene(offset, points_a, points_b, dim, order, kappa_2)
 
 
 @pytest.mark.parametrize("dim,order,kappa_2", [(2, 1, None), (3, 2, None), (2, 2, 0.5), (3, 1, 0.5)])
@@ -415,8 +416,7 @@ def test_extreme_huge_coordinates_1e9_matching_diameter_relative_to_shape_theore
     rng = np.random.default_rng(3)
     # relative positions on a 2^-10 grid: exactly representable next to 1e9 (spacing 2^-23), so the
     # far scene is exactly the near one translated
-    pa = np.round(rng.uniform(-5, 5, (6, dim)) * 2 ** 10) / 2 ** 10
-    pb = np.round(rng.uniform(-5, 5, (6, dim)) * 2 ** 10) / 2 ** 10
+    pa, pb = lib.grid_points(rng, 6, dim), lib.grid_points(rng, 6, dim)
     assert np.all((pa + 1e9) - 1e9 == pa) and np.all((pb + 1e9) - 1e9 == pb)
     far = _placed_scene(1e9, pa, pb, dim, order, kappa_2)
     near = _placed_scene(0.0, pa, pb, dim, order, kappa_2)
@@ -445,13 +445,7 @@ def test_extreme_huge_coordinates_1e9_scene_file_resolves_shape_theorem_4_2():
     assert traj.diameters[-1] == pytest.approx(brute_matching_diameter(scene.model, traj.final, 0), abs=1e-13)
 
 
-def _explicit_triangles_at(offset):
-    tri = np.array([[0.0, 1.0], [-math.sqrt(3) / 2, -0.5], [math.sqrt(3) / 2, -0.5]])
-    agents = []
-    for a, c in ((0.3, (0.0, 0.0)), (1.2, (3.0, -2.0)), (2.0, (-1.0, 4.0))):
-        rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-        agents.append({"vertices": (tri @ rot.T + np.array(c) + offset).tolist()})
-    return {"dimension": 2, "groups": [{"name": "g", "shape": "triangle", "agents": agents}]}
+_explicit_triangles_at = lib.explicit_triangles_at
 
 
 def test_extreme_huge_coordinates_1e9_explicit_vertices_load_within_input_precision_section_3():
@@ -466,9 +460,7 @@ def test_extreme_huge_coordinates_1e9_explicit_vertices_load_within_input_precis
 # scale ratios 1e-6 .. 1e6 (F-1)
 
 
-def _scale_scene(order, t_end=1.0, **kw):
-    return make_scene(2, order, count=6, seed=5, scales={"log_uniform": [1e-6, 1e6]}, mass=0.5, t_end=t_end,
-                      **kw)
+_scale_scene = lib.scale_ratio_scene
 
 
 def _f1_stiffness(scene):
@@ -533,43 +525,11 @@ def test_extreme_scale_ratios_1e_6_1e_6_adaptive_refuses_early_naming_stiffness_
 def _dop853_real_limit():
     """DOP853's stability interval on the negative real axis, from its tableau (independent bisection)."""
     from scipy.integrate import DOP853
-    a, b = DOP853.A[:12, :12], DOP853.B
-    lo, hi = 0.0, 20.0
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        k = np.linalg.solve(np.eye(12) + mid * a, np.ones(12))
-        if abs(1.0 - mid * (b @ k)) <= 1.0:
-            lo = mid
-        else:
-            hi = mid
-    return lo
+    return tableau_limit(DOP853.A[:12, :12], DOP853.B, [-1.0], hi=20.0)
 
 
 # ---------------------------------------------------------------------------------------------
 # D0 >= 1: antipodal and splay equilibria (not consensus), and generic data outside Theorem 4.2
-
-
-def _antipodal_deviation(rep, state):
-    """pi minus the angle of O_1^T O_2: sin(angle) = |R - R^T|_F / (2 sqrt 2) (accurate near pi)."""
-    mats = rot_matrices(rep, state.groups[0].rot)
-    r = mats[0].T @ mats[1]
-    return float(np.arcsin(min(1.0, np.linalg.norm(r - r.T) / (2 * math.sqrt(2)))))
-
-
-def _splay_deviation(rep, state):
-    mats = rot_matrices(rep, state.groups[0].rot)
-    th = np.arctan2(mats[:, 1, 0], mats[:, 0, 0])
-    dev = np.angle(np.exp(1j * (th - th[0] - 2 * np.pi * np.arange(len(th)) / len(th))))
-    return float(np.linalg.norm(dev - dev.mean()))
-
-
-EQUILIBRIA = {
-    # name: (dim, shape, rotations, deviation, linear rate of the unstable mode at first order / kappa)
-    "antipodal_2d": (2, "triangle", {"angles": [0.0, math.pi]}, _antipodal_deviation, 1.0),
-    "antipodal_3d": (3, "tetrahedron", {"rotvecs": [[0, 0, 0], [0, 0, 3.141592653589793]]},
-                     _antipodal_deviation, 1.0),
-    "splay_2d": (2, "triangle", {"angles": [0.0, 2 * math.pi / 3, 4 * math.pi / 3]}, _splay_deviation, 0.5),
-}
 
 
 @pytest.mark.parametrize("rep", ["auto", "matrix"])
@@ -579,16 +539,11 @@ def test_extreme_non_consensus_equilibrium_reproduced_roundoff_grows_at_linear_r
     """W = 0 at these states, so the model stays there; floating point is 1e-16 off (sin(pi) != 0) and
     the unstable mode grows from there at exactly the rate of the linearisation: first order
     kappa * c, second order the positive root of m l^2 + gamma l - kappa c = 0."""
-    dim, shape, rots, deviation, c = EQUILIBRIA[name]
-    m, gamma, kappa = 0.5, 1.0, 1.0
-    rate = kappa * c if order == 1 else (-gamma + math.sqrt(gamma ** 2 + 4 * m * kappa * c)) / (2 * m)
-    scene = make_scene(dim, order, count=len(next(iter(rots.values()))), shape=shape, rotations=rots,
-                       representation=rep, mass=m, gamma=gamma, kappa=kappa, t_end=40.0 / rate,
-                       samples={"every": 0.5}, centroids={"box": [-1.0, 1.0]})
-    traj = simulate(scene, "rkmk4", 0.05)
+    c, m, gamma, kappa = EQUILIBRIA[name][-1], 0.5, 1.0, 1.0
+    scene, traj, t, eps, rate = lib.equilibrium_run(name, order, rep, 40.0, 0.5, m=m, gamma=gamma)
+    # the independent linearisation: first order kappa c, second order m l^2 + gamma l - kappa c = 0
+    assert rate == pytest.approx(kappa * c if order == 1 else max(np.roots([m, gamma, -kappa * c]).real))
     assert all_finite(traj)
-    t = np.array(traj.times)
-    eps = np.array([deviation(scene.model.rotations, st) for st in traj.states])
     assert eps[0] < 1e-15                                      # starts at the equilibrium (to round-off)
     assert np.all(eps[t <= 10.0 / rate] < 1e-9)                # and stays there for 10 e-folding times
     window = (eps > 1e-11) & (eps < 1e-3)
@@ -627,15 +582,7 @@ def test_extreme_d0_ge_1_uniform_random_n_8_still_converges_outside_theorem_4_2(
 # coincident centroids across groups (F-2)
 
 
-def _coincident(order, at=(0.0, 0.0), t_end=20.0):
-    data = yaml.safe_load((EXTREMES / "coincident_mixed.yaml").read_text())
-    data["model"]["order"] = order
-    if order == 1:
-        data["model"].pop("mass")
-    for g in data["groups"]:
-        g["centroids"] = {"at": list(at)}
-    data["time"] = {"t_end": t_end, "samples": {"every": 1.0}}
-    return load_scene(data)
+_coincident = lib.coincident_scene
 
 
 @pytest.mark.parametrize("order,method", [(1, "lie_euler"), (1, "rkmk4"), (1, "adaptive"), (2, "rkmk4"),
@@ -669,16 +616,8 @@ def test_extreme_coincident_pairs_across_groups_finite_separate_to_L_F_2():
     """Each centroid of group a on one of group b (so the group centres coincide too): the pairs start
     with zero force, round-off (not the model) picks the directions they leave in -- the path of a copy
     translated to 1e9 differs -- but every run is finite and the groups end L apart."""
-    rng = np.random.default_rng(3)
-    pts = np.round(rng.uniform(-5, 5, (6, 2)) * 2 ** 10) / 2 ** 10
     for off in (0.0, 1e9):
-        scene = load_scene({"dimension": 2, "seed": 4,
-                            "model": {"order": 2, "mass": 0.5, "kappa_2": 0.5, "L": 3.0},
-                            "time": {"t_end": 20.0, "samples": {"every": 1.0}},
-                            "groups": [{"name": "a", "shape": "triangle", "count": 6,
-                                        "centroids": {"points": (pts + off).tolist()}},
-                                       {"name": "b", "shape": "square", "count": 6,
-                                        "centroids": {"points": (pts[::-1] + off).tolist()}}]})
+        scene = lib.coincident_pairs_scene(off)
         traj = simulate(scene, "rkmk4", 0.05)
         assert all_finite(traj)
         assert traj.metrics[0]["group_separation"] < 1e-12
@@ -696,25 +635,7 @@ def test_extreme_coincident_centroids_at_1e9_same_as_at_origin_F_2():
 # nearly collinear triangle
 
 
-def _collinear_agents(dim, height, count=5, seed=0):
-    rng = np.random.default_rng(seed)
-    tri = np.zeros((3, dim))
-    tri[1, 0], tri[2, 0], tri[2, 1] = 1.0, 0.5, height
-    if dim == 2:
-        a = rng.uniform(-np.pi, np.pi, count)
-        rots = np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)], -1)], -2)
-    else:
-        from scipy.spatial.transform import Rotation
-        rots = Rotation.random(count, random_state=1).as_matrix()
-    cents = rng.uniform(-3.0, 3.0, (count, dim))
-    verts = np.einsum("nij,aj->nai", rots, tri) + cents[:, None, :]
-    return verts, rots
-
-
-def _collinear_scene(dim, verts, order=1):
-    model = {"order": order} if order == 1 else {"order": 2, "mass": 0.5}
-    return load_scene({"dimension": dim, "model": model, "time": {"t_end": 40.0, "samples": {"every": 5.0}},
-                       "groups": [{"name": "slivers", "agents": [{"vertices": v.tolist()} for v in verts]}]})
+_collinear_agents, _collinear_scene = lib.collinear_agents, lib.collinear_scene
 
 
 @pytest.mark.parametrize("order", [1, 2])

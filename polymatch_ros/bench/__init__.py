@@ -37,7 +37,8 @@ from .report import Report
 from .timing import machine_lines
 
 #: modules of this package that are helpers, not families
-HELPERS = frozenset({"report", "timing", "scenes", "options", "flat"})
+HELPERS = frozenset({"report", "timing", "scenes", "options", "flat", "solve", "extremes_lib",
+                      "extremes_cases", "extremes_stiff", "extremes_geometry"})
 
 
 def families():

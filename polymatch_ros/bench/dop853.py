@@ -8,8 +8,8 @@ Solvers, each at rtol = atol = tol for tol in 1e-6 ... 1e-12:
                     is abelian, so (A-2)_2 is Kuramoto) and centroids follow the exact flow of
                     Proposition 2.1 (no evaluations, no step-size limit).
   ours (matrix)     the same in the general 2x2 matrix representation with the Cayley map.
-  scipy DOP853      ``solve_ivp(method="DOP853")`` on y = (centroids (N, 2), O (N, 2, 2)) flattened,
-                    right-hand side (A-2) written directly with numpy:
+  scipy DOP853      ``solve_ivp(method="DOP853")`` on y = (centroids (N, 2), O (N, 2, 2)) flattened
+                    (``bench/flat.py``), right-hand side (A-2) written directly with numpy:
                         xbar_i' = kappa/N sum_k (xbar_k - xbar_i),
                         O_i'    = kappa/(2N) sum_k (O_k O_i^T - O_i O_k^T) O_i
                     (the sum taken through S = sum_k O_k); centroids are integrated too, and
@@ -51,100 +51,28 @@ def add_arguments(p):
     p.add_argument("--t-end", type=at_least(1e-300, float), help="override time.t_end")
 
 
-# -- the flattened system for scipy ------------------------------------------------------------
-
-def flat_rhs(kappa, gamma, n, d):
-    """(A-2) for y = (xbar (n, d), O (n, d, d)) flattened, as scipy's solve_ivp wants it."""
-    import numpy as np
-    nx = n * d
-    c = kappa / (2.0 * gamma * n)
-
-    def rhs(t, y):
-        x = y[:nx].reshape(n, d)
-        o = y[nx:].reshape(n, d, d)
-        dx = (kappa / gamma) * (x.mean(axis=0) - x)      # kappa/N sum_k (xbar_k - xbar_i)
-        b = o @ o.sum(axis=0).T                           # O_i S^T = sum_k O_i O_k^T
-        w = c * (b.transpose(0, 2, 1) - b)                # kappa/(2N) sum_k (O_k O_i^T - O_i O_k^T)
-        return np.concatenate([dx.ravel(), (w @ o).ravel()])
-
-    return rhs
-
-
-def unflatten(y, n, d):
-    """Columns of solve_ivp's y -> centroids (T, n, d), rotations (T, n, d, d)."""
-    nx = n * d
-    y = y.T
-    return y[:, :nx].reshape(-1, n, d), y[:, nx:].reshape(-1, n, d, d)
-
-
-def vertices(centroids, mats, reference):
-    """x^i_a = xbar_i + O_i r_a for arrays (T, n, d), (T, n, d, d): (T, n, a, d)."""
-    import numpy as np
-    return centroids[:, :, None, :] + np.einsum("tnij,aj->tnai", mats, reference)
-
-
-def orthogonality(mats):
-    """max_i |O_i^T O_i - I|_F (the core metrics' definition, Lemma 2.1)."""
-    import numpy as np
-    d = mats.shape[-1]
-    gram = np.swapaxes(mats, -1, -2) @ mats
-    return float(np.linalg.norm(gram - np.eye(d), axis=(-2, -1)).max())
-
-
 # -- runs -------------------------------------------------------------------------------------
 
-def _core_run(scene, times, method, **kw):
-    """(wall seconds, trajectory) of ``simulate`` without metrics."""
-    import time
-
-    from ..core import simulate
-    t0 = time.perf_counter()
-    traj = simulate(scene, method, samples=times, metrics=False, keep_states=True, **kw)
-    return time.perf_counter() - t0, traj
-
-
-def _core_arrays(traj):
-    import numpy as np
-    scene = traj.scene
-    rot = scene.model.rotations
-    cents = np.array([st.groups[0].x + scene.origin for st in traj.states])
-    mats = np.array([rot.to_matrices(st.groups[0].rot) for st in traj.states])
-    return np.array(traj.times), cents, mats
+def _verts(scene, out):
+    from ..core.metrics import vertices
+    return vertices(out.centroids, out.mats, scene.model.groups[0].reference)
 
 
 def _core_own_steps(scene, tol):
-    """(times, centroids, rotations) at every step ours accepts when asked for t_end only."""
+    """(times, vertices, rotations) at every step ours accepts when asked for t_end only."""
     import numpy as np
 
     from ..core import AdaptiveLie, State, System
+    from ..core.metrics import vertices
+    from .solve import state_arrays
 
     m = scene.model
     accepted = [scene.initial]
     meth = AdaptiveLie(tol, max_steps=scene.integrator.max_steps)
     meth.integrate(System(m), State(0.0, scene.initial.groups), [scene.t_end], on_step=accepted.append)
     times = np.array([0.0] + [st.t for st in accepted[1:]])
-    mats = np.array([m.rotations.to_matrices(st.groups[0].rot) for st in accepted])
-    cents = np.array([st.groups[0].x + scene.origin for st in accepted])
-    return times, cents, mats
-
-
-def _scipy_run(scene, tol, t_eval):
-    import time
-
-    import numpy as np
-    from scipy.integrate import solve_ivp
-    m = scene.model
-    g = scene.initial.groups[0]
-    n, d = m.n_agents, m.dim
-    y0 = np.concatenate([(g.x + scene.origin).ravel(), m.rotations.to_matrices(g.rot).ravel()])
-    rhs = flat_rhs(m.kappa, m.gamma, n, d)
-    t0 = time.perf_counter()
-    sol = solve_ivp(rhs, (0.0, scene.t_end), y0, method="DOP853", rtol=tol, atol=tol, t_eval=t_eval)
-    wall = time.perf_counter() - t0
-    if not sol.success:
-        from ..core import PolymatchError
-        raise PolymatchError(f"scipy DOP853 failed at tol {tol:g}: {sol.message}")
-    return wall, sol
+    cents, mats, _w = state_arrays(scene, accepted)
+    return times, vertices(cents, mats, m.groups[0].reference), mats
 
 
 def _check_scene(scene):
@@ -174,10 +102,11 @@ class _Reference:
 
     def at(self, times):
         import numpy as np
+
+        from .solve import Solver, solve
         ts = np.asarray(times, dtype=float)
-        _, traj = _core_run(self.scene, np.concatenate([[0.0], ts[ts > 0]]), "adaptive", tolerance=self.tol)
-        t, c, m = _core_arrays(traj)
-        v = vertices(c, m, self.scene.model.groups[0].reference)
+        out = solve(self.scene, Solver("adaptive", "adaptive", self.tol), np.concatenate([[0.0], ts[ts > 0]]))
+        v = _verts(self.scene, out)
         return v if ts[0] == 0 else v[1:]
 
 
@@ -186,36 +115,35 @@ class _Reference:
 def _runs(sc, scene, tol, times):
     """One timed run A (outputs at ``times``) and one timed run B (final state only)."""
     import numpy as np
+
+    from .solve import Solver, solve
     if sc is None:
-        return _scipy_run(scene, tol, times), _scipy_run(scene, tol, None)
-    return (_core_run(sc, times, "adaptive", tolerance=tol),
-            _core_run(sc, np.array([0.0, scene.t_end]), "adaptive", tolerance=tol))
+        scipy = Solver("DOP853", "scipy", tol)
+        return solve(scene, scipy, times), solve(scene, scipy, None)
+    ours = Solver("adaptive", "adaptive", tol)
+    return solve(sc, ours, times), solve(sc, ours, np.array([0.0, scene.t_end]))
 
 
 def _row(label, sc, scene, tol, runs, ref_dense, ref):
     """Wall/evals/error on the sample times (A) and on the solver's own steps (B) from timed runs."""
     import numpy as np
-    r_verts = scene.model.groups[0].reference
-    dense_w = [a[0] for a, _ in runs]
-    end_w = [b[0] for _, b in runs]
-    (_, out), (_, out_end) = runs[-1]
-    n, d = scene.model.n_agents, scene.dim
-    if sc is None:
-        c, m = unflatten(out.y, n, d)
-        evals, steps = out.nfev, len(out_end.t) - 1       # t_eval does not change scipy's steps
-        own_t = out_end.t
-        own_c, own_m = unflatten(out_end.y, n, d)
-        evals_end, steps_end = out_end.nfev, len(out_end.t) - 1
+
+    from ..core.metrics import orthogonality
+    dense_w = [a.wall for a, _ in runs]
+    end_w = [b.wall for _, b in runs]
+    out, out_end = runs[-1]
+    if sc is None:                                     # t_eval does not change scipy's steps
+        own_t, own_v, own_m = out_end.times, _verts(scene, out_end), out_end.mats
+        steps = out_end.steps
     else:
-        _, c, m = _core_arrays(out)
-        evals, steps, evals_end, steps_end = out.rhs_evals, out.steps, out_end.rhs_evals, out_end.steps
-        own_t, own_c, own_m = _core_own_steps(sc, tol)
-    err = float(np.abs(vertices(c, m, r_verts) - ref_dense).max())
-    err_own = float(np.abs(vertices(own_c, own_m, r_verts) - ref.at(own_t)).max())
+        own_t, own_v, own_m = _core_own_steps(sc, tol)
+        steps = out.steps
+    err = float(np.abs(_verts(scene, out) - ref_dense).max())
+    err_own = float(np.abs(own_v - ref.at(own_t)).max())
     return {"solver": label, "tol": tol, "wall": min(dense_w), "wall_med": float(np.median(dense_w)),
-            "evals": evals, "steps": steps, "err": err,
-            "wall_end": min(end_w), "wall_end_med": float(np.median(end_w)), "evals_end": evals_end,
-            "steps_end": steps_end, "err_own": err_own, "orth": orthogonality(own_m[-1])}
+            "evals": out.evals, "steps": steps, "err": err,
+            "wall_end": min(end_w), "wall_end_med": float(np.median(end_w)), "evals_end": out_end.evals,
+            "steps_end": out_end.steps, "err_own": err_own, "orth": orthogonality(own_m[-1])}
 
 
 def _target_rows(results, solvers, target, wall_key, err_key, evals_key):
@@ -240,6 +168,7 @@ def run(args, log):
     from ..core.scene import resolve_scene_path
     from ..core import load_scene, with_representation
     from .report import Report
+    from .solve import Solver, solve
     from .timing import fmt_ms
 
     report = Report(NAME, "Adaptive Lie DOP853 vs scipy DOP853 (`polymatch bench dop853`)")
@@ -253,12 +182,10 @@ def run(args, log):
         n_samples, ref_dt, ref_tol = args.samples, args.ref_dt, args.ref_tol
     repeats = args.repeats or (1 if args.quick else 5)
     times = np.linspace(0.0, scene.t_end, n_samples)
-    r_verts = scene.model.groups[0].reference
 
     log(f"dop853: reference rkmk4 dt = {ref_dt:g} on {scene.name}")
-    wall_ref, ref1 = _core_run(scene, times, "rkmk4", dt=ref_dt)
-    ref_t, c, m = _core_arrays(ref1)
-    ref_dense = vertices(c, m, r_verts)
+    ref1 = solve(scene, Solver("rkmk4", "fixed", ref_dt), times)
+    wall_ref, ref_t, ref_dense = ref1.wall, ref1.times, _verts(scene, ref1)
     ref = _Reference(scene, ref_tol)
     ref_gap = float(np.abs(ref.at(times) - ref_dense).max())
     shift = float(np.abs(ref_t - times).max())

@@ -109,29 +109,3 @@ class FlatSystem:
             e = e + (self.mass / self.n) * np.sum(np.asarray(w) ** 2, axis=(-3, -2, -1))
         return e
 
-
-def vertices(centroids, mats, reference):
-    """x^i_a = xbar_i + O_i r_a for arrays (T, N, d), (T, N, d, d) and r (n_a, d): (T, N, n_a, d)."""
-    return centroids[:, :, None, :] + np.einsum("tnij,aj->tnai", mats, reference)
-
-
-def orthogonality(mats):
-    """max over everything but the last two axes of |O^T O - I|_F (Lemma 2.1's defect)."""
-    mats = np.asarray(mats)
-    d = mats.shape[-1]
-    gram = np.swapaxes(mats, -1, -2) @ mats
-    return float(np.linalg.norm(gram - np.eye(d), axis=(-2, -1)).max())
-
-
-def core_arrays(traj):
-    """(times (T,), absolute centroids (T, N, d), rotation matrices (T, N, d, d), W skew or None)
-    from a single-group core ``Trajectory`` with ``keep_states=True``."""
-    scene = traj.scene
-    grp = scene.model.rotations
-    states = traj.states
-    cents = np.array([st.groups[0].x + scene.origin for st in states])
-    mats = np.array([grp.to_matrices(st.groups[0].rot) for st in states])
-    w = None
-    if scene.model.order == 2:
-        w = np.array([grp.algebra_to_skew(st.groups[0].w) for st in states])
-    return np.array(traj.times, dtype=float), cents, mats, w

@@ -65,79 +65,12 @@ def _sample_steps(steps, linear=5001):
     return np.unique(idx.astype(int))
 
 
-class Run:
-    def __init__(self, solver, kind, value):
-        self.solver, self.kind, self.value = solver, kind, value     # kind: fixed | adaptive | scipy
-        self.status, self.walls, self.out = "ok", [], None
-
-    @property
-    def param(self):
-        return f"h = {self.value:g}" if self.kind == "fixed" else f"tol = {self.value:.0e}"
-
-
-def _execute(run, scene, times, flat, y0):
-    """(wall seconds, (times, rotation matrices (T, N, d, d), W skew or None, evals))."""
-    import time
-
-    from ..core import simulate
-    from .flat import core_arrays
-    t0 = time.perf_counter()
-    if run.kind == "scipy":
-        from scipy.integrate import solve_ivp
-        sol = solve_ivp(flat.rhs, (0.0, scene.t_end), y0, method=run.solver, rtol=run.value, atol=run.value,
-                        t_eval=times)
-        wall = time.perf_counter() - t0
-        if not sol.success:
-            raise RuntimeError(sol.message)
-        u = flat.unpack(sol.y)
-        return wall, (sol.t, u["rot"], u.get("w"), sol.nfev)
-    if run.kind == "fixed":
-        traj = simulate(scene, run.solver, dt=run.value, samples=times, metrics=False, keep_states=True)
-    else:
-        traj = simulate(scene, "adaptive", tolerance=run.value, samples=times, metrics=False, keep_states=True)
-    wall = time.perf_counter() - t0
-    t, _c, mats, w = core_arrays(traj)
-    return wall, (t, mats, w, traj.rhs_evals)
-
-
-def _runs(order, dt, tols):
-    from ..core import METHODS
-    runs = [Run(name, "fixed", dt) for name, m in METHODS.items() if order in m.info.models]
-    runs += [Run("adaptive (ours)", "adaptive", t) for t in tols]
-    runs += [Run(name, "scipy", t) for name in ("RK45", "DOP853") for t in tols]
-    return runs
-
-
-def _measure(runs, scene, times, repeats, log):
-    from ..core import StabilityError
-    from .flat import FlatSystem
-    flat = FlatSystem.for_scene(scene)
-    y0 = flat.initial(scene)
-    for r in range(repeats):
-        for run in runs:
-            if run.status != "ok":
-                continue
-            log(f"longhorizon: {scene.name}: {run.solver} {run.param} (repeat {r + 1}/{repeats})")
-            try:
-                wall, out = _execute(run, scene, times, flat, y0)
-            except StabilityError as exc:
-                limit = str(exc).split("limit here is ")[-1].split(" (")[0] if "limit here" in str(exc) else ""
-                run.status = "refused (unstable)" + (f": {limit}" if limit else "")
-                continue
-            except Exception as exc:    # a solver that fails is a result, not a crash
-                run.status = f"failed: {str(exc).splitlines()[0][:60]}"
-                continue
-            run.walls.append(wall)
-            if run.out is None:
-                run.out = out
-    return flat
-
-
 def _defect_series(mats):
+    """max_i |O_i^T O_i - I|_F at each sample (Lemma 2.1)."""
     import numpy as np
-    d = mats.shape[-1]
-    gram = np.swapaxes(mats, -1, -2) @ mats
-    return np.linalg.norm(gram - np.eye(d), axis=(-2, -1)).max(axis=-1)
+
+    from ..core.metrics import orthogonality
+    return np.array([orthogonality(m) for m in mats])
 
 
 def _running_max_at(t, series, marks):
@@ -187,6 +120,7 @@ def run(args, log):
     import numpy as np
 
     from .report import Report
+    from .solve import solvers_for, measure
 
     report = Report(NAME, "Long horizons (`polymatch bench longhorizon`)")
     steps = 1000 if args.quick else args.steps
@@ -208,21 +142,21 @@ def run(args, log):
 
     # -- A: second order, gamma = 0 ----------------------------------------------------------
     scene = _scene(2, n, dim, t_end, args.seed)
-    runs = _runs(2, dt, tols)
-    flat = _measure(runs, scene, times, repeats, log)
+    runs = solvers_for(2, [dt], tols)
+    flat = measure(runs, scene, times, repeats, lambda text: log(f"longhorizon: {text}"))
     rows = []
     for r in runs:
         if r.status != "ok":
-            rows.append([r.solver, r.param, r.status] + ["-"] * (len(marks) + 5))
+            rows.append([r.name, r.param, r.status] + ["-"] * (len(marks) + 5))
             continue
-        t, mats, w, evals = r.out
+        t, mats, w, evals = r.out.times, r.out.mats, r.out.w, r.out.evals
         e = flat.energy(mats, w)
         drift = np.abs(e - e[0]) / e[0]
         dm = _running_max_at(t, drift, marks)
         p = _growth(t, drift, marks)
         defect = _defect_series(mats)
         r.series = (t, drift, defect)
-        rows.append([r.solver, r.param] + _wall_cells(r) + [evals] + [f"{v:.1e}" for v in dm]
+        rows.append([r.name, r.param] + _wall_cells(r) + [evals] + [f"{v:.1e}" for v in dm]
                     + ["-" if p is None else f"{p:.2f}", _verdict(dm[-1], p), f"{defect.max():.1e}"])
     u0 = flat.unpack(flat.initial(scene))
     report.text("### A. Second-order model (A-1), gamma = 0: energy (Prop. 2.2 i) and orthogonality",
@@ -235,17 +169,17 @@ def run(args, log):
 
     # -- B: first order ------------------------------------------------------------------------
     scene1 = _scene(1, n, dim, t_end, args.seed)
-    runs1 = _runs(1, dt, tols)
-    _measure(runs1, scene1, times, repeats, log)
+    runs1 = solvers_for(1, [dt], tols)
+    measure(runs1, scene1, times, repeats, lambda text: log(f"longhorizon: {text}"))
     rows = []
     for r in runs1:
         if r.status != "ok":
-            rows.append([r.solver, r.param, r.status] + ["-"] * (len(marks) + 2))
+            rows.append([r.name, r.param, r.status] + ["-"] * (len(marks) + 2))
             continue
-        t, mats, _w, evals = r.out
+        t, mats, evals = r.out.times, r.out.mats, r.out.evals
         defect = _defect_series(mats)
         r.series = (t, None, defect)
-        rows.append([r.solver, r.param] + _wall_cells(r) + [evals]
+        rows.append([r.name, r.param] + _wall_cells(r) + [evals]
                     + [f"{v:.1e}" for v in _running_max_at(t, defect, marks)])
     report.text("### B. First-order model (A-2): orthogonality defect")
     report.table(["method", "h or tol", "wall s (best)", "median s", "rhs evals"]
@@ -261,20 +195,14 @@ def run(args, log):
 
     def draw(plt):
         fig, axes = plt.subplots(1, 3, figsize=(16, 4.4))
-        for k, r in enumerate(figures["A"]):
-            t, drift, defect = r.series
-            style = "x:" if r.kind == "scipy" else ("D-" if r.kind == "adaptive" else "-")
-            sel = t > 0
-            axes[0].loglog(t[sel], np.maximum(drift[sel], 1e-17), style, color=f"C{k % 10}", ms=3, lw=1,
-                           label=f"{r.solver} {r.param}")
-            axes[1].loglog(t[sel], np.maximum(defect[sel], 1e-17), style, color=f"C{k % 10}", ms=3, lw=1,
-                           label=f"{r.solver} {r.param}")
-        for k, r in enumerate(figures["B"]):
-            t, _d, defect = r.series
-            style = "x:" if r.kind == "scipy" else ("D-" if r.kind == "adaptive" else "-")
-            sel = t > 0
-            axes[2].loglog(t[sel], np.maximum(defect[sel], 1e-17), style, color=f"C{k % 10}", ms=3, lw=1,
-                           label=f"{r.solver} {r.param}")
+        panels = [(axes[0], figures["A"], 1), (axes[1], figures["A"], 2), (axes[2], figures["B"], 2)]
+        for ax, runs_, which in panels:
+            for k, r in enumerate(runs_):
+                t, series = r.series[0], r.series[which]
+                style = "x:" if r.kind == "scipy" else ("D-" if r.kind == "adaptive" else "-")
+                sel = t > 0
+                ax.loglog(t[sel], np.maximum(series[sel], 1e-17), style, color=f"C{k % 10}", ms=3, lw=1,
+                          label=f"{r.name} {r.param}")
         axes[0].set_title("A: gamma = 0, |E(t) - E(0)| / E(0)")
         axes[1].set_title("A: gamma = 0, orthogonality defect")
         axes[2].set_title("B: first order, orthogonality defect")

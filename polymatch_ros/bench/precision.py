@@ -51,8 +51,6 @@ CASES = {
 }
 QUICK_CASES = ["o1-d2-near", "o2-d3-far"]
 
-SCIPY = ("RK45", "DOP853")
-
 
 def add_arguments(p):
     from .options import at_least, float_list
@@ -96,120 +94,31 @@ def rotation_diameter(scene):
     return point_set_diameter(scene.model.rotations.flat(gs.rot))
 
 
-# -- solvers ----------------------------------------------------------------------------------
+# -- errors -----------------------------------------------------------------------------------
 
-class Cell:
-    """One solver at one setting: its runs, its error and its cost."""
-
-    def __init__(self, solver, kind, value):
-        self.solver, self.kind, self.value = solver, kind, value      # kind: fixed | adaptive | scipy
-        self.status = "ok"
-        self.walls = []
-        self.err = self.orth = None
-        self.evals = self.steps = None
-
-    @property
-    def param(self):
-        return f"h = {self.value:g}" if self.kind == "fixed" else f"tol = {self.value:.0e}"
-
-    @property
-    def ok(self):
-        return self.status == "ok"
-
-    @property
-    def best(self):
-        return min(self.walls)
-
-    @property
-    def median(self):
-        import statistics
-        return statistics.median(self.walls)
-
-
-def _run_core(scene, times, cell):
-    import time
-
-    from ..core import simulate
-    from .flat import core_arrays
-    t0 = time.perf_counter()
-    if cell.kind == "fixed":
-        traj = simulate(scene, cell.solver, dt=cell.value, samples=times, metrics=False, keep_states=True)
-    else:
-        traj = simulate(scene, "adaptive", tolerance=cell.value, samples=times, metrics=False, keep_states=True)
-    wall = time.perf_counter() - t0
-    t, cents, mats, _w = core_arrays(traj)
-    return wall, (t, cents, mats, traj.rhs_evals, traj.steps)
-
-
-def _run_scipy(flat, y0, t_end, times, cell):
-    import time
-
-    from scipy.integrate import solve_ivp
-    t0 = time.perf_counter()
-    sol = solve_ivp(flat.rhs, (0.0, t_end), y0, method=cell.solver, rtol=cell.value, atol=cell.value,
-                    t_eval=times)
-    wall = time.perf_counter() - t0
-    if not sol.success:
-        raise RuntimeError(sol.message)
-    u = flat.unpack(sol.y)
-    return wall, (sol.t, u["x"], u["rot"], sol.nfev, None)
-
-
-def _runner(scene, flat, y0, times, cell):
-    if cell.kind == "scipy":
-        return lambda: _run_scipy(flat, y0, scene.t_end, times, cell)
-    return lambda: _run_core(scene, times, cell)
-
-
-def _cells(scene, steps, tols):
-    from ..core import METHODS
-    cells = []
-    for name, meth in METHODS.items():
-        if scene.model.order in meth.info.models:
-            cells += [Cell(name, "fixed", h) for h in steps]
-    cells += [Cell("adaptive (ours)", "adaptive", t) for t in tols]
-    for name in SCIPY:
-        cells += [Cell(name, "scipy", t) for t in tols]
-    return cells
-
-
-def _measure(cells, run_of, repeats, ref_verts, reference, times, log):
-    """Every cell ``repeats`` times, round-robin; errors and counts from the first run."""
+def vertex_error(out, ref_verts, reference):
+    """max over samples, agents and vertices of |x^i_a - x^i_a(ref)| (Euclidean)."""
     import numpy as np
 
-    from ..core import StabilityError
-    from .flat import orthogonality, vertices
-    # untimed warm-up of each solver at its cheapest setting (imports, caches, first-call costs)
-    seen = set()
+    from ..core.metrics import vertices
+    diff = vertices(out.centroids, out.mats, reference) - ref_verts
+    return float(np.sqrt(np.max(np.sum(diff * diff, axis=-1))))
+
+
+def _score(cells, times, ref_verts, reference):
+    """Error, orthogonality defect and counts of every cell from its first run."""
+    import numpy as np
+
+    from ..core.metrics import orthogonality
     for cell in cells:
-        if cell.solver not in seen:
-            seen.add(cell.solver)
-            try:
-                run_of[id(cell)]()
-            except Exception:       # the timed loop below records what went wrong
-                pass
-    for r in range(repeats):
-        live = [c for c in cells if c.ok]
-        log(f"precision:   round {r + 1}/{repeats}: {len(live)} runs")
-        for cell in live:
-            try:
-                wall, out = run_of[id(cell)]()
-            except StabilityError:
-                cell.status = "refused (unstable)"
-                continue
-            except Exception as exc:      # a solver that fails is a result, not a crash
-                cell.status = f"failed: {str(exc).splitlines()[0][:60]}"
-                continue
-            cell.walls.append(wall)
-            if cell.err is None:
-                t, cents, mats, evals, steps = out
-                if len(t) != len(times) or np.max(np.abs(np.asarray(t) - times)) > 1e-9 * max(1.0, times[-1]):
-                    cell.status = "failed: output times differ from the sample times"
-                    continue
-                diff = vertices(cents, mats, reference) - ref_verts
-                cell.err = float(np.sqrt(np.max(np.sum(diff * diff, axis=-1))))
-                cell.orth = orthogonality(mats)
-                cell.evals, cell.steps = int(evals), steps
+        if not cell.ok:
+            continue
+        t = np.asarray(cell.out.times)
+        if len(t) != len(times) or np.max(np.abs(t - times)) > 1e-9 * max(1.0, times[-1]):
+            cell.status = "failed: output times differ from the sample times"
+            continue
+        cell.err = vertex_error(cell.out, ref_verts, reference)
+        cell.orth = orthogonality(cell.out.mats)
 
 
 # -- tables -----------------------------------------------------------------------------------
@@ -223,9 +132,9 @@ def case_table(cells, repeats):
     rows = []
     for c in cells:
         if not c.ok:
-            rows.append([c.solver, c.param, c.status, "-", "-", "-", "-"])
+            rows.append([c.name, c.param, c.status, "-", "-", "-", "-"])
             continue
-        rows.append([c.solver, c.param, _fmt_err(c.err), fmt_ms(c.best), fmt_ms(c.median), c.evals,
+        rows.append([c.name, c.param, _fmt_err(c.err), fmt_ms(c.best), fmt_ms(c.median), c.out.evals,
                      f"{c.orth:.1e}"])
     header = ["method", "h or tol", "max error", f"wall ms (best of {repeats})", "median ms", "rhs evals",
               "orth. defect"]
@@ -238,8 +147,8 @@ def order_rows(cells, floor):
 
     from ..core import METHODS
     rows = []
-    for name in dict.fromkeys(c.solver for c in cells if c.kind == "fixed"):
-        pts = sorted(((c.value, c.err) for c in cells if c.solver == name and c.ok), reverse=True)
+    for name in dict.fromkeys(c.name for c in cells if c.kind == "fixed"):
+        pts = sorted(((c.value, c.err) for c in cells if c.name == name and c.ok), reverse=True)
         slopes = []
         for (h1, e1), (h2, e2) in zip(pts, pts[1:]):
             if e2 > 100 * floor and e1 > e2:
@@ -258,7 +167,7 @@ def frontier_rows(label, cells, targets):
     from .timing import fmt_ms
 
     def name(c):
-        return f"{c.solver} {c.param}"
+        return f"{c.name} {c.param}"
 
     rows = []
     for target in targets:
@@ -267,24 +176,24 @@ def frontier_rows(label, cells, targets):
             rows.append([label, f"{target:.0e}", "none", "-", "-", "-", "-", "-", "-"])
             continue
         win = ok[0]
-        second = next((c for c in ok if c.solver != win.solver), None)
+        second = next((c for c in ok if c.name != win.name), None)
         scipy = next((c for c in ok if c.kind == "scipy"), None)
         fixed = next((c for c in ok if c.kind == "fixed"), None)
-        fewest = min(ok, key=lambda c: c.evals)
-        rows.append([label, f"{target:.0e}", name(win), f"{fmt_ms(win.best)} / {fmt_ms(win.median)}", win.evals,
+        fewest = min(ok, key=lambda c: c.out.evals)
+        rows.append([label, f"{target:.0e}", name(win), f"{fmt_ms(win.best)} / {fmt_ms(win.median)}", win.out.evals,
                      f"{name(second)} ({fmt_ms(second.best)})" if second else "-",
                      f"{name(scipy)} ({fmt_ms(scipy.best)})" if scipy else "none",
                      f"{name(fixed)} ({fmt_ms(fixed.best)})" if fixed else "none",
-                     f"{name(fewest)} ({fewest.evals})"])
+                     f"{name(fewest)} ({fewest.out.evals})"])
     return rows
 
 
 def _figure(label, cells, targets, repeats):
     def draw(plt):
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.6), sharey=True)
-        solvers = list(dict.fromkeys(c.solver for c in cells))
+        solvers = list(dict.fromkeys(c.name for c in cells))
         for k, solver in enumerate(solvers):
-            cs = [c for c in cells if c.solver == solver and c.ok and c.err > 0]
+            cs = [c for c in cells if c.name == solver and c.ok and c.err > 0]
             if not cs:
                 continue
             kind = cs[0].kind
@@ -294,7 +203,7 @@ def _figure(label, cells, targets, repeats):
             col = "k" if kind == "adaptive" else f"C{k % 10}"
             err = [c.err for c in cs]
             axes[0].loglog([c.best * 1e3 for c in cs], err, style, color=col, label=solver, ms=4)
-            axes[1].loglog([c.evals for c in cs], err, style, color=col, label=solver, ms=4)
+            axes[1].loglog([c.out.evals for c in cs], err, style, color=col, label=solver, ms=4)
         for ax in axes:
             for t in targets:
                 ax.axhline(t, color="r", lw=0.6, ls="--")
@@ -327,8 +236,9 @@ def run(args, log):
     import numpy as np
 
     from ..core import PolymatchError
-    from .flat import FlatSystem, vertices
+    from ..core.metrics import vertices
     from .report import Report
+    from .solve import Solver, measure, solve, solvers_for
 
     report = Report(NAME, "Work-precision (`polymatch bench precision`)")
     if args.quick:
@@ -362,24 +272,20 @@ def run(args, log):
         reference = scene.model.groups[0].reference
         d0 = rotation_diameter(scene)
         log(f"precision: {case} ({label}, D0 = {d0:.2f}): references")
-        _w, ref = _run_core(scene, times, Cell("adaptive", "adaptive", ref_tol))
-        ref_verts = vertices(ref[1], ref[2], reference)
-        _w, chk = _run_core(scene, times, Cell("rkmk4", "fixed", ref_dt))
-        gap = float(np.sqrt(np.max(np.sum((vertices(chk[1], chk[2], reference) - ref_verts) ** 2, axis=-1))))
-        flat = FlatSystem.for_scene(scene)
-        y0 = flat.initial(scene)
-
-        cells = _cells(scene, steps, tols)
-        run_of = {id(c): _runner(scene, flat, y0, times, c) for c in cells}
+        ref = solve(scene, Solver("adaptive", "adaptive", ref_tol), times)
+        ref_verts = vertices(ref.centroids, ref.mats, reference)
+        gap = vertex_error(solve(scene, Solver("rkmk4", "fixed", ref_dt), times), ref_verts, reference)
+        cells = solvers_for(scene.model.order, steps, tols)
         log(f"precision: {case}: {len(cells)} cells x {repeats} interleaved repeats")
-        _measure(cells, run_of, repeats, ref_verts, reference, times, log)
+        measure(cells, scene, times, repeats, lambda text: log(f"precision:   {text}"), warmup=True)
+        _score(cells, times, ref_verts, reference)
 
         m = scene.model
         params = f"m = {m.mass:g}, " if m.order == 2 else ""
         report.text(f"### {label}  (`{case}`)",
                     "",
                     f"d = {m.dim}, N = {m.n_agents}, {params}D0 = max_ij |O_i - O_j|_F = {d0:.3f} at t = 0.  "
-                    f"Reference: ours adaptive at tol {ref_tol:g} ({ref[4]} steps); rkmk4 at dt = {ref_dt:g} "
+                    f"Reference: ours adaptive at tol {ref_tol:g} ({ref.steps} steps); rkmk4 at dt = {ref_dt:g} "
                     f"agrees with it to {gap:.1e} (max vertex distance over the samples): errors near that "
                     f"floor are not resolved.")
         header, rows = case_table(cells, repeats)
@@ -390,8 +296,8 @@ def run(args, log):
         orders += [[case] + r for r in orows if r[3] == "below nominal"]
         report.figure(case, _figure(label, cells, targets, repeats), f"{label}: error vs wall time and evaluations")
         frontier += frontier_rows(case, cells, targets)
-        refused = sorted({f"{c.solver} h = {c.value:g}" for c in cells if c.status.startswith("refused")})
-        failed = sorted({f"{c.solver} {c.param}: {c.status}" for c in cells if c.status.startswith("failed")})
+        refused = sorted({f"{c.name} h = {c.value:g}" for c in cells if c.status.startswith("refused")})
+        failed = sorted({f"{c.name} {c.param}: {c.status}" for c in cells if c.status.startswith("failed")})
         if refused or failed:
             summary.append(f"- `{case}`: " + "; ".join(
                 ([f"refused (unstable): {', '.join(refused)}"] if refused else []) + failed))

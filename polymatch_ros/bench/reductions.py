@@ -29,13 +29,12 @@ def _scene(dim, n, t_end, **model):
 
 
 def _vertices(scene, state, rot):
+    """Every vertex x^i_a = xbar_i + s_i O_i r_a of every group, absolute coordinates."""
     import numpy as np
-    out = []
-    for g, gs in zip(scene.model.groups, state.groups):
-        mats = rot.to_matrices(gs.rot)
-        s = np.ones(len(mats)) if g.scales is None else g.scales
-        out.append((gs.x + scene.origin)[:, None, :] + s[:, None, None] * np.einsum("nij,aj->nai", mats, g.reference))
-    return np.concatenate([v.reshape(-1, scene.dim) for v in out])
+
+    from ..core.metrics import vertices
+    return np.concatenate([vertices(gs.x + scene.origin, rot.to_matrices(gs.rot), g.reference, g.scales)
+                           .reshape(-1, scene.dim) for g, gs in zip(scene.model.groups, state.groups)])
 
 
 def _timed(scene, method, dt, repeats):

@@ -53,22 +53,7 @@ def measure(fn, repeats, setup=None, warmup=1):
 
     The garbage collector is paused while timing, as ``timeit`` does.
     """
-    repeats = max(1, int(repeats))
-    for _ in range(warmup):
-        fn(setup() if setup else None)
-    samples = []
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        for _ in range(repeats):
-            arg = setup() if setup else None
-            t0 = time.perf_counter()
-            fn(arg)
-            samples.append(time.perf_counter() - t0)
-    finally:
-        if enabled:
-            gc.enable()
-    return Timing(tuple(samples))
+    return measure_interleaved([(fn, setup)], repeats, warmup)[0]
 
 
 def measure_interleaved(cases, repeats, warmup=1):

@@ -61,10 +61,9 @@ def _vertex_error_over_run(scene, method, dt, ref):
 
 
 def _verts(scene, state):
-    import numpy as np
-    rot = scene.model.rotations
+    from ..core.metrics import vertices
     g, gs = scene.model.groups[0], state.groups[0]
-    return gs.x[:, None, :] + np.einsum("nij,aj->nai", rot.to_matrices(gs.rot), g.reference)
+    return vertices(gs.x, scene.model.rotations.to_matrices(gs.rot), g.reference)
 
 
 def _reference(scene, times):
