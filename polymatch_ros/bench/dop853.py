@@ -120,8 +120,11 @@ def _core_own_steps(scene, tol):
 
     m = scene.model
     accepted = [scene.initial]
-    meth = AdaptiveLie(tol, max_steps=scene.integrator.max_steps)
-    meth.integrate(System(m), State(0.0, scene.initial.groups), [scene.t_end], on_step=accepted.append)
+    run = AdaptiveLie(tol, max_steps=scene.integrator.max_steps).solver(
+        System(m), State(0.0, scene.initial.groups), scene.t_end)
+    while run.status == "running":
+        run.step()
+        accepted.append(run.state)
     times = np.array([0.0] + [st.t for st in accepted[1:]])
     mats = np.array([m.rotations.to_matrices(st.groups[0].rot) for st in accepted])
     cents = np.array([st.groups[0].x + scene.origin for st in accepted])

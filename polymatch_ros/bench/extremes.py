@@ -94,14 +94,11 @@ def _scene(dim, order=1, *, count=6, seed=1, kappa=1.0, gamma=1.0, mass=0.5, sha
 
 def _refusal(scene, method, dt):
     """(one-line message or None, limit named or None)."""
-    import re
     from ..core import StabilityError, simulate
     try:
         simulate(scene, method, dt, keep_states=False, metrics=False, samples=[0.0])
     except StabilityError as exc:
-        msg = str(exc)
-        found = re.search(r"dt < ([0-9.eE+-]+)", msg)
-        return msg, (float(found.group(1)) if found else None)
+        return str(exc), (exc.limit if exc.limit else None)
     return None, None
 
 
@@ -127,7 +124,7 @@ def _finite(traj):
             for a in (gs.x, gs.v, gs.w, gs.rot):
                 if a is not None and not np.all(np.isfinite(np.asarray(a))):
                     return False
-    return all(np.isfinite(m["diameter"]) for m in traj.metrics)
+    return all(np.isfinite(m.diameter) for m in traj.metrics)
 
 
 def _defect(model, gs):
@@ -196,7 +193,7 @@ def stiff_mass(ctx):
         for dt in dts:
             a = simulate(_scene(3, 2, mass=1e-8, t_end=t_end, samples=samples, **kw), "etd2", dt)
             err = max(_max_err(first, ref.final, a.scene, a.final),
-                      max(abs(p["diameter"] - q["diameter"]) for p, q in zip(a.metrics, ref.metrics)))
+                      max(abs(p.diameter - q.diameter) for p, q in zip(a.metrics, ref.metrics)))
             errs.append(err)
             rows.append([f"{dt:g}", f"{err:.2e}", f"{errs[-2] / err:.2f}" if len(errs) > 1 else "-",
                          f"{a.wall_time:.2f}", "yes" if _finite(a) else "NO"])
@@ -255,7 +252,7 @@ def undamped(ctx):
             continue
         def run(name=name):
             traj = simulate(scene(), name, dt)
-            e = np.array([m["groups"][0]["energy"] for m in traj.metrics])
+            e = np.array([m.groups[0].energy for m in traj.metrics])
             dev = np.abs(e - e[0]) / e[0]
             k = len(dev) // 10
             results[name] = (dev[:k].max(), dev[-k:].max(), (e[-1] - e[0]) / e[0], traj)
@@ -394,7 +391,7 @@ def large_n(ctx):
             sc = _scene(3, order, count=n, seed=3, t_end=t_end, samples={"every": 10.0}, mass=0.5,
                         centroids={"box": [-5.0, 5.0]}, velocities={"angular": {"normal": 0.5}})
             traj = simulate(sc, "rkmk4", 0.1)
-            d0, dend = traj.metrics[0]["diameter"], traj.metrics[-1]["diameter"]
+            d0, dend = traj.metrics[0].diameter, traj.metrics[-1].diameter
             e0, eend = matching(sc, traj.states[0]), matching(sc, traj.final)
             worst = max(_defect(sc.model, s.groups[0]) for s in traj.states)
             rows.append([order, n, traj.steps, f"{d0:.3f}", f"{dend:.2e}", f"{traj.converged_at}", f"{worst:.1e}",
@@ -419,7 +416,7 @@ def dim10(ctx):
             traj = simulate(sc, "rkmk4", 0.1)
             worst = max(_defect(sc.model, s.groups[0]) for s in traj.states)
             ok = _finite(traj) and worst < 1e-12 and traj.converged
-            return (f"orthogonality defect <= {worst:.1e}; diameter {traj.metrics[0]['diameter']:.2f} -> "
+            return (f"orthogonality defect <= {worst:.1e}; diameter {traj.metrics[0].diameter:.2f} -> "
                     f"{traj.diameters[-1]:.1e}, converged at t = {traj.converged_at} ({traj.wall_time:.1f} s)"), ok
         ctx.check(f"d = 10, N = {n}, order {order}", "stays in SO(10) to 1e-12; converges", run)
 
@@ -481,8 +478,8 @@ def huge_coords(ctx):
             pb = np.round(rng.uniform(-5, 5, (size, dim)) * 2 ** 10) / 2 ** 10
             far, near = placed(1e9, pa, pb, dim, order, mixed), placed(0.0, pa, pb, dim, order, mixed)
             tf, tn = simulate(far, "rkmk4", 0.05), simulate(near, "rkmk4", 0.05)
-            diff = max(abs(gf["matching_diameter"] - gn["matching_diameter"])
-                       for mf, mn in zip(tf.metrics, tn.metrics) for gf, gn in zip(mf["groups"], mn["groups"]))
+            diff = max(abs(gf.matching_diameter - gn.matching_diameter)
+                       for mf, mn in zip(tf.metrics, tn.metrics) for gf, gn in zip(mf.groups, mn.groups))
             ok = _finite(tf) and diff <= 1e-12
             return (f"N = {size}{' + ' + str(size) if mixed else ''}: max diameter difference far - origin over {len(tf.metrics)} "
                     f"samples = {diff:.1e} (shape size 1); "
@@ -633,7 +630,7 @@ def d0_random(ctx):
             for seed in seeds:
                 sc = _scene(dim, 1, count=8, seed=seed, t_end=t_end, samples={"every": 10.0})
                 traj = simulate(sc, "rkmk4", 0.1)
-                d0s.append(traj.metrics[0]["groups"][0]["rotation_diameter"])
+                d0s.append(traj.metrics[0].groups[0].rotation_diameter)
                 conv += traj.converged
             return (f"{conv}/{len(seeds)} converge by t = {t_end:g}; D0 (rotation diameter) {min(d0s):.2f} .. "
                     f"{max(d0s):.2f}"), conv == len(seeds)
@@ -659,7 +656,7 @@ def coincident(ctx):
         for at in ((0.0, 0.0), (1e9, 1e9)):
             def run(order=order, at=at):
                 traj = simulate(scene(order, at), "rkmk4", 0.05)
-                sep = max(m["group_separation"] for m in traj.metrics)
+                sep = max(m.group_separation for m in traj.metrics)
                 return f"finite; group separation stays {sep:g} (zero force at coincidence)", \
                     _finite(traj) and sep == 0.0
             ctx.check(f"coincident centroids (F-2), order {order}, at {at[0]:g}", "finite; stay together", run)
@@ -669,7 +666,7 @@ def coincident(ctx):
         ok = True
         for pert in (1e-12,) if ctx.quick else (1e-15, 1e-12, 1e-6):
             traj = simulate(scene(2, (0.0, 0.0), pert), "rkmk4", 0.05)
-            seps = [m["group_separation"] for m in traj.metrics]
+            seps = [m.group_separation for m in traj.metrics]
             t1 = next((t for t, s in zip(traj.times, seps) if s > 1.0), None)
             rows.append([f"{pert:g}", f"{seps[0]:.1e}", f"{t1}", f"{seps[-1]:.6f}", f"{traj.times[-1]:g}"])
             ok &= _finite(traj) and abs(seps[-1] - 3.0) < (1e-2 if ctx.quick else 1e-5)
@@ -692,7 +689,7 @@ def coincident(ctx):
 
         far, near = simulate(make(1e9), "rkmk4", 0.05), simulate(make(0.0), "rkmk4", 0.05)
         diff = max(abs(x - y) for x, y in zip(far.diameters, near.diameters))
-        seps = [t.metrics[-1]["group_separation"] for t in (far, near)]
+        seps = [t.metrics[-1].group_separation for t in (far, near)]
         ok = _finite(far) and _finite(near) and all(abs(x - 3.0) < 1e-3 for x in seps)
         return (f"each centroid of group a sits on one of group b (group centres coincide): round-off picks the "
                 f"directions, so the copy at 1e9 differs from the one at 0 by up to {diff:.2f} in D on the way; "
