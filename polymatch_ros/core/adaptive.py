@@ -74,7 +74,7 @@ class _Chart:
         self.base_size = np.where(self.is_rot, 1.0, np.abs(self.base))   # rotations have unit size
 
     def state(self, vec):
-        """(State at psi(vec) . y, per-group Theta) — the stage the right-hand side is evaluated at."""
+        """(State at psi(vec) . y, per-group Theta): the stage the right-hand side sees."""
         grp = self.system.group
         groups = list(self.y.groups)
         thetas = [None] * len(groups)

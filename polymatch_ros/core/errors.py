@@ -39,7 +39,7 @@ class StabilityError(PolymatchError):
 
 
 class StepLimitError(PolymatchError):
-    """An adaptive run used up ``integrator.max_steps`` (accepted and rejected steps) before t_end."""
+    """An adaptive run used up integrator.max_steps (accepted + rejected steps) before t_end."""
 
 
 class ParameterError(PolymatchError):

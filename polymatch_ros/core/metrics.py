@@ -173,7 +173,7 @@ def group_metrics(model: Model, gi: int, gs: GroupState) -> GroupMetrics:
 
 
 def ensemble_metrics(model: Model, state: State) -> EnsembleMetrics:
-    """Per-group metrics and the ensemble's headline diameter (max matching diameter over groups)."""
+    """Per-group metrics and the headline diameter (max matching diameter over groups)."""
     groups = tuple(group_metrics(model, gi, gs) for gi, gs in enumerate(state.groups))
     separation = None
     if model.inter_group:

@@ -31,7 +31,7 @@ def rk_stability(a: Sequence, b: Sequence, z) -> np.ndarray:
 
 
 class ExplicitRK(Method):
-    """An explicit tableau (a, b): stage states are y + h sum_j a_ij k_j, the end y + h sum b_j k_j.
+    """An explicit tableau (a, b): stages y + h sum_j a_ij k_j, the step's end y + h sum_j b_j k_j.
 
     The combinator is shared; subclasses say how a rotation moves (``move_rotation``)
     and what a stage's rotation slope is (``slopes``).

@@ -51,7 +51,8 @@ class ExponentialLie(Method):
     """Exponential Lie-Euler (order 1) and ETD2-Lie (order 2) for the second-order model (A-1).
 
     With lambda = gamma/m and N(O) = kappa/(2Nm)(S O^T - O S^T), the damping is solved exactly:
-        W(t) = e^{-lambda t} W_n + int_0^t e^{-lambda (t-s)} N(s) ds,   O_{n+1} = psi(int_0^h W) O_n,
+        W(t) = e^{-lambda t} W_n + int_0^t e^{-lambda (t-s)} N(s) ds,
+        O_{n+1} = psi(int_0^h W) O_n,
     with N frozen (order 1) or linear between N(O_n) and N(O_pred) (order 2, Cox-Matthews ETD2RK):
         W_{n+1} = e W_n + h phi1 N_n + h phi2 (N_p - N_n)
         Theta   = h phi1 W_n + h^2 phi2 N_n + h^2 phi3 (N_p - N_n)

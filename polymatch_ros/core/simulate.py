@@ -49,10 +49,11 @@ class Plan:
 
 
 def with_representation(scene: Scene, representation: str) -> Scene:
-    """The same scene with rotations in another representation (e.g. 'matrix' for the full model)."""
+    """The same scene with rotations in another representation ('matrix': the full model)."""
     model = scene.model
     new = group_for(model.dim, representation)
-    if type(new) is type(model.rotations) and getattr(new, "retraction", None) == model.rotations.retraction:
+    same_map = getattr(new, "retraction", None) == model.rotations.retraction
+    if type(new) is type(model.rotations) and same_map:
         return scene
     old = model.rotations
     groups = []
@@ -64,17 +65,19 @@ def with_representation(scene: Scene, representation: str) -> Scene:
 
 
 def recommend(scene: Scene, distributed: bool = False) -> tuple[str, str]:
-    """(method name, reason) recommended for the scene's kind (see README, 'Speed against accuracy')."""
+    """(method name, reason) recommended for the scene's kind (README, speed vs accuracy)."""
     m = scene.model
     if m.order == 1:
         if scene.integrator.tolerance is not None and not distributed:
             return "adaptive", "a tolerance was asked for (centralised)"
         return "rkmk4", "first order: 4th-order Munthe-Kaas, 4 rounds per step"
     if m.gamma == 0:
-        return "lie_verlet", "undamped (gamma = 0): symplectic splitting keeps the energy without drift"
+        return "lie_verlet", ("undamped (gamma = 0): symplectic splitting keeps the energy "
+                              "without drift")
     dt = scene.integrator.dt or 0.05
     if m.mass / m.gamma < 0.5 * dt:
-        return "etd2", (f"m/gamma = {m.mass / m.gamma:.3g} < dt/2: damping is stiff, integrate it exactly "
+        return "etd2", (f"m/gamma = {m.mass / m.gamma:.3g} < dt/2: damping is stiff, "
+                        "integrate it exactly "
                         "(an explicit adaptive method would crawl at the stability limit)")
     if scene.integrator.tolerance is not None and not distributed:
         return "adaptive", "a tolerance was asked for (centralised)"
@@ -94,7 +97,8 @@ def plan(scene: Scene, method: str | None = None, dt: float | None = None,
     if name == "adaptive":
         from .adaptive import AdaptiveLie
         if distributed:
-            raise PolymatchError("the adaptive integrator runs centralised only; pick a fixed-step method")
+            raise PolymatchError("the adaptive integrator runs centralised only; "
+                                 "pick a fixed-step method")
         tol = tol or 1e-8
         return Plan(AdaptiveLie(tol, max_steps=scene.integrator.max_steps), None, tol, reason)
     meth = get_method(name)
@@ -102,7 +106,8 @@ def plan(scene: Scene, method: str | None = None, dt: float | None = None,
     if not step > 0 or not math.isfinite(step):
         raise PolymatchError(f"dt must be a positive number, got {step}")
     if step > scene.t_end:
-        warnings.warn(f"dt = {step:g} is larger than t_end = {scene.t_end:g}: taking one step of t_end")
+        warnings.warn(f"dt = {step:g} is larger than t_end = {scene.t_end:g}: "
+                      "taking one step of t_end")
         step = scene.t_end
     if check:
         check_stability(meth, scene.model, step)
@@ -213,21 +218,25 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
         lines.append(f"model: first order (A-2), kappa = {m.kappa:g}, gamma = {m.gamma:g}: "
                      "no velocities are carried")
     else:
-        lines.append(f"model: second order (A-1), m = {m.mass:g}, gamma = {m.gamma:g}, kappa = {m.kappa:g}")
+        lines.append(f"model: second order (A-1), m = {m.mass:g}, gamma = {m.gamma:g}, "
+                     f"kappa = {m.kappa:g}")
     for g in m.groups:
         kind = "similar (F-1: torque weights s_k/s_i)" if g.scales is not None else \
             "congruent (no scale weights)"
         lines.append(f"group {g.name!r}: {g.size} x {len(g.reference)}-vertex polytope, {kind}")
     if m.inter_group:
-        lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; centroids integrated "
+        lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; "
+                     "centroids integrated "
                      "with the method's stages (the inter-group force is nonlinear)")
     elif m.centroids_exact:
         lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential)")
     else:
-        lines.append("centroids: integrated with the method's stages (model.centroids = integrated; "
+        lines.append("centroids: integrated with the method's stages "
+                     "(model.centroids = integrated; "
                      "the exact flow would be cheaper and exact)")
     rep = m.rotations
-    rep_text = {"angle": "angles (SO(2) is abelian: the first-order model is Kuramoto, exp is addition)",
+    rep_text = {"angle": "angles (SO(2) is abelian: the first-order model is Kuramoto, "
+                         "exp is addition)",
                 "so3": f"3x3 matrices, structure-of-arrays, {rep.retraction} map in closed form",
                 "matrix": f"{m.dim}x{m.dim} matrices, Cayley map by batched solves"}[rep.name]
     lines.append(f"rotations: {rep_text}")
@@ -237,13 +246,16 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
         try:
             check_stability(p.method, m, p.dt)
             limit = max_stable_dt(p.method, m, 1e6)
-            stab = f"linear stability limit dt < {limit:.3g}" if limit < 1e6 else "no stability limit found"
+            stab = (f"linear stability limit dt < {limit:.3g}" if limit < 1e6
+                    else "no stability limit found")
         except StabilityError as exc:
             stab = f"REFUSED: {exc}"
-        lines.append(f"integrator: {info.name} (order {info.order}, {info.stages} evaluation(s)/step, "
-                     f"{info.rounds} exchange round(s)/step in lockstep), dt = {p.dt:g} — {p.reason}; {stab}")
+        lines.append(f"integrator: {info.name} (order {info.order}, {info.stages} "
+                     f"evaluation(s)/step, {info.rounds} exchange round(s)/step in lockstep), "
+                     f"dt = {p.dt:g} — {p.reason}; {stab}")
         if info.family == "projection" and rep.name == "angle":
-            lines.append("projection baselines need matrices: the run uses the full 2x2 matrix model")
+            lines.append("projection baselines need matrices: "
+                         "the run uses the full 2x2 matrix model")
     else:
         lines.append(f"integrator: adaptive DOP853-Lie, tolerance {p.tolerance:g} — {p.reason}")
     lines.extend(f"note: {n}" for n in scene.notes)
@@ -255,9 +267,11 @@ def convergence_verdict(scene: Scene, diameter: float, converged_at: float | Non
     """(exit code, message) for the end of a run."""
     if converged_at is not None:
         return 0, f"converged: matching diameter < {scene.tolerance:g} from t = {converged_at:g}"
-    msg = f"did not converge: matching diameter {diameter:.3e} >= tolerance {scene.tolerance:g} at t_end"
+    msg = (f"did not converge: matching diameter {diameter:.3e} >= tolerance "
+           f"{scene.tolerance:g} at t_end")
     if stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
-        msg += (f"; the rotations sit at an equilibrium that is not consensus (|W| = {stationarity:.1e}),"
+        msg += ("; the rotations sit at an equilibrium that is not consensus "
+                f"(|W| = {stationarity:.1e}),"
                 " e.g. antipodal or splay states of the Lohe model")
     if not scene.expect_convergence:
         return 0, msg + " (the scene expects this: convergence.expected = false)"

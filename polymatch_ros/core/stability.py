@@ -28,7 +28,7 @@ RATIO_SLACK = 1e-12
 
 
 def test_matrices(model: Model) -> list[tuple[str, np.ndarray, str]]:
-    """Linearisations at consensus that a fixed-step method must keep bounded: (label, matrix, cause).
+    """Linearisations at consensus a fixed-step method must keep bounded: (label, matrix, cause).
 
     Rotations in algebra coordinates xi: first order xi' = -k xi / gamma, second order
     m xi'' = -gamma xi' - k xi, with k = kappa * max_i(mean s / s_i) (F-1 weights; 1 if
