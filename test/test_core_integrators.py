@@ -1,9 +1,13 @@
 """Integrators: Lemma 2.1 (orthogonality), observed orders, representation reductions, stability."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from polymatch_ros.core import METHODS, StabilityError, System, simulate, with_representation
+from polymatch_ros.core import (METHODS, PolymatchError, StabilityError, System, simulate,
+                                with_representation)
+from polymatch_ros.core.errors import StepLimitError
 from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState
 
@@ -189,6 +193,33 @@ def test_adaptive_dop853_lie_accuracy_and_orthogonality_lemma_2_1(order):
         assert defect(rot_matrices(scene.model.rotations, st.groups[0].rot)) <= 1e-14
     # and it is much cheaper than the fixed-step reference
     assert ada.rhs_evals < 4 * 500 / 2
+
+
+def test_adaptive_max_steps_bounds_accepted_and_rejected_steps():
+    scene = make_scene(2, 1, count=4, seed=5, t_end=5.0)
+    scene = replace(scene, integrator=replace(scene.integrator, max_steps=5))
+    with pytest.raises(StepLimitError) as exc:
+        simulate(scene, "adaptive", tolerance=1e-8, keep_states=False, metrics=False)
+    msg = str(exc.value)
+    assert "\n" not in msg and "max_steps = 5" in msg and exc.value.exit_code == 1
+
+
+@pytest.mark.parametrize("tolerance", [1e-30, 1e-200])
+def test_adaptive_tolerance_beyond_double_precision_refused_in_one_line(tolerance):
+    scene = make_scene(2, 1, count=4, seed=5, t_end=5.0)
+    with pytest.raises(PolymatchError) as exc:
+        simulate(scene, "adaptive", tolerance=tolerance, keep_states=False, metrics=False)
+    msg = str(exc.value)
+    assert "\n" not in msg and "beyond double precision" in msg
+
+
+def test_stability_error_fields_match_its_message():
+    second, _ = _stiff_pair()
+    with pytest.raises(StabilityError) as exc:
+        simulate(second, "rkmk4", 0.01, keep_states=False, metrics=False)
+    err = exc.value
+    assert err.method == "rkmk4" and err.dt == 0.01 and 0 < err.limit < 0.01
+    assert f"dt < {err.limit:.3g} ({err.cause}" in str(err)
 
 
 def test_adaptive_final_state_at_t_end_like_fixed_step_theorem_4_2():

@@ -41,6 +41,8 @@ STEP_FLOOR = 1e-12
 END_RTOL = 1e-13
 #: the step cap is this fraction of DOP853's linear stability limit
 CAP_FRACTION = 0.9
+#: the smallest tolerance worth asking for in double precision (scipy's floor for rtol)
+TOLERANCE_FLOOR = 100 * np.finfo(float).eps
 
 
 class _Chart:
@@ -179,7 +181,10 @@ class AdaptiveSolver:
         self.chart = _Chart(system, state)
         self.k0 = self.chart.pack(system.rates(state, self.coupling))
         self.nfev += 1
-        self.h = min(self._initial_step(self.chart, self.k0, self.t_end - state.t), self.cap)
+        with np.errstate(over="ignore", invalid="ignore"):
+            self.h = min(self._initial_step(self.chart, self.k0, self.t_end - state.t), self.cap)
+        if not (math.isfinite(self.h) and self.h > 0):
+            self._beyond_precision()
 
     def _check_stiffness(self):
         """The step cap; refuse before stepping when max_steps cannot reach t_end under it."""
@@ -192,6 +197,12 @@ class AdaptiveSolver:
                 f"{needed:.2g} steps to reach t = {self.t_end:g} (max_steps = {meth.max_steps}); "
                 "use etd2 for stiff damping, a shorter t_end, or a larger integrator.max_steps")
         return cap
+
+    def _beyond_precision(self):
+        raise PolymatchError(
+            f"adaptive: tolerance {self.method.rtol:g} is beyond double precision (no step "
+            f"meets it at t = {self.state.t:.6g}); use a tolerance of at least "
+            f"{TOLERANCE_FLOOR:.1g} or a fixed dt")
 
     def _count_attempt(self):
         if self.nsteps + self.nrejected >= self.method.max_steps:
@@ -279,11 +290,16 @@ class AdaptiveSolver:
         while True:
             self._count_attempt()
             if not step >= STEP_FLOOR * max(1.0, abs(y.t)):
+                if meth.rtol < TOLERANCE_FLOOR:
+                    self._beyond_precision()
                 raise PolymatchError(f"adaptive: step size fell to {step:.3g} at t = {y.t:.6g}; "
                                      "the scene is too stiff for an explicit method at this "
                                      "tolerance")
-            result = self._attempt(self.chart, step, self.k0)
+            with np.errstate(over="ignore", invalid="ignore"):
+                result = self._attempt(self.chart, step, self.k0)
             err = result[-1]
+            if math.isnan(err):
+                self._beyond_precision()
             if err < 1.0:
                 factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR,
                                                          SAFETY * err ** meth.error_exponent)
