@@ -1,8 +1,10 @@
 """SO(3) in structure-of-arrays layout with closed-form Cayley and exp maps."""
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from .base import RotationGroup, polar_newton_schulz
+from .base import Array, MeanField, RotationGroup, polar_newton_schulz
 
 
 def _hat3(w):
@@ -29,64 +31,64 @@ class SO3(RotationGroup):
     dim = 3
     name = "so3"
 
-    def __init__(self, retraction="cayley"):
+    def __init__(self, retraction: str = "cayley"):
         if retraction not in ("cayley", "exp"):
             raise ValueError("retraction must be 'cayley' or 'exp'")
         self.retraction = retraction
 
-    def identity(self, n):
+    def identity(self, n: int) -> Array:
         return np.repeat(np.eye(3)[:, :, None], n, axis=2)
 
-    def from_matrices(self, mats):
+    def from_matrices(self, mats: np.ndarray) -> Array:
         return np.ascontiguousarray(np.asarray(mats, dtype=float).transpose(1, 2, 0))
 
-    def to_matrices(self, g):
+    def to_matrices(self, g: Array) -> np.ndarray:
         return np.ascontiguousarray(g.transpose(2, 0, 1))
 
-    def flat(self, g):
+    def flat(self, g: Array) -> np.ndarray:
         return g.reshape(9, -1).T
 
-    def count(self, g):
+    def count(self, g: Array) -> int:
         return g.shape[2]
 
-    def take(self, g, idx):
+    def take(self, g: Array, idx) -> Array:
         return g[:, :, idx]
 
-    def put(self, g, idx, values):
+    def put(self, g: Array, idx, values: Array) -> None:
         g[:, :, idx] = values
 
-    def concat(self, parts):
+    def concat(self, parts: Sequence[Array]) -> Array:
         return np.concatenate(parts, axis=2)
 
-    def rotate(self, g, r):
+    def rotate(self, g: Array, r: np.ndarray) -> np.ndarray:
         return np.einsum("ijn,j->ni", g, r)
 
-    def algebra_zeros(self, n):
+    def algebra_zeros(self, n: int) -> Array:
         return np.zeros((3, n))
 
-    def algebra_take(self, a, idx):
+    def algebra_take(self, a: Array, idx) -> Array:
         return a[:, idx]
 
-    def algebra_concat(self, parts):
+    def algebra_concat(self, parts: Sequence[Array]) -> Array:
         return np.concatenate(parts, axis=1)
 
-    def algebra_from_skew(self, w):
+    def algebra_from_skew(self, w: np.ndarray) -> Array:
         w = np.asarray(w, dtype=float)
         return np.array([w[:, 2, 1], w[:, 0, 2], w[:, 1, 0]])
 
-    def algebra_to_skew(self, a):
+    def algebra_to_skew(self, a: Array) -> np.ndarray:
         return _hat3(a).transpose(2, 0, 1)
 
-    def algebra_sq_norm(self, a):
+    def algebra_sq_norm(self, a: Array) -> np.ndarray:
         return 2.0 * np.sum(a * a, axis=0)
 
-    def algebra_scale_rows(self, a, c):
+    def algebra_scale_rows(self, a: Array, c: np.ndarray) -> Array:
         return a * c
 
     def _compose(self, r, g):
         return np.einsum("ikn,kjn->ijn", r, g)
 
-    def retract(self, xi, g):
+    def retract(self, xi: Array, g: Array) -> Array:
         if self.retraction == "cayley":
             th2 = np.sum(xi * xi, axis=0)
             c = 1.0 / (1.0 + 0.25 * th2)
@@ -121,7 +123,7 @@ class SO3(RotationGroup):
         r[2, 2] += 1.0
         return self._compose(r, g)
 
-    def dpsi_inv(self, xi, a):
+    def dpsi_inv(self, xi: Array, a: Array) -> Array:
         if self.retraction == "cayley":
             return a - 0.5 * _cross3(xi, a) + 0.25 * np.sum(xi * a, axis=0) * xi
         th = np.sqrt(np.sum(xi * xi, axis=0))
@@ -134,18 +136,18 @@ class SO3(RotationGroup):
         wxa = _cross3(xi, a)
         return a - 0.5 * wxa + coef * _cross3(xi, wxa)
 
-    def mean_field(self, g, weights=None):
+    def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
         flat = g.reshape(9, -1)
         s = flat.sum(axis=1) if weights is None else flat @ weights
         return s.reshape(3, 3)
 
-    def coupling(self, g, s):
+    def coupling(self, g: Array, s: MeanField) -> Array:
         # column c of S O_n^T is S (row c of O_n): three (3x3)(3xN) BLAS products
         a0, a1, a2 = s @ g[0], s @ g[1], s @ g[2]
         return np.array([a1[2] - a2[1], a2[0] - a0[2], a0[1] - a1[0]])
 
-    def tangent(self, a, g):
+    def tangent(self, a: Array, g: Array) -> Array:
         return self._compose(_hat3(a), g)
 
-    def project(self, g):
+    def project(self, g: Array) -> Array:
         return self.from_matrices(polar_newton_schulz(self.to_matrices(g)))
