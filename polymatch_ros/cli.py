@@ -15,7 +15,6 @@ expects it, 1 for anything else.
 """
 
 import argparse
-import math
 import os
 import sys
 import warnings
@@ -47,8 +46,8 @@ def cmd_simulate(args):
     print(format_table(summary_rows(traj.scene, traj.metrics[-1]), SUMMARY_HEADER))
     print(f"t = {traj.times[-1]:g}, steps {traj.steps}, right-hand sides {traj.rhs_evals}, "
           f"wall time {traj.wall_time:.3f} s")
-    if "group_separation" in traj.metrics[-1]:
-        print(f"distance between group centres: {traj.metrics[-1]['group_separation']:.4g} "
+    if traj.metrics[-1].group_separation is not None:
+        print(f"distance between group centres: {traj.metrics[-1].group_separation:.4g} "
               f"(L = {scene.model.L:g})")
     if args.save:
         save_npz(traj, args.save)
@@ -57,7 +56,7 @@ def cmd_simulate(args):
         from .figures import snapshot_figure
         snapshot_figure(traj, args.figure)
         print(f"snapshots saved to {args.figure}")
-    code, msg = convergence_verdict(scene, traj.metrics[-1]["diameter"], traj.converged_at, traj.stationarity)
+    code, msg = convergence_verdict(scene, traj.metrics[-1].diameter, traj.converged_at, traj.stationarity)
     print(msg)
     return code
 
@@ -77,7 +76,7 @@ def save_npz(traj, path):
         data[key + "centroids"] = np.array([st.groups[gi].x + scene.origin for st in traj.states])
         data[key + "rotations"] = np.array([model.rotations.to_matrices(st.groups[gi].rot) for st in traj.states])
         for name in ("centroid_diameter", "rotation_diameter", "matching_diameter", "energy", "orthogonality"):
-            data[key + name] = np.array([m["groups"][gi][name] for m in traj.metrics])
+            data[key + name] = np.array([getattr(m.groups[gi], name) for m in traj.metrics])
     np.savez_compressed(path, **data)
 
 

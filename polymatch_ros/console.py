@@ -59,9 +59,9 @@ class Progress:
 
 def summary_rows(scene, metrics):
     rows = []
-    for g, m in zip(scene.model.groups, metrics["groups"]):
-        rows.append([g.name, g.size, f"{m['centroid_diameter']:.3e}", f"{m['rotation_diameter']:.3e}",
-                     f"{m['matching_diameter']:.3e}", f"{m['energy']:.3e}", f"{m['orthogonality']:.1e}"])
+    for g, m in zip(scene.model.groups, metrics.groups):
+        rows.append([g.name, g.size, f"{m.centroid_diameter:.3e}", f"{m.rotation_diameter:.3e}",
+                     f"{m.matching_diameter:.3e}", f"{m.energy:.3e}", f"{m.orthogonality:.1e}"])
     return rows
 
 

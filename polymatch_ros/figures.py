@@ -51,7 +51,7 @@ def snapshot_figure(traj, path, times=None):
     for t in times:
         k = int(np.argmin(np.abs(have - t)))
         if abs(have[k] - t) <= 1e-6 * max(1.0, t) + 1e-9 and traj.states:
-            picks.append((t, traj.states[k], traj.metrics[k]["diameter"] if traj.metrics else None))
+            picks.append((t, traj.states[k], traj.metrics[k].diameter if traj.metrics else None))
     if not picks:
         raise PolymatchError("no stored states at the snapshot times; simulate with those sample times")
     dim = scene.dim

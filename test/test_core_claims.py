@@ -28,7 +28,7 @@ CONFIG = Path(__file__).resolve().parent.parent / "config"
 def _centroid_diameters(traj):
     """D(t) computed here by brute force from the states, checked against the core's metric."""
     d = np.array([brute_diameter(st.groups[0].x) for st in traj.states])
-    core = np.array([m["groups"][0]["centroid_diameter"] for m in traj.metrics])
+    core = np.array([m.groups[0].centroid_diameter for m in traj.metrics])
     np.testing.assert_allclose(core, d, rtol=1e-12, atol=1e-300)
     return np.array(traj.times), d
 
@@ -105,7 +105,7 @@ def test_first_order_rotation_bound_prop_2_2_ii(dim, seed):
     t = np.array(traj.times)
     d = np.array([brute_rotation_diameter(rot_matrices(scene.model.rotations, st.groups[0].rot))
                   for st in traj.states])
-    core = np.array([m["groups"][0]["rotation_diameter"] for m in traj.metrics])
+    core = np.array([m.groups[0].rotation_diameter for m in traj.metrics])
     np.testing.assert_allclose(core, d, rtol=1e-12, atol=1e-15)
     d0 = d[0]
     assert 0.2 < d0 < 1.0                                 # the proposition's hypothesis, not vacuous
@@ -126,7 +126,7 @@ def test_energy_nonincreasing_and_dissipation_identity_prop_2_2_i(dim, rep):
     assert scene.model.rotations.name == rep
     traj = simulate(scene, "rkmk4", 0.01)
     e = np.array([rotation_energy(scene.model, st.groups[0]) for st in traj.states])
-    core = np.array([met["groups"][0]["energy"] for met in traj.metrics])
+    core = np.array([met.groups[0].energy for met in traj.metrics])
     np.testing.assert_allclose(core, e, rtol=1e-12, atol=0)
     assert np.all(np.diff(e) <= 1e-12 * e[0])             # never increases
     assert e[-1] < 0.5 * e[0]
@@ -190,7 +190,7 @@ def test_complete_vertex_matching_config_theorems_4_1_4_2(name, order):
     assert d0 > 1.0
     assert dend < 1e-6
     assert traj.diameters[-1] == pytest.approx(dend, abs=1e-12)
-    assert traj.metrics[0]["diameter"] == pytest.approx(d0, rel=1e-12)
+    assert traj.metrics[0].diameter == pytest.approx(d0, rel=1e-12)
     # and the components the proofs use: centroids and rotations both reach consensus
     assert brute_diameter(traj.final.groups[0].x) < 1e-6
     assert brute_rotation_diameter(rot_matrices(scene.model.rotations, traj.final.groups[0].rot)) < 1e-6

@@ -1,11 +1,13 @@
 """Integrators: Lemma 2.1 (orthogonality), observed orders, representation reductions, stability."""
 
-import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from polymatch_ros.core import METHODS, StabilityError, System, simulate, with_representation
+from polymatch_ros.core import (METHODS, PolymatchError, StabilityError, System, simulate,
+                                with_representation)
+from polymatch_ros.core.errors import StepLimitError
 from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState
 
@@ -38,7 +40,7 @@ def test_orthogonality_preserved_10k_steps_lemma_2_1(method, dim, rep):
         dft = defect(mats)
         worst = max(worst, dft)
         assert np.all(np.linalg.det(mats) > 0)
-        assert met["groups"][0]["orthogonality"] == pytest.approx(dft, abs=1e-15)   # same to round-off
+        assert met.groups[0].orthogonality == pytest.approx(dft, abs=1e-15)   # same to round-off
     assert worst <= 1e-12
     # the test is not vacuous: the ensemble is still rotating at the end
     w = skew_matrices(scene.model.rotations, traj.final.groups[0].w)
@@ -193,6 +195,33 @@ def test_adaptive_dop853_lie_accuracy_and_orthogonality_lemma_2_1(order):
     assert ada.rhs_evals < 4 * 500 / 2
 
 
+def test_adaptive_max_steps_bounds_accepted_and_rejected_steps():
+    scene = make_scene(2, 1, count=4, seed=5, t_end=5.0)
+    scene = replace(scene, integrator=replace(scene.integrator, max_steps=5))
+    with pytest.raises(StepLimitError) as exc:
+        simulate(scene, "adaptive", tolerance=1e-8, keep_states=False, metrics=False)
+    msg = str(exc.value)
+    assert "\n" not in msg and "max_steps = 5" in msg and exc.value.exit_code == 1
+
+
+@pytest.mark.parametrize("tolerance", [1e-30, 1e-200])
+def test_adaptive_tolerance_beyond_double_precision_refused_in_one_line(tolerance):
+    scene = make_scene(2, 1, count=4, seed=5, t_end=5.0)
+    with pytest.raises(PolymatchError) as exc:
+        simulate(scene, "adaptive", tolerance=tolerance, keep_states=False, metrics=False)
+    msg = str(exc.value)
+    assert "\n" not in msg and "beyond double precision" in msg
+
+
+def test_stability_error_fields_match_its_message():
+    second, _ = _stiff_pair()
+    with pytest.raises(StabilityError) as exc:
+        simulate(second, "rkmk4", 0.01, keep_states=False, metrics=False)
+    err = exc.value
+    assert err.method == "rkmk4" and err.dt == 0.01 and 0 < err.limit < 0.01
+    assert f"dt < {err.limit:.3g} ({err.cause}" in str(err)
+
+
 def test_adaptive_final_state_at_t_end_like_fixed_step_theorem_4_2():
     scene = make_scene(2, 1, count=4, seed=5, t_end=5.0)
     fixed = simulate(scene, "rkmk4", 0.05, samples=[0.0, 1.0], keep_states=False, metrics=False)
@@ -229,7 +258,7 @@ def test_explicit_methods_refuse_stiff_mass_A_1(method):
     msg = str(exc.value)
     assert "\n" not in msg
     assert "dt <" in msg and method in msg
-    limit = float(re.search(r"dt < ([0-9.eE+-]+)", msg).group(1))
+    limit = exc.value.limit
     # independent limit: the fastest eigenvalue of m xi'' = -gamma xi' - kappa xi
     lam = np.linalg.eigvals(np.array([[0.0, 1.0], [-1.5 / 1e-8, -2.0 / 1e-8]]))
     fast = float(np.max(np.abs(lam)))
@@ -257,6 +286,6 @@ def test_etd2_stiff_mass_tends_to_first_order_model_A_2():
         results.append(err["rot"])
         for st in a.states:
             m = ensemble_metrics(second.model, st)
-            assert np.isfinite(m["diameter"])
+            assert np.isfinite(m.diameter)
     # the remaining difference is etd2's O(dt^2) truncation error, not an O(1) model mismatch
     assert np.log2(results[0] / results[1]) == pytest.approx(2.0, abs=0.3)

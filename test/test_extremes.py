@@ -94,12 +94,13 @@ def rk_limit(method, eigenvalues):
 
 
 def refusal_limit(exc):
-    """The limit named in a StabilityError: the number after 'dt <'."""
+    """The limit a StabilityError names (its ``limit`` field; the message says 'dt < limit')."""
     msg = str(exc)
     assert "\n" not in msg, msg
-    limit = lib.refusal_limit(msg)
-    assert limit is not None, msg
-    return limit
+    assert "dt <" in msg, msg
+    assert exc.limit is not None, msg
+    assert f"dt < {exc.limit:.3g}" in msg, msg
+    return exc.limit
 
 
 def second_order_eigenvalues(m, gamma, k):
@@ -193,7 +194,7 @@ def test_extreme_stiff_mass_m_1e_8_etd2_runs_matches_first_order_limit_A_2():
         assert a.final.t == pytest.approx(2.0)
         err = state_error(first, ref.final, a.scene, a.final)
         assert err["x"] < 1e-7                    # exact centroid flow: O(m/gamma) only
-        diam = max(abs(p["diameter"] - q["diameter"]) for p, q in zip(a.metrics, ref.metrics))
+        diam = max(abs(p.diameter - q.diameter) for p, q in zip(a.metrics, ref.metrics))
         errs.append(max(err["rot"], diam))
     assert errs[0] < 1e-3
     for coarse, fine in zip(errs, errs[1:]):
@@ -299,9 +300,9 @@ def test_extreme_stiff_coupling_kappa_1e4_compliant_dt_accurate_adaptive_cost_A_
         fixed = simulate(scene, "rkmk4", h)
         assert np.allclose(fixed.times, ref.times, rtol=0, atol=1e-15)
         errs.append(max(state_error(scene, fixed.final, scene, ref.final).values()))
-        d0 = ref.metrics[0]["diameter"]
+        d0 = ref.metrics[0].diameter
         for p, q in zip(fixed.metrics, ref.metrics):                # to 1e-6 of the initial diameter
-            assert abs(p["diameter"] - q["diameter"]) < 1e-6 * d0
+            assert abs(p.diameter - q.diameter) < 1e-6 * d0
     assert errs[1] < 1e-6
     assert errs[0] / errs[1] > 10.0                              # 4th order (16) up to the transient
     ada = simulate(scene, "adaptive", tolerance=1e-9)
@@ -334,17 +335,17 @@ def test_extreme_large_n_10_000_few_steps_metrics_finite_exact_theorem_4_2(order
     assert traj.steps == 2 and all_finite(traj)
     model = scene.model
     for st, met in zip(traj.states, traj.metrics):
-        g = met["groups"][0]
+        g = met.groups[0]
         verts = vertices(model, st, 0)                                    # (N, n, d)
         matching = max(hull_diameter(verts[:, a, :]) for a in range(verts.shape[1]))
-        assert g["matching_diameter"] == pytest.approx(matching, rel=1e-12)
-        assert met["diameter"] == g["matching_diameter"]
-        assert g["centroid_diameter"] == pytest.approx(hull_diameter(st.groups[0].x), rel=1e-12)
+        assert g.matching_diameter == pytest.approx(matching, rel=1e-12)
+        assert met.diameter == g.matching_diameter
+        assert g.centroid_diameter == pytest.approx(hull_diameter(st.groups[0].x), rel=1e-12)
         mats = rot_matrices(model.rotations, st.groups[0].rot)
         if st is traj.final:                                  # the 9-D scan is the slow part: once
-            assert g["rotation_diameter"] == pytest.approx(chunked_max_distance(mats.reshape(len(mats), -1)),
+            assert g.rotation_diameter == pytest.approx(chunked_max_distance(mats.reshape(len(mats), -1)),
                                                            rel=1e-12)
-        assert g["orthogonality"] == pytest.approx(defect(mats), abs=1e-15) and defect(mats) < 1e-13
+        assert g.orthogonality == pytest.approx(defect(mats), abs=1e-15) and defect(mats) < 1e-13
 
 
 # ---------------------------------------------------------------------------------------------
@@ -362,7 +363,7 @@ def test_extreme_dimension_10_simplices_stay_in_so10_and_converge_lemma_2_1_theo
         mats = rot_matrices(scene.model.rotations, st.groups[0].rot)
         assert defect(mats) < 1e-12
         assert np.all(np.linalg.det(mats) > 0)
-    assert traj.metrics[0]["diameter"] > 1.0
+    assert traj.metrics[0].diameter > 1.0
     assert brute_matching_diameter(scene.model, traj.final, 0) < 1e-6
     assert traj.converged
 
@@ -425,9 +426,9 @@ def test_extreme_huge_coordinates_1e9_matching_diameter_relative_to_shape_theore
     assert all_finite(tf)
     size = 1.0                                               # circumradius of both shapes
     for mf, mn in zip(tf.metrics, tn.metrics):
-        for gf, gn in zip(mf["groups"], mn["groups"]):
-            assert abs(gf["matching_diameter"] - gn["matching_diameter"]) <= 1e-12 * size
-    assert tf.metrics[0]["diameter"] > 1.0
+        for gf, gn in zip(mf.groups, mn.groups):
+            assert abs(gf.matching_diameter - gn.matching_diameter) <= 1e-12 * size
+    assert tf.metrics[0].diameter > 1.0
     assert tf.diameters[-1] < 1e-3                            # and something happened
     # the configurations themselves (independent: vertices relative to polytope 0's first vertex) agree
     for gi in range(len(far.model.groups)):
@@ -504,7 +505,7 @@ def test_extreme_scale_ratios_1e_6_1e_6_compliant_dt_accurate_F_1():
     assert np.allclose(run.times, ref.times, rtol=1e-12, atol=0)
     assert max(state_error(scene, run.final, scene, ref.final).values()) < 1e-9
     for p, q in zip(run.metrics, ref.metrics):
-        assert p["diameter"] == pytest.approx(q["diameter"], rel=1e-9)
+        assert p.diameter == pytest.approx(q.diameter, rel=1e-9)
 
 
 def test_extreme_scale_ratios_1e_6_1e_6_adaptive_refuses_early_naming_stiffness_F_1():
@@ -560,7 +561,7 @@ def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
     scene = load_scene(EXTREMES / scene_file)
     traj = simulate(scene)
     assert not traj.converged and traj.stationarity < 1e-10
-    assert traj.metrics[0]["groups"][0]["rotation_diameter"] >= 1.0
+    assert traj.metrics[0].groups[0].rotation_diameter >= 1.0
     code, msg = convergence_verdict(replace(scene, expect_convergence=True), traj.diameters[-1],
                                     traj.converged_at, traj.stationarity)
     assert code == 3 and "not consensus" in msg
@@ -592,11 +593,11 @@ def test_extreme_coincident_centroids_mixed_finite_zero_force_keeps_them_F_2(ord
     traj = simulate(scene, "adaptive", tolerance=1e-9) if method == "adaptive" else simulate(scene, method, 0.05)
     assert all_finite(traj)
     for met, st in zip(traj.metrics, traj.states):
-        assert met["group_separation"] == 0.0                 # the defined zero force: nothing moves them
+        assert met.group_separation == 0.0                 # the defined zero force: nothing moves them
         for gs in st.groups:
             assert np.all(gs.x == 0.0)
-    for g in traj.metrics[-1]["groups"]:                      # rotations still match inside each group
-        assert g["matching_diameter"] < 1e-6
+    for g in traj.metrics[-1].groups:                      # rotations still match inside each group
+        assert g.matching_diameter < 1e-6
 
 
 @pytest.mark.parametrize("order", [1, 2])
@@ -605,10 +606,10 @@ def test_extreme_coincident_centroids_mixed_any_asymmetry_separates_to_L_F_2(ord
     scene.initial.groups[0].x[0, 0] += 1e-12
     traj = simulate(scene, "rkmk4", 0.05)
     assert all_finite(traj)
-    assert traj.metrics[0]["group_separation"] == pytest.approx(0.25e-12, rel=1e-3)
-    assert traj.metrics[-1]["group_separation"] == pytest.approx(scene.model.L, abs=1e-6)
+    assert traj.metrics[0].group_separation == pytest.approx(0.25e-12, rel=1e-3)
+    assert traj.metrics[-1].group_separation == pytest.approx(scene.model.L, abs=1e-6)
     # it leaves at finite speed (the force tends to kappa_2 L, not 0, as |y - x| -> 0+)
-    t_sep = next(t for t, m in zip(traj.times, traj.metrics) if m["group_separation"] > 1.0)
+    t_sep = next(t for t, m in zip(traj.times, traj.metrics) if m.group_separation > 1.0)
     assert t_sep <= 5.0
 
 
@@ -620,8 +621,8 @@ def test_extreme_coincident_pairs_across_groups_finite_separate_to_L_F_2():
         scene = lib.coincident_pairs_scene(off)
         traj = simulate(scene, "rkmk4", 0.05)
         assert all_finite(traj)
-        assert traj.metrics[0]["group_separation"] < 1e-12
-        assert traj.metrics[-1]["group_separation"] == pytest.approx(3.0, abs=1e-3)
+        assert traj.metrics[0].group_separation < 1e-12
+        assert traj.metrics[-1].group_separation == pytest.approx(3.0, abs=1e-3)
 
 
 def test_extreme_coincident_centroids_at_1e9_same_as_at_origin_F_2():
@@ -715,7 +716,7 @@ def test_extreme_one_agent_per_group_mixed_separates_to_L_F_2():
                                    dict(one, name="b", shape="square", centroids={"points": [[0.5, 0.0]]})]})
     traj = simulate(scene, "rkmk4", 0.05)
     assert all_finite(traj) and traj.diameters[-1] == 0.0
-    assert traj.metrics[-1]["group_separation"] == pytest.approx(2.0, abs=1e-9)
+    assert traj.metrics[-1].group_separation == pytest.approx(2.0, abs=1e-9)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -68,8 +68,11 @@ def _core_own_steps(scene, tol):
 
     m = scene.model
     accepted = [scene.initial]
-    meth = AdaptiveLie(tol, max_steps=scene.integrator.max_steps)
-    meth.integrate(System(m), State(0.0, scene.initial.groups), [scene.t_end], on_step=accepted.append)
+    run = AdaptiveLie(tol, max_steps=scene.integrator.max_steps).solver(
+        System(m), State(0.0, scene.initial.groups), scene.t_end)
+    while run.status == "running":
+        run.step()
+        accepted.append(run.state)
     times = np.array([0.0] + [st.t for st in accepted[1:]])
     cents, mats, _w = state_arrays(scene, accepted)
     return times, vertices(cents, mats, m.groups[0].reference), mats

@@ -44,7 +44,7 @@ def large_n(v, order):
                          sc.model.groups[0].reference)
         return max(exact_diameter(verts[:, a, :]) for a in range(verts.shape[1]))
 
-    d0, dend = traj.metrics[0]["diameter"], traj.metrics[-1]["diameter"]
+    d0, dend = traj.metrics[0].diameter, traj.metrics[-1].diameter
     e0, eend = matching(traj.states[0]), matching(traj.final)
     worst = max(lib.defect(sc, s) for s in traj.states)
     row = (order, n, traj.steps, f"{d0:.3f}", f"{dend:.2e}", f"{traj.converged_at}",
@@ -65,7 +65,7 @@ def dim10(v, order):
     traj = _sim(sc, "rkmk4", 0.1)
     worst = max(lib.defect(sc, s) for s in traj.states)
     return Outcome(
-        f"orthogonality defect <= {worst:.1e}; diameter {traj.metrics[0]['diameter']:.2f} -> "
+        f"orthogonality defect <= {worst:.1e}; diameter {traj.metrics[0].diameter:.2f} -> "
         f"{traj.diameters[-1]:.1e}, converged at t = {traj.converged_at} ({traj.wall_time:.1f} s)",
         lib.finite(traj) and worst < 1e-12 and traj.converged)
 
@@ -97,9 +97,9 @@ def huge_coords(v, dim, order, mixed):
     far, near = lib.placed_scene(1e9, pa, pb, dim, order, **kw), lib.placed_scene(0.0, pa, pb, dim,
                                                                                   order, **kw)
     tf, tn = _sim(far, "rkmk4", 0.05), _sim(near, "rkmk4", 0.05)
-    diff = max(abs(gf["matching_diameter"] - gn["matching_diameter"])
-               for mf, mn in zip(tf.metrics, tn.metrics) for gf, gn in zip(mf["groups"],
-                                                                           mn["groups"]))
+    diff = max(abs(gf.matching_diameter - gn.matching_diameter)
+               for mf, mn in zip(tf.metrics, tn.metrics) for gf, gn in zip(mf.groups,
+                                                                           mn.groups))
     return Outcome(
         f"N = {size}{' + ' + str(size) if mixed else ''}: max diameter difference far - origin "
         f"over {len(tf.metrics)} samples = {diff:.1e} (shape size 1); D(t_end) = "
@@ -152,7 +152,7 @@ def d0_random(v, dim):
     for seed in seeds:
         traj = _sim(lib.scene(dim, 1, count=8, seed=seed, t_end=t_end, samples={"every": 10.0}),
                     "rkmk4", 0.1)
-        d0s.append(traj.metrics[0]["groups"][0]["rotation_diameter"])
+        d0s.append(traj.metrics[0].groups[0].rotation_diameter)
         conv += traj.converged
     return Outcome(
         f"{conv}/{len(seeds)} converge by t = {t_end:g}; D0 (rotation diameter) {min(d0s):.2f} .. "
@@ -167,7 +167,7 @@ def _coincident(v, order, at=(0.0, 0.0), pert=0.0):
 
 def coincident_at(v, order, at):
     traj = _coincident(v, order, at)
-    sep = max(m["group_separation"] for m in traj.metrics)
+    sep = max(m.group_separation for m in traj.metrics)
     return Outcome(f"finite; group separation stays {sep:g} (zero force at coincidence)",
                    lib.finite(traj) and sep == 0.0)
 
@@ -176,7 +176,7 @@ def coincident_asymmetry(v):
     rows, ok = [], True
     for pert in (1e-12,) if v.quick else (1e-15, 1e-12, 1e-6):
         traj = _coincident(v, 2, pert=pert)
-        seps = [m["group_separation"] for m in traj.metrics]
+        seps = [m.group_separation for m in traj.metrics]
         t1 = next((t for t, s in zip(traj.times, seps) if s > 1.0), None)
         rows.append((f"{pert:g}", f"{seps[0]:.1e}", f"{t1}", f"{seps[-1]:.6f}",
                      f"{traj.times[-1]:g}"))
@@ -189,7 +189,7 @@ def coincident_pairs(v):
     far = _sim(lib.coincident_pairs_scene(1e9), "rkmk4", 0.05)
     near = _sim(lib.coincident_pairs_scene(0.0), "rkmk4", 0.05)
     diff = max(abs(x - y) for x, y in zip(far.diameters, near.diameters))
-    seps = [t.metrics[-1]["group_separation"] for t in (far, near)]
+    seps = [t.metrics[-1].group_separation for t in (far, near)]
     ok = lib.finite(far) and lib.finite(near) and all(abs(x - 3.0) < 1e-3 for x in seps)
     return Outcome(
         f"each centroid of group a sits on one of group b (group centres coincide): round-off picks "

@@ -6,7 +6,6 @@ and checks the numbers against its own independent oracles.
 """
 
 import math
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -176,10 +175,9 @@ def collinear_scene(dim, verts, order=1, every=5.0):
 # measurements
 
 
-def refusal_limit(message):
-    """The limit a StabilityError names: the number after 'dt <' (None if it names none)."""
-    found = re.search(r"dt < ([0-9.eE+-]+)", message)
-    return float(found.group(1)) if found else None
+def refusal_limit(exc):
+    """The stable-step limit a StabilityError names (its ``limit`` field; None if none or no error)."""
+    return getattr(exc, "limit", None)
 
 
 def refusal(scene_, method, dt):
@@ -213,7 +211,7 @@ def finite(traj):
             for a in (gs.x, gs.v, gs.w, gs.rot):
                 if a is not None and not np.all(np.isfinite(np.asarray(a))):
                     return False
-    return all(np.isfinite(m["diameter"]) for m in traj.metrics)
+    return all(np.isfinite(m.diameter) for m in traj.metrics)
 
 
 def max_error(scene_a, a, scene_b, b):

@@ -132,10 +132,9 @@ def solve(scene, solver, times, flat=None):
 
 
 def refusal_status(exc):
-    """'refused (unstable): dt < ...' from a StabilityError's message."""
-    text = str(exc)
-    limit = text.split("limit here is ")[-1].split(" (")[0] if "limit here" in text else ""
-    return "refused (unstable)" + (f": {limit}" if limit else "")
+    """'refused (unstable): dt < ...' from a StabilityError's ``limit`` field."""
+    limit = getattr(exc, "limit", None)
+    return "refused (unstable)" + (f": dt < {limit:.3g}" if limit else "")
 
 
 def measure(solvers, scene, times, repeats, log, warmup=False):

@@ -5,15 +5,17 @@
     traj.diameters[-1], traj.final         # matching diameter, final state
 
 The ROS agents, the monitor and the benchmarks use exactly these pieces:
-``System`` (model + mean field), the integrator registry ``METHODS``,
-``drive`` (one step) and ``ensemble_metrics``.
+``System`` (model + mean field, ``lohe_torque``), the integrator registry
+``METHODS`` (every method follows ``solver.Method``), ``drive`` (one step) and
+``ensemble_metrics`` (an ``EnsembleMetrics`` record).
 """
 
 from .decompose import decompose
-from .errors import ParameterError, PolymatchError, SceneError, ShapeError, StabilityError
+from .errors import (ParameterError, PolymatchError, SceneError, ShapeError, StabilityError,
+                     StepLimitError)
 from .integrators import METHODS, check_stability, get_method, max_stable_dt
-from .metrics import ensemble_metrics, point_set_diameter
-from .model import Coupling, GroupState, Model, State, System
+from .metrics import EnsembleMetrics, GroupMetrics, ensemble_metrics, point_set_diameter
+from .model import Coupling, GroupState, Model, State, System, lohe_torque
 from .scene import Scene, load_scene
 from .simulate import Trajectory, drive, explain, plan, recommend, simulate, with_representation
 
@@ -27,8 +29,10 @@ def __getattr__(name):
 
 
 __all__ = [
-    "AdaptiveLie", "Coupling", "GroupState", "METHODS", "Model", "ParameterError", "PolymatchError",
-    "Scene", "SceneError", "ShapeError", "StabilityError", "State", "System", "Trajectory", "drive",
-    "check_stability", "decompose", "ensemble_metrics", "explain", "get_method", "load_scene",
-    "max_stable_dt", "plan", "point_set_diameter", "recommend", "simulate", "with_representation",
+    "AdaptiveLie", "Coupling", "EnsembleMetrics", "GroupMetrics", "GroupState", "METHODS",
+    "Model", "ParameterError", "PolymatchError", "Scene", "SceneError", "ShapeError",
+    "StabilityError", "State", "StepLimitError", "System", "Trajectory", "check_stability",
+    "decompose", "drive", "ensemble_metrics", "explain", "get_method", "load_scene",
+    "lohe_torque", "max_stable_dt", "plan", "point_set_diameter", "recommend", "simulate",
+    "with_representation",
 ]

@@ -14,19 +14,35 @@ vector, so a stage costs one matrix-vector product plus the right-hand side.
 Decoupled centroids follow their exact flow (Proposition 2.1): they neither
 cost evaluations nor limit the step.  Centralised only: a distributed ensemble
 cannot agree on a step size without an extra round per step.
+
+``AdaptiveLie`` is the method (tableau, tolerances, step cap); ``AdaptiveSolver``
+is one run with the contract of ``solver.FixedStepSolver``: ``step()``, ``status``,
+``nsteps``/``nfev`` (and ``nrejected``).  ``max_steps`` bounds accepted and rejected
+steps together.
 """
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.integrate import DOP853
 
-from .errors import PolymatchError
-from .integrators import MethodInfo, _exact_centroids, rk_stability, test_matrices
-from .model import GroupState, State
+from .errors import PolymatchError, StepLimitError
+from .model import GroupState, Model, State, System
+from .rk import rk_stability
+from .solver import FINISHED, RUNNING, MethodInfo, exact_centroids, with_centroids
+from .stability import test_matrices
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 N_STAGES = DOP853.n_stages
+#: steps below this (relative to max(1, |t|)) are round-off: the scene is too stiff
+STEP_FLOOR = 1e-12
+#: a step that ends this close (relative to max(1, |t_end|)) to t_end ends at t_end
+END_RTOL = 1e-13
+#: the step cap is this fraction of DOP853's linear stability limit
+CAP_FRACTION = 0.9
+#: the smallest tolerance worth asking for in double precision (scipy's floor for rtol)
+TOLERANCE_FLOOR = 100 * np.finfo(float).eps
 
 
 class _Chart:
@@ -60,7 +76,7 @@ class _Chart:
         self.base_size = np.where(self.is_rot, 1.0, np.abs(self.base))   # rotations have unit size
 
     def state(self, vec):
-        """(State at psi(vec) . y, per-group Theta) — the stage the right-hand side is evaluated at."""
+        """(State at psi(vec) . y, per-group Theta): the stage the right-hand side sees."""
         grp = self.system.group
         groups = list(self.y.groups)
         thetas = [None] * len(groups)
@@ -97,27 +113,26 @@ class _Chart:
 
 
 class AdaptiveLie:
-    info = MethodInfo("adaptive", DOP853.order, N_STAGES, 0, "adaptive", (1, 2),
-                      "DOP853 (scipy's tableau, step control, dense output) in Cayley/angle coordinates, "
-                      "re-centred every step; centralised only")
+    """DOP853-Lie: the method (scipy's tableau, tolerances, step cap); runs are ``solver``."""
 
-    def __init__(self, rtol, atol=None, max_steps=10_000_000):
+    info = MethodInfo("adaptive", DOP853.order, N_STAGES, 0, "adaptive", (1, 2),
+                      "DOP853 (scipy's tableau, step control, dense output) in Cayley/angle "
+                      "coordinates, re-centred every step; centralised only")
+
+    def __init__(self, rtol: float, atol: float | None = None, max_steps: int = 10_000_000):
         self.rtol = float(rtol)
         self.atol = float(rtol if atol is None else atol)
         self.max_steps = int(max_steps)
         self.error_exponent = -1.0 / (DOP853.error_estimator_order + 1)
-        self.nfev = 0
-        self.steps = 0
-        self.rejected = 0
         self.A, self.B = DOP853.A[:N_STAGES, :N_STAGES], DOP853.B
-        self._rows = [np.ascontiguousarray(self.A[s, :s]) for s in range(1, N_STAGES)]
+        self.rows = [np.ascontiguousarray(self.A[s, :s]) for s in range(1, N_STAGES)]
         self.E3, self.E5 = DOP853.E3, DOP853.E5
 
     @property
-    def name(self):
+    def name(self) -> str:
         return self.info.name
 
-    def step_cap(self, model):
+    def step_cap(self, model: Model) -> tuple[float, str]:
         """0.9 x the largest h at which DOP853 is linearly stable on the model's test matrices.
 
         Near consensus the error estimate lets the step grow until it hovers at the
@@ -138,9 +153,64 @@ class AdaptiveLie:
                     lo = mid
                 else:
                     hi = mid
-            if 0.9 * lo < best[0]:
-                best = (0.9 * lo, cause)
+            if CAP_FRACTION * lo < best[0]:
+                best = (CAP_FRACTION * lo, cause)
         return best
+
+    def solver(self, system: System, state: State, t_end: float, samples: Sequence[float] = (),
+               dt: float | None = None) -> "AdaptiveSolver":
+        """A run from ``state`` to t_end (the latest of t_end and the samples); dt is unused."""
+        return AdaptiveSolver(self, system, state, t_end, samples)
+
+
+class AdaptiveSolver:
+    """One adaptive run: ``step()`` takes one accepted step and returns the sample states in it."""
+
+    def __init__(self, method: AdaptiveLie, system: System, state: State, t_end: float,
+                 samples: Sequence[float] = ()):
+        self.method, self.system, self.state = method, system, state
+        times = np.union1d(np.asarray(samples, dtype=float), [float(t_end)])
+        self.pending = [float(t) for t in times if t > state.t]
+        self.nsteps = self.nfev = self.nrejected = 0
+        self.status = RUNNING if self.pending else FINISHED
+        if not self.pending:
+            return
+        self.t_end = self.pending[-1]
+        self.cap = self._check_stiffness()
+        self.coupling = system.couple(state.groups)
+        self.chart = _Chart(system, state)
+        self.k0 = self.chart.pack(system.rates(state, self.coupling))
+        self.nfev += 1
+        with np.errstate(over="ignore", invalid="ignore"):
+            self.h = min(self._initial_step(self.chart, self.k0, self.t_end - state.t), self.cap)
+        if not (math.isfinite(self.h) and self.h > 0):
+            self._beyond_precision()
+
+    def _check_stiffness(self):
+        """The step cap; refuse before stepping when max_steps cannot reach t_end under it."""
+        meth, y = self.method, self.state
+        cap, cause = meth.step_cap(self.system.model)
+        needed = (self.t_end - y.t) / cap
+        if needed > meth.max_steps:
+            raise PolymatchError(
+                f"adaptive: the scene is stiff ({cause}): an explicit method needs at least "
+                f"{needed:.2g} steps to reach t = {self.t_end:g} (max_steps = {meth.max_steps}); "
+                "use etd2 for stiff damping, a shorter t_end, or a larger integrator.max_steps")
+        return cap
+
+    def _beyond_precision(self):
+        raise PolymatchError(
+            f"adaptive: tolerance {self.method.rtol:g} is beyond double precision (no step "
+            f"meets it at t = {self.state.t:.6g}); use a tolerance of at least "
+            f"{TOLERANCE_FLOOR:.1g} or a fixed dt")
+
+    def _count_attempt(self):
+        if self.nsteps + self.nrejected >= self.method.max_steps:
+            raise StepLimitError(
+                f"adaptive: max_steps = {self.method.max_steps} steps (accepted and rejected) "
+                f"used up at t = {self.state.t:.6g} of {self.t_end:g}; raise "
+                "integrator.max_steps, loosen the tolerance or use a fixed dt")
+
 
     def _fun(self, chart, vec):
         stage, thetas = chart.state(vec)
@@ -150,8 +220,9 @@ class AdaptiveLie:
         return chart.pack(system.in_chart(raw, thetas)), raw, stage
 
     def _error_norm(self, K, h, scale):
-        err5 = (K.T @ self.E5) / scale
-        err3 = (K.T @ self.E3) / scale
+        meth = self.method
+        err5 = (K.T @ meth.E5) / scale
+        err3 = (K.T @ meth.E3) / scale
         n5, n3 = float(err5 @ err5), float(err3 @ err3)
         if n5 == 0.0 and n3 == 0.0:
             return 0.0
@@ -160,16 +231,16 @@ class AdaptiveLie:
     def _attempt(self, chart, h, k0):
         K = np.empty((N_STAGES + 1, chart.n))
         K[0] = k0
-        for s, row in enumerate(self._rows, start=1):
+        for s, row in enumerate(self.method.rows, start=1):
             K[s] = self._fun(chart, (row @ K[:s]) * h)[0]
-        theta = (K[:N_STAGES].T @ self.B) * h
+        theta = (K[:N_STAGES].T @ self.method.B) * h
         K[N_STAGES], raw_new, y_new = self._fun(chart, theta)
         new_size = np.where(chart.is_rot, 1.0, np.abs(chart.base + theta))
-        scale = self.atol + self.rtol * np.maximum(chart.base_size, new_size)
+        scale = self.method.atol + self.method.rtol * np.maximum(chart.base_size, new_size)
         return theta, K, raw_new, y_new, self._error_norm(K, h, scale)
 
     def _initial_step(self, chart, k0, span):
-        scale = self.atol + self.rtol * chart.base_size
+        scale = self.method.atol + self.method.rtol * chart.base_size
         d0 = float(np.sqrt(np.mean((chart.base_size / scale) ** 2)))
         d1 = float(np.sqrt(np.mean((k0 / scale) ** 2)))
         h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
@@ -182,8 +253,9 @@ class AdaptiveLie:
             h1 = (0.01 / max(d1, d2)) ** (1.0 / (DOP853.order + 1))
         return min(100 * h0, h1, span)
 
-    def _dense(self, chart, K, h, theta, k_end, y, coupling, times, on_sample):
-        """Interpolate (DOP853's continuous extension in the chart) at the sample times in the step."""
+    def _dense(self, K, h, theta, times):
+        """States at ``times`` inside the step (DOP853's continuous extension in the chart)."""
+        chart, y = self.chart, self.state
         Kx = np.empty((N_STAGES + 1 + len(DOP853.C_EXTRA), chart.n))
         Kx[:N_STAGES + 1] = K
         for s, (a, c) in enumerate(zip(DOP853.A_EXTRA, DOP853.C_EXTRA), start=N_STAGES + 1):
@@ -191,89 +263,69 @@ class AdaptiveLie:
         F = np.empty((DOP853.D.shape[0] + 3, chart.n))
         F[0] = theta
         F[1] = h * Kx[0] - theta
-        F[2] = 2 * theta - h * (k_end + Kx[0])
+        F[2] = 2 * theta - h * (K[N_STAGES] + Kx[0])
         F[3:] = h * (DOP853.D @ Kx)
-        system = chart.system
+        out = []
         for t in times:
             x = (t - y.t) / h
             val = np.zeros(chart.n)
             for i, f in enumerate(reversed(F)):
                 val += f
                 val *= x if i % 2 == 0 else 1 - x
-            st, _ = chart.state(val)
-            if system.model.centroids_exact:
-                cents = _exact_centroids(system, y, coupling, t - y.t)
-                st = State(t, tuple(gs if c is None else GroupState(c[0], gs.rot, c[1], gs.w)
-                                    for gs, c in zip(st.groups, _present(system, st, cents))))
-            on_sample(State(t, st.groups))
+            out.append(self._with_exact_centroids(chart.state(val)[0], t - y.t, t))
+        return out
 
-    # -- driver --------------------------------------------------------------------
-    def integrate(self, system, y, times, on_sample=None, on_step=None):
-        """Advance y to the last of the increasing ``times``.
+    def _with_exact_centroids(self, st, dt, t):
+        """``st`` at time t with decoupled centroids on their exact flow over dt (Prop. 2.1)."""
+        if not self.system.model.centroids_exact:
+            return State(t, st.groups)
+        cents = exact_centroids(self.system, self.state, self.coupling, dt)
+        return State(t, with_centroids(st.groups, cents))
 
-        ``on_sample(state)`` is called at each of ``times`` (interpolated inside a step),
-        ``on_step(state)`` after every accepted step.
-        """
-        times = [float(t) for t in times if t > y.t]
-        if not times:
-            return y
-        t_end = times[-1]
-        cap, cause = self.step_cap(system.model)
-        if (t_end - y.t) / cap > self.max_steps:
-            raise PolymatchError(f"adaptive: the scene is stiff ({cause}): an explicit method needs at least "
-                                 f"{(t_end - y.t) / cap:.2g} steps to reach t = {t_end:g} (max_steps = "
-                                 f"{self.max_steps}); use etd2 for stiff damping, a shorter t_end, or a "
-                                 f"larger integrator.max_steps")
-        coupling = system.couple(y.groups)
-        chart = _Chart(system, y)
-        k0 = chart.pack(system.rates(y, coupling))
-        self.nfev += 1
-        h = min(self._initial_step(chart, k0, t_end - y.t), cap)
-        pending = list(times)
-        while y.t < t_end:
-            if self.steps >= self.max_steps:
-                raise PolymatchError(f"adaptive: {self.max_steps} steps reached at t = {y.t:.6g} of "
-                                     f"{t_end:g}; raise integrator.max_steps or use a fixed dt")
-            step = min(h, t_end - y.t)
-            rejected = False
-            while True:
-                if step < 1e-12 * max(1.0, abs(y.t)):
-                    raise PolymatchError(f"adaptive: step size fell to {step:.3g} at t = {y.t:.6g}; the "
-                                         "scene is too stiff for an explicit method at this tolerance")
-                theta, K, raw_new, y_new, err = self._attempt(chart, step, k0)
-                if err < 1.0:
-                    factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR, SAFETY * err ** self.error_exponent)
-                    if rejected:
-                        factor = min(1.0, factor)
-                    break
-                self.rejected += 1
-                rejected = True
-                step *= max(MIN_FACTOR, SAFETY * err ** self.error_exponent)
-            self.steps += 1
-            reached = t_end if y.t + step >= t_end - 1e-13 * max(1.0, abs(t_end)) else y.t + step
-            inside = [t for t in pending if t < reached]
-            pending = [t for t in pending if t >= reached]
-            if inside and on_sample is not None:
-                self._dense(chart, K, step, theta, K[N_STAGES], y, coupling, inside, on_sample)
-            if system.model.centroids_exact:
-                cents = _exact_centroids(system, y, coupling, step)
-                y_new = State(reached, tuple(gs if c is None else GroupState(c[0], gs.rot, c[1], gs.w)
-                                             for gs, c in zip(y_new.groups, _present(system, y_new, cents))))
-            else:
-                y_new = State(reached, y_new.groups)
-            y = y_new
-            if on_step is not None:
-                on_step(y)
-            coupling = system.couple(y.groups)
-            chart = _Chart(system, y)
-            k0 = chart.pack(raw_new)               # FSAL: raw rates at y_new are the new chart's k0
-            h = min(step * factor, cap)
-            if pending and pending[0] == reached:
-                pending.pop(0)
-                if on_sample is not None:
-                    on_sample(y)
-        return y
+    def _accepted_attempt(self):
+        """(step, attempt result, growth factor) of the first attempt the error test accepts."""
+        meth, y = self.method, self.state
+        step = min(self.h, self.t_end - y.t)
+        rejected = False
+        while True:
+            self._count_attempt()
+            if not step >= STEP_FLOOR * max(1.0, abs(y.t)):
+                if meth.rtol < TOLERANCE_FLOOR:
+                    self._beyond_precision()
+                raise PolymatchError(f"adaptive: step size fell to {step:.3g} at t = {y.t:.6g}; "
+                                     "the scene is too stiff for an explicit method at this "
+                                     "tolerance")
+            with np.errstate(over="ignore", invalid="ignore"):
+                result = self._attempt(self.chart, step, self.k0)
+            err = result[-1]
+            if math.isnan(err):
+                self._beyond_precision()
+            if err < 1.0:
+                factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR,
+                                                         SAFETY * err ** meth.error_exponent)
+                return step, result, (min(1.0, factor) if rejected else factor)
+            self.nrejected += 1
+            rejected = True
+            step *= max(MIN_FACTOR, SAFETY * err ** meth.error_exponent)
 
-
-def _present(system, state, cents):
-    return [None if gs is None or system.group.count(gs.rot) == 0 else c for gs, c in zip(state.groups, cents)]
+    def step(self) -> list[State]:
+        """Take one accepted step; return the states at the sample times it reached."""
+        y = self.state
+        step, (theta, K, raw_new, y_new, _), factor = self._accepted_attempt()
+        self.nsteps += 1
+        near_end = self.t_end - END_RTOL * max(1.0, abs(self.t_end))
+        reached = self.t_end if y.t + step >= near_end else y.t + step
+        inside = [t for t in self.pending if t < reached]
+        self.pending = [t for t in self.pending if t >= reached]
+        out = self._dense(K, step, theta, inside) if inside else []
+        self.state = y = self._with_exact_centroids(y_new, step, reached)
+        self.coupling = self.system.couple(y.groups)
+        self.chart = _Chart(self.system, y)
+        self.k0 = self.chart.pack(raw_new)       # FSAL: raw rates at y_new are the new chart's k0
+        self.h = min(step * factor, self.cap)
+        if self.pending and self.pending[0] == reached:
+            self.pending.pop(0)
+            out.append(y)
+        if reached >= self.t_end:
+            self.status = FINISHED
+        return out

@@ -161,9 +161,3 @@ def _explain_mismatch(name, q, ref, m, similar, mismatch, allowed, rank):
     kind = "similar" if similar else "congruent"
     raise ShapeError(f"{name} is not {kind} to the reference: max vertex mismatch {mismatch:.3g} "
                      f"exceeds the tolerance {allowed:.3g}")
-
-
-def compose_vertices(centroids, rotations, reference, scales=None):
-    """x^i_a = xbar^i + s^i O^i r_a for (N, d) centroids and (N, d, d) rotations: (N, n, d)."""
-    s = np.ones(len(centroids)) if scales is None else np.asarray(scales)
-    return centroids[:, None, :] + s[:, None, None] * np.einsum("nij,aj->nai", rotations, reference)

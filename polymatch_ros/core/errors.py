@@ -22,9 +22,24 @@ class ShapeError(SceneError):
 
 
 class StabilityError(PolymatchError):
-    """A fixed-step explicit method asked to run beyond its linear stability limit."""
+    """A fixed-step method refused for a scene: beyond its linear stability limit, no stable
+    step at all (``limit == 0``), the wrong model order, or an unknown method name.
+
+    The message is for people; readers use the fields: ``method`` (name), ``dt`` (the step
+    asked for), ``limit`` (the largest stable step, 0 when there is none, None when the
+    refusal is not about stability) and ``cause`` (what makes the scene stiff).
+    """
 
     exit_code = 2
+
+    def __init__(self, message: str, *, method: str | None = None, dt: float | None = None,
+                 limit: float | None = None, cause: str | None = None):
+        super().__init__(message)
+        self.method, self.dt, self.limit, self.cause = method, dt, limit, cause
+
+
+class StepLimitError(PolymatchError):
+    """An adaptive run used up integrator.max_steps (accepted + rejected steps) before t_end."""
 
 
 class ParameterError(PolymatchError):

@@ -19,10 +19,16 @@ Per group g:
   orthogonality       max_i |O_i^T O_i - I|_F                          (Lemma 2.1)
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from .model import GroupState, Model, State, System
+from .so import RotationGroup
 
-def point_set_diameter(points, bound=None, block=256, col_block=2048):
+
+def point_set_diameter(points: np.ndarray, bound: float | None = None, block: int = 256,
+                       col_block: int = 2048) -> float:
     """max_{i,j} |p_i - p_j| for points (N, k), exactly.
 
     Points are centred and sorted by radius r_i; a pair can only beat the best
@@ -73,21 +79,13 @@ def point_set_diameter(points, bound=None, block=256, col_block=2048):
     return float(np.sqrt(diff @ diff))
 
 
-def max_rotation_distance(d):
+def max_rotation_distance(d: int) -> float:
     """max |O - P|_F over SO(d): 2 sqrt(d) for even d (P = -O), 2 sqrt(d - 1) for odd d."""
     return 2.0 * np.sqrt(d if d % 2 == 0 else d - 1)
 
 
-def vertex_points(grp, gs, reference, scales=None):
-    """(n, N, d) vertex positions xbar_i + s_i O_i r_a, one array per vertex a."""
-    out = []
-    for r in reference:
-        rot = grp.rotate(gs.rot, r)
-        out.append(gs.x + (rot if scales is None else scales[:, None] * rot))
-    return out
-
-
-def vertices(centroids, mats, reference, scales=None):
+def vertices(centroids: np.ndarray, mats: np.ndarray, reference: np.ndarray,
+             scales: np.ndarray | None = None) -> np.ndarray:
     """Vertices x^i_a = xbar_i + s_i O_i r_a for arrays with any leading axes.
 
     ``centroids`` (..., d), ``mats`` (..., d, d), ``reference`` (n_a, d) and optional
@@ -99,7 +97,7 @@ def vertices(centroids, mats, reference, scales=None):
     return np.asarray(centroids)[..., None, :] + rotated
 
 
-def orthogonality(mats):
+def orthogonality(mats: np.ndarray) -> float:
     """max over all leading axes of |O^T O - I|_F: the defect Lemma 2.1 says stays zero."""
     mats = np.asarray(mats, dtype=float)
     if mats.size == 0:
@@ -108,14 +106,14 @@ def orthogonality(mats):
     return float(np.linalg.norm(gram - np.eye(mats.shape[-1]), axis=(-2, -1)).max())
 
 
-def orthogonality_defect(grp, g):
+def orthogonality_defect(grp: RotationGroup, g: np.ndarray) -> float:
     """Lemma 2.1's defect of one group's rotations in ``grp``'s representation."""
     if grp.name == "angle":           # angles are rotations by construction
         return 0.0
     return orthogonality(grp.to_matrices(g))
 
 
-def rotation_energy(model, gs):
+def rotation_energy(model: Model, gs: GroupState) -> float:
     """E of Proposition 2.2 for one group (kinetic part only for the second-order model)."""
     grp = model.rotations
     flat = grp.flat(gs.rot)
@@ -130,38 +128,62 @@ def rotation_energy(model, gs):
     return kinetic + potential
 
 
-def group_metrics(model, gi, gs):
+@dataclass(frozen=True)
+class GroupMetrics:
+    """One group's diameters, energy and orthogonality defect (see the module docstring)."""
+
+    centroid_diameter: float
+    rotation_diameter: float
+    matching_diameter: float
+    vertex_diameter: float
+    energy: float
+    orthogonality: float
+
+
+@dataclass(frozen=True)
+class EnsembleMetrics:
+    """Per-group metrics and the ensemble's headline diameter (max matching diameter).
+
+    ``group_separation``: smallest distance between group centres (F-2 only, else None).
+    """
+
+    groups: tuple[GroupMetrics, ...]
+    diameter: float
+    group_separation: float | None = None
+
+
+def _vertex_diameter(grp: RotationGroup, gs: GroupState, reference: np.ndarray,
+                     scales: np.ndarray | None = None) -> float:
+    """max over vertices a of the diameter of {x^i_a}_i (Theorems 4.1, 4.2)."""
+    pts = vertices(gs.x, grp.to_matrices(gs.rot), reference, scales)
+    return max(point_set_diameter(np.ascontiguousarray(pts[:, a])) for a in range(len(reference)))
+
+
+def group_metrics(model: Model, gi: int, gs: GroupState) -> GroupMetrics:
+    """Metrics of group gi; similar groups are matched at their mean scale (F-1)."""
     grp = model.rotations
     g = model.groups[gi]
     mean_scale = None if g.scales is None else float(np.mean(g.scales))
     ref = g.reference if mean_scale is None else g.reference * mean_scale
-    matching = max(point_set_diameter(p) for p in vertex_points(grp, gs, ref))
-    if g.scales is None:
-        vertex = matching
-    else:
-        vertex = max(point_set_diameter(p) for p in vertex_points(grp, gs, g.reference, g.scales))
-    return {
-        "centroid_diameter": point_set_diameter(gs.x),
-        "rotation_diameter": point_set_diameter(grp.flat(gs.rot), bound=max_rotation_distance(grp.dim)),
-        "matching_diameter": matching,
-        "vertex_diameter": vertex,
-        "energy": rotation_energy(model, gs),
-        "orthogonality": orthogonality_defect(grp, gs.rot),
-    }
+    matching = _vertex_diameter(grp, gs, ref)
+    vertex = matching if g.scales is None else _vertex_diameter(grp, gs, g.reference, g.scales)
+    rotation = point_set_diameter(grp.flat(gs.rot), bound=max_rotation_distance(grp.dim))
+    return GroupMetrics(point_set_diameter(gs.x), rotation, matching, vertex,
+                        rotation_energy(model, gs), orthogonality_defect(grp, gs.rot))
 
 
-def ensemble_metrics(model, state):
-    """Per-group metrics and the ensemble's headline diameter (max matching diameter over groups)."""
-    groups = [group_metrics(model, gi, gs) for gi, gs in enumerate(state.groups)]
-    out = {"groups": groups, "diameter": max(m["matching_diameter"] for m in groups)}
+def ensemble_metrics(model: Model, state: State) -> EnsembleMetrics:
+    """Per-group metrics and the headline diameter (max matching diameter over groups)."""
+    groups = tuple(group_metrics(model, gi, gs) for gi, gs in enumerate(state.groups))
+    separation = None
     if model.inter_group:
         means = [gs.x.mean(axis=0) for gs in state.groups]
-        out["group_separation"] = min(float(np.linalg.norm(a - b))
-                                      for i, a in enumerate(means) for b in means[i + 1:])
-    return out
+        separation = min(float(np.linalg.norm(a - b))
+                         for i, a in enumerate(means) for b in means[i + 1:])
+    return EnsembleMetrics(groups, max(m.matching_diameter for m in groups), separation)
 
 
-def stationarity(system, state):
+def stationarity(system: System, state: State) -> float:
     """max_i |W_i| of the first-order rotation field at ``state``: ~0 at any equilibrium.
 
     Used to tell a non-consensus equilibrium (antipodal, splay) from slow convergence.

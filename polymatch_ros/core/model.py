@@ -16,10 +16,10 @@ with S = sum_k O_k (the mean field: O(N d^3) instead of O(N^2 d^3)).
            generalised to any number of groups by summing over every other group h with
            weight kappa_2 / N_h.
 
+``lohe_torque`` is the one assembly of the rotation coupling (A-1)/(A-2)/(F-1).
 Centroids never couple to rotations, so centroid and rotation parts are
-evaluated separately.  Inside one group without an inter-group potential the
-centroid equations are linear and ``CentroidFlow`` solves them exactly
-(Proposition 2.1).
+evaluated separately (``centroids``: the exact flow of Proposition 2.1 and the
+F-2 force).
 
 Every quantity an agent needs from the others is collected by ``System.couple``
 from an *ensemble* (full group arrays in agent-index order).  The centralised
@@ -27,12 +27,19 @@ simulator passes its own arrays; a ROS agent passes the arrays it assembled
 from its peers' messages.  Both then run the same code.
 """
 
-from dataclasses import dataclass, field, replace
+from collections.abc import Generator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from .centroids import CentroidFlow, pair_force
 from .errors import SceneError
 from .so import RotationGroup
+from .so.base import Array, MeanField
+
+__all__ = ["Coupling", "CentroidFlow", "Group", "GroupCoupling", "GroupState", "Model", "Request",
+           "State", "System", "lohe_torque", "pair_force", "validate_model"]
 
 
 @dataclass(frozen=True)
@@ -43,11 +50,11 @@ class Group:
     size: int                      # N_g
     reference: np.ndarray          # (n, d) centred r_a
     edges: tuple
-    scales: np.ndarray = None      # (N_g,) s_i for similar ensembles (F-1); None = congruent
+    scales: np.ndarray | None = None   # (N_g,) s_i for similar ensembles (F-1); None = congruent
     start: int = 0                 # global index of the group's first agent
 
     @property
-    def indices(self):
+    def indices(self) -> range:
         return range(self.start, self.start + self.size)
 
 
@@ -60,7 +67,7 @@ class Model:
     kappa: float
     gamma: float
     mass: float
-    groups: tuple
+    groups: tuple[Group, ...]
     rotations: RotationGroup
     kappa_2: float = 0.0
     L: float = 0.0
@@ -69,20 +76,20 @@ class Model:
     centroids: str = "exact"
 
     @property
-    def n_agents(self):
+    def n_agents(self) -> int:
         return sum(g.size for g in self.groups)
 
     @property
-    def inter_group(self):
+    def inter_group(self) -> bool:
         """True when the F-2 inter-group potential is active."""
         return self.kappa_2 != 0.0 and len(self.groups) > 1
 
     @property
-    def centroids_exact(self):
+    def centroids_exact(self) -> bool:
         """Centroids decouple into linear consensus per group: solved in closed form."""
         return not self.inter_group and self.centroids == "exact"
 
-    def group_of(self, agent):
+    def group_of(self, agent: int) -> tuple[int, int]:
         for gi, g in enumerate(self.groups):
             if g.start <= agent < g.start + g.size:
                 return gi, agent - g.start
@@ -94,9 +101,9 @@ class GroupState:
     """Rows of one group: centroid offsets x (n, d), rotations, and velocities (second order)."""
 
     x: np.ndarray
-    rot: object
-    v: np.ndarray = None
-    w: object = None
+    rot: Array
+    v: np.ndarray | None = None
+    w: Array | None = None
 
 
 @dataclass(slots=True)
@@ -108,8 +115,8 @@ class State:
     """
 
     t: float
-    groups: tuple
-    coupling: object = field(default=None, repr=False)
+    groups: tuple[GroupState | None, ...]
+    coupling: "Coupling | None" = field(default=None, repr=False)
 
 
 @dataclass(slots=True)
@@ -118,116 +125,39 @@ class Request:
 
     stage: State
     boundary: bool
-    fields: tuple
+    fields: tuple[str, ...]
 
 
 @dataclass(slots=True)
 class GroupCoupling:
     """What agent i needs from its group: S, N, and the centroid mean (and mean velocity)."""
 
-    s: object
+    s: MeanField
     n: int
-    mean_x: np.ndarray = None
-    mean_v: np.ndarray = None
+    mean_x: np.ndarray | None = None
+    mean_v: np.ndarray | None = None
 
 
 @dataclass(slots=True)
 class Coupling:
-    groups: tuple
-    centroids: tuple = None        # every group's full centroid array (F-2 only)
+    """The mean field of every group at one stage (``System.couple``)."""
+
+    groups: tuple[GroupCoupling | None, ...]
+    centroids: tuple | None = None     # every group's full centroid array (F-2 only)
 
 
-class CentroidFlow:
-    """Exact flow of m x'' = -gamma x' + kappa (mu - x) over a step h (Proposition 2.1).
+def lohe_torque(group: RotationGroup, rot: Array, coupling: GroupCoupling, gain: float,
+                inv_scales: np.ndarray | None = None) -> Array:
+    """gain/(2N) (S O_i^T - O_i S^T) [/ s_i] for every rotation: the package's one Lohe torque.
 
-    The mean mu moves by its own momentum (kappa = 0 mode), each deviation
-    x_i - mu by the damped oscillator with stiffness kappa.  For m = 0 the
-    deviation decays as exp(-kappa h / gamma) and mu is constant.  Formulas are
-    written with phi_1(z) = expm1(z)/z so they stay accurate for m -> 0, near
-    critical damping, and for gamma = 0.
+    With gain = kappa it is the torque of the second-order model (A-1); with
+    gain = kappa/gamma it is W_i of the first-order model (A-2).  S is the group's mean
+    field (sum_k s_k O_k under F-1) and ``inv_scales`` the local 1/s_i (F-1 weights).
     """
-
-    def __init__(self, mass, gamma, kappa):
-        self.mass, self.gamma, self.kappa = float(mass), float(gamma), float(kappa)
-        self._cache = {}
-
-    @staticmethod
-    def _roots(m, gamma, k):
-        """Roots of m l^2 + gamma l + k = 0, computed without cancellation."""
-        disc = gamma * gamma - 4.0 * m * k
-        if disc >= 0:
-            sq = np.sqrt(disc)
-            q = -0.5 * (gamma + sq)
-            fast = q / m
-            slow = k / q if q != 0 else 0.0
-            return complex(fast), complex(slow)
-        sq = np.sqrt(-disc)
-        return complex(-gamma, sq) / (2 * m), complex(-gamma, -sq) / (2 * m)
-
-    def _matrix(self, k, h):
-        m, gamma = self.mass, self.gamma
-        l1, l2 = self._roots(m, gamma, k)
-        delta = l1 - l2
-        e1, e2 = np.exp(l1 * h), np.exp(l2 * h)
-        z = delta * h
-        phi1 = np.expm1(z) / z if abs(z) > 1e-12 else 1.0 + z / 2
-        p = h * e2 * phi1                    # (e1 - e2) / (l1 - l2)
-        if abs(z) > 1.0:                     # well separated roots: no cancellation
-            xx = (l1 * e2 - l2 * e1) / delta
-            vv = (l1 * e1 - l2 * e2) / delta
-        else:
-            xx = e2 - l2 * p
-            vv = e2 + l1 * p
-        vx = -(k / m) * p
-        return np.array([[xx, p], [vx, vv]]).real
-
-    def propagator(self, h):
-        """(mean 2x2, deviation 2x2) for the second-order model; scalars for the first."""
-        key = float(h)
-        if key not in self._cache:
-            if self.mass == 0.0:
-                self._cache[key] = (1.0, float(np.exp(-self.kappa * h / self.gamma)))
-            else:
-                self._cache[key] = (self._matrix(0.0, h), self._matrix(self.kappa, h))
-            if len(self._cache) > 64:
-                self._cache.pop(next(iter(self._cache)))
-        return self._cache[key]
-
-    def advance(self, x, v, mean_x, mean_v, h):
-        """New (x, v) of the given rows, from the group means at the start of the step."""
-        p0, pk = self.propagator(h)
-        dx = x - mean_x
-        if self.mass == 0.0:
-            return mean_x + pk * dx, None
-        dv = v - mean_v
-        mx = p0[0, 0] * mean_x + p0[0, 1] * mean_v
-        mv = p0[1, 0] * mean_x + p0[1, 1] * mean_v
-        return (mx + pk[0, 0] * dx + pk[0, 1] * dv,
-                mv + pk[1, 0] * dx + pk[1, 1] * dv)
-
-
-def pair_force(x, y, kappa_2, L, chunk=1 << 20):
-    """F-2 force on each row of x from the centroids y of another group (N_y = len(y)).
-
-        F_i = kappa_2 / N_y  sum_l (|y_l - x_i| - L) (y_l - x_i) / |y_l - x_i|
-
-    which is -grad_x of (kappa_2 / N_y) sum_l V(x_i, y_l).  At exactly coincident
-    centroids the direction is undefined (the paper's force is 0/0); we take the
-    force of such a pair to be zero, the average of the force over all directions
-    of approach.  It is finite everywhere, never NaN, and the pair separates as
-    soon as any other agent moves either centroid.
-    """
-    out = np.zeros_like(x)
-    if len(y) == 0 or len(x) == 0:
-        return out
-    rows = max(1, chunk // (len(y) * x.shape[1]))
-    for a in range(0, len(x), rows):
-        diff = y[None, :, :] - x[a:a + rows, None, :]
-        r = np.sqrt(np.sum(diff * diff, axis=2))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            coef = np.where(r > 0, (r - L) / np.where(r > 0, r, 1.0), 0.0)
-        out[a:a + rows] = np.einsum("ij,ijk->ik", coef, diff)
-    return out * (kappa_2 / len(y))
+    rate = group.coupling(rot, coupling.s)
+    if inv_scales is not None:
+        rate = group.algebra_scale_rows(rate, inv_scales)
+    return (gain / 2.0 / coupling.n) * rate
 
 
 class System:
@@ -237,13 +167,14 @@ class System:
     ``None`` means all rows (the centralised simulator).
     """
 
-    def __init__(self, model, rows=None):
+    def __init__(self, model: Model, rows: Sequence | None = None):
         self.model = model
         self.group = model.rotations
         self.rows = tuple(None for _ in model.groups) if rows is None else tuple(rows)
-        self.flows = tuple(CentroidFlow(model.mass, model.gamma, model.kappa) for _ in model.groups)
-        # kappa/(2N) (second order) or kappa/(2 gamma N) (first order), N supplied per evaluation
-        self._rate_scale = model.kappa / 2.0 if model.order == 2 else model.kappa / (2.0 * model.gamma)
+        self.flows = tuple(CentroidFlow(model.mass, model.gamma, model.kappa)
+                           for _ in model.groups)
+        # the torque's gain: kappa (A-1) or kappa/gamma (A-2, where W_i itself is the torque)
+        self._torque_gain = model.kappa if model.order == 2 else model.kappa / model.gamma
         self._inv_scales = []
         for g, r in zip(model.groups, self.rows):
             if g.scales is None:
@@ -253,7 +184,7 @@ class System:
                 self._inv_scales.append(1.0 / s)
 
     # -- what must be exchanged ---------------------------------------------
-    def exchange_fields(self, first_stage):
+    def exchange_fields(self, first_stage: bool) -> tuple[str, ...]:
         """Fields of a stage that other agents need (the distributed driver sends only these)."""
         m = self.model
         fields = ["rot"]
@@ -263,7 +194,8 @@ class System:
             fields.append("v")
         return tuple(fields)
 
-    def evaluate(self, stage, first_stage=False):
+    def evaluate(self, stage: State,
+                 first_stage: bool = False) -> Generator[Request, Any, Coupling]:
         """Generator: the coupling at ``stage``; yields a ``Request`` when it must be exchanged.
 
         ``first_stage`` marks a state on the step grid (the start of a step, or the end
@@ -276,7 +208,7 @@ class System:
         stage.coupling = self.couple(ensemble, first_stage)
         return stage.coupling
 
-    def couple(self, ensemble, first_stage=True):
+    def couple(self, ensemble: Sequence, first_stage: bool = True) -> Coupling:
         """Mean fields from full group arrays (a tuple of objects with .x, .rot, .v)."""
         m = self.model
         grp = self.group
@@ -289,24 +221,23 @@ class System:
             n = grp.count(e.rot)
             s = grp.mean_field(e.rot, None if g.scales is None else _ensemble_scales(g, e, n))
             if need_means:
-                out.append(GroupCoupling(s, n, _mean_rows(e.x), _mean_rows(e.v) if m.order == 2 else None))
+                mean_v = _mean_rows(e.v) if m.order == 2 else None
+                out.append(GroupCoupling(s, n, _mean_rows(e.x), mean_v))
             else:
                 out.append(GroupCoupling(s, n))
         centroids = tuple(None if e is None else e.x for e in ensemble) if m.inter_group else None
         return Coupling(tuple(out), centroids)
 
     # -- local right-hand sides -----------------------------------------------
-    def rotation_rate(self, gi, rot, coupling):
-        """First order: W_i of (A-2)/(F-1).  Second order: the torque kappa/(2N)(S O^T - O S^T)[/s_i]."""
-        c = coupling.groups[gi]
-        scale = self._rate_scale / c.n
-        rate = self.group.coupling(rot, c.s)
-        inv = self._inv_scales[gi]
-        if inv is not None:
-            rate = self.group.algebra_scale_rows(rate, inv)
-        return scale * rate
+    def rotation_rate(self, gi: int, rot: Array, coupling: Coupling) -> Array:
+        """First order: W_i of (A-2)/(F-1).  Second order: the torque of (A-1)/(F-1).
 
-    def centroid_force(self, gi, x, coupling):
+        Both are ``lohe_torque`` with the model's gain (kappa/gamma or kappa).
+        """
+        return lohe_torque(self.group, rot, coupling.groups[gi], self._torque_gain,
+                           self._inv_scales[gi])
+
+    def centroid_force(self, gi: int, x: np.ndarray, coupling: Coupling) -> np.ndarray:
         """kappa (mean - x_i) + F-2 forces from every other group (not divided by gamma or m)."""
         m = self.model
         force = m.kappa * (coupling.groups[gi].mean_x - x)
@@ -316,21 +247,26 @@ class System:
                     force += pair_force(x, y, m.kappa_2, m.L)
         return force
 
-    def exact_centroids(self, gi, gs, coupling, h):
+    def exact_centroids(self, gi: int, gs: GroupState, coupling: Coupling,
+                        h: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """(x, v) of group gi after h along the exact flow of Proposition 2.1."""
         c = coupling.groups[gi]
         return self.flows[gi].advance(gs.x, gs.v, c.mean_x, c.mean_v, h)
 
-    def rates(self, stage, coupling):
+    def is_active(self, gs: GroupState | None) -> bool:
+        """True when the group has local rows to advance (an agent holds rows of some groups)."""
+        return gs is not None and self.group.count(gs.rot) > 0
+
+    def rates(self, stage: State, coupling: Coupling) -> list[tuple | None]:
         """Stage derivatives (k_rot, k_x, k_v, k_w) per local group; k_rot in so(d) (spatial).
 
         k_rot is W_i (first order) or the stage's W_i (second order); k_w = (torque - gamma W)/m.
         Centroid entries are None when centroids are solved exactly.
         """
         m = self.model
-        count = self.group.count
         out = []
         for gi, gs in enumerate(stage.groups):
-            if gs is None or count(gs.rot) == 0:
+            if not self.is_active(gs):
                 out.append(None)
                 continue
             rate = self.rotation_rate(gi, gs.rot, coupling)
@@ -351,7 +287,7 @@ class System:
             out.append((k_rot, k_x, k_v, k_w))
         return out
 
-    def in_chart(self, rates, thetas):
+    def in_chart(self, rates: list, thetas: Sequence | None) -> list:
         """Rates in the psi-chart centred at the step start: k_rot -> dpsi^{-1}_Theta(k_rot)."""
         if thetas is None or self.group.abelian:
             return rates
@@ -381,11 +317,7 @@ def _ensemble_scales(group, ensemble_rows, n):
     return group.scales[np.asarray(idx)]
 
 
-def copy_state(state):
-    return State(state.t, tuple(replace(gs) for gs in state.groups))
-
-
-def validate_model(model):
+def validate_model(model: Model) -> None:
     if model.order not in (1, 2):
         raise SceneError(f"model.order: must be 1 or 2, got {model.order}")
     if model.order == 2 and not model.mass > 0:

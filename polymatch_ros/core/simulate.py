@@ -1,4 +1,4 @@
-"""The centralised simulator: scene -> trajectory at the sample times, with per-group metrics.
+"""The centralised simulator: scene -> trajectory at sample times, with per-group metrics.
 
 ``simulate`` runs the same steppers the ROS agents run (``drive`` answers
 each stage with the simulator's own arrays), picks the integrator the scene
@@ -6,63 +6,54 @@ asks for (or the recommended one for its kind), refuses unstable fixed steps,
 and records metrics only at sample times so they never dominate the run.
 """
 
+from __future__ import annotations
+
 import math
 import time
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import PolymatchError, StabilityError
 from .integrators import check_stability, get_method, max_stable_dt
-from .metrics import ensemble_metrics, stationarity
+from .metrics import EnsembleMetrics, ensemble_metrics, stationarity
 from .model import GroupState, State, System
 from .so import group_for
+from .solver import RUNNING, Method, drive, step_grid
+
+if TYPE_CHECKING:
+    from .adaptive import AdaptiveLie
+    from .scene import Scene
+
+__all__ = ["EXIT_NOT_CONVERGED", "Plan", "Trajectory", "convergence_verdict", "drive", "explain",
+           "plan", "prepare", "recommend", "simulate", "step_grid", "with_representation"]
 
 EXIT_NOT_CONVERGED = 3
-
-
-def drive(method, system, state, h, answer=None):
-    """Advance ``state`` by one step ``h`` of ``method``: the one driver of every stepper.
-
-    A method's step is a generator: each stage yields a request (what the mean field of
-    (A-1)/(A-2) needs from the ensemble at that stage) and is sent back the ensemble's
-    arrays; it returns the new state.  ``answer(request, stage_index)`` supplies those
-    arrays: the centralised simulator answers from the request's own arrays (the default),
-    a lockstep agent with its peers' messages of that round, a realtime agent with the
-    newest poses it has heard.
-    """
-    gen = method.step(system, state, h)
-    stage = 0
-    try:
-        request = next(gen)
-        while True:
-            groups = request.stage.groups if answer is None else answer(request, stage)
-            stage += 1
-            request = gen.send(groups)
-    except StopIteration as stop:
-        return stop.value
 
 
 @dataclass
 class Plan:
     """The integrator a run will use, and why."""
 
-    method: object
-    dt: float = None
-    tolerance: float = None
+    method: Method | AdaptiveLie
+    dt: float | None = None            # None: adaptive (see tolerance)
+    tolerance: float | None = None
     reason: str = ""
 
     @property
-    def name(self):
+    def name(self) -> str:
         return self.method.name
 
 
-def with_representation(scene, representation):
-    """The same scene with rotations in another representation (e.g. 'matrix' for the full model)."""
+def with_representation(scene: Scene, representation: str) -> Scene:
+    """The same scene with rotations in another representation ('matrix': the full model)."""
     model = scene.model
     new = group_for(model.dim, representation)
-    if type(new) is type(model.rotations) and getattr(new, "retraction", None) == model.rotations.retraction:
+    same_map = getattr(new, "retraction", None) == model.rotations.retraction
+    if type(new) is type(model.rotations) and same_map:
         return scene
     old = model.rotations
     groups = []
@@ -73,25 +64,28 @@ def with_representation(scene, representation):
     return replace(scene, model=replace(model, rotations=new), initial=State(0.0, tuple(groups)))
 
 
-def recommend(scene, distributed=False):
-    """(method name, reason) recommended for the scene's kind (see README, 'Speed against accuracy')."""
+def recommend(scene: Scene, distributed: bool = False) -> tuple[str, str]:
+    """(method name, reason) recommended for the scene's kind (README, speed vs accuracy)."""
     m = scene.model
     if m.order == 1:
         if scene.integrator.tolerance is not None and not distributed:
             return "adaptive", "a tolerance was asked for (centralised)"
         return "rkmk4", "first order: 4th-order Munthe-Kaas, 4 rounds per step"
     if m.gamma == 0:
-        return "lie_verlet", "undamped (gamma = 0): symplectic splitting keeps the energy without drift"
+        return "lie_verlet", ("undamped (gamma = 0): symplectic splitting keeps the energy "
+                              "without drift")
     dt = scene.integrator.dt or 0.05
     if m.mass / m.gamma < 0.5 * dt:
-        return "etd2", (f"m/gamma = {m.mass / m.gamma:.3g} < dt/2: damping is stiff, integrate it exactly "
+        return "etd2", (f"m/gamma = {m.mass / m.gamma:.3g} < dt/2: damping is stiff, "
+                        "integrate it exactly "
                         "(an explicit adaptive method would crawl at the stability limit)")
     if scene.integrator.tolerance is not None and not distributed:
         return "adaptive", "a tolerance was asked for (centralised)"
     return "rkmk4", "second order, non-stiff: 4th-order Munthe-Kaas"
 
 
-def plan(scene, method=None, dt=None, tolerance=None, distributed=False, check=True):
+def plan(scene: Scene, method: str | None = None, dt: float | None = None,
+         tolerance: float | None = None, distributed: bool = False, check: bool = True) -> Plan:
     """Resolve the integrator: explicit choice > scene file > recommendation; check stability."""
     name = method or scene.integrator.method
     reason = "chosen explicitly" if method else "from the scene file"
@@ -103,7 +97,8 @@ def plan(scene, method=None, dt=None, tolerance=None, distributed=False, check=T
     if name == "adaptive":
         from .adaptive import AdaptiveLie
         if distributed:
-            raise PolymatchError("the adaptive integrator runs centralised only; pick a fixed-step method")
+            raise PolymatchError("the adaptive integrator runs centralised only; "
+                                 "pick a fixed-step method")
         tol = tol or 1e-8
         return Plan(AdaptiveLie(tol, max_steps=scene.integrator.max_steps), None, tol, reason)
     meth = get_method(name)
@@ -111,14 +106,15 @@ def plan(scene, method=None, dt=None, tolerance=None, distributed=False, check=T
     if not step > 0 or not math.isfinite(step):
         raise PolymatchError(f"dt must be a positive number, got {step}")
     if step > scene.t_end:
-        warnings.warn(f"dt = {step:g} is larger than t_end = {scene.t_end:g}: taking one step of t_end")
+        warnings.warn(f"dt = {step:g} is larger than t_end = {scene.t_end:g}: "
+                      "taking one step of t_end")
         step = scene.t_end
     if check:
         check_stability(meth, scene.model, step)
     return Plan(meth, step, None, reason)
 
 
-def prepare(scene, plan_):
+def prepare(scene: Scene, plan_: Plan) -> Scene:
     """Scene in the representation the method needs (projection baselines work on matrices)."""
     if plan_.method.info.family == "projection" and scene.model.rotations.name == "angle":
         return with_representation(scene, "matrix")
@@ -127,41 +123,66 @@ def prepare(scene, plan_):
 
 @dataclass
 class Trajectory:
-    scene: object
+    scene: Scene
     plan: Plan
-    times: list = field(default_factory=list)
-    metrics: list = field(default_factory=list)
-    states: list = field(default_factory=list)
+    times: list[float] = field(default_factory=list)
+    metrics: list[EnsembleMetrics] = field(default_factory=list)
+    states: list[State] = field(default_factory=list)
     steps: int = 0
     rhs_evals: int = 0
     wall_time: float = 0.0
-    final: State = None
-    converged_at: float = None
-    stationarity: float = None
+    final: State | None = None
+    converged_at: float | None = None
+    stationarity: float | None = None
 
     @property
-    def diameters(self):
-        return np.array([m["diameter"] for m in self.metrics])
+    def diameters(self) -> np.ndarray:
+        return np.array([m.diameter for m in self.metrics])
 
     @property
-    def converged(self):
+    def converged(self) -> bool:
         return self.converged_at is not None
 
 
-def step_grid(t_end, dt):
-    """Step end times k*dt (k = 1..n), the last one clipped to t_end."""
-    n = max(1, int(math.ceil(t_end / dt - 1e-9)))
-    grid = dt * np.arange(1, n + 1)
-    grid[-1] = t_end
-    return grid
+class _Recorder:
+    """Metrics (and states) at sample times; says when a run may stop (converged)."""
+
+    def __init__(self, traj, metrics, keep_states, progress, stop_when_converged):
+        self.traj, self.metrics, self.keep_states = traj, metrics, keep_states
+        self.progress, self.stop_when_converged = progress, stop_when_converged
+        self.below = None           # time from which the diameter has stayed under tolerance
+        self.last = None
+
+    def record(self, st: State) -> bool:
+        traj, scene = self.traj, self.traj.scene
+        traj.times.append(st.t)
+        self.last = st
+        if self.metrics:
+            met = ensemble_metrics(scene.model, st)
+            traj.metrics.append(met)
+            if met.diameter < scene.tolerance:
+                if self.below is None:
+                    self.below = st.t
+            else:
+                self.below = None
+            if self.progress is not None:
+                self.progress(st.t, met.diameter)
+        if self.keep_states:
+            traj.states.append(st)
+        return self.stop_when_converged and self.below is not None
 
 
-def simulate(scene, method=None, dt=None, tolerance=None, *, samples=None, keep_states=True,
-             progress=None, stop_when_converged=False, check_stability=True, metrics=True):
+def simulate(scene: Scene, method: str | None = None, dt: float | None = None,
+             tolerance: float | None = None, *, samples: Sequence[float] | None = None,
+             keep_states: bool = True, progress: Callable[[float, float], None] | None = None,
+             stop_when_converged: bool = False, check_stability: bool = True,
+             metrics: bool = True) -> "Trajectory":
     """Run the scene centralised; return a ``Trajectory`` with metrics at the sample times.
 
     Fixed-step runs take steps of dt (the last one clipped to t_end); sample times
-    are rounded to the nearest step.  ``progress(t, diameter)`` is called at samples.
+    are rounded to the nearest step; the adaptive method interpolates them.
+    ``progress(t, diameter)`` is called at samples.  One loop drives every method's run
+    (``solver.FixedStepSolver`` or ``adaptive.AdaptiveSolver``).
     """
     plan_ = plan(scene, method, dt, tolerance, check=check_stability)
     scene = prepare(scene, plan_)
@@ -170,59 +191,26 @@ def simulate(scene, method=None, dt=None, tolerance=None, *, samples=None, keep_
     traj = Trajectory(scene, plan_)
     state = State(0.0, tuple(replace(gs) for gs in scene.initial.groups))
     t0 = time.perf_counter()
-    below = [None]
-
-    def record(st):
-        traj.times.append(st.t)
-        if metrics:
-            met = ensemble_metrics(scene.model, st)
-            traj.metrics.append(met)
-            if met["diameter"] < scene.tolerance:
-                if below[0] is None:
-                    below[0] = st.t
-            else:
-                below[0] = None
-            if progress is not None:
-                progress(st.t, met["diameter"])
-        if keep_states:
-            traj.states.append(st)
-        return stop_when_converged and below[0] is not None
-
-    stop = record(state)
-    if plan_.dt is None:
-        if not stop:
-            if stop_when_converged:
-                for t in times[times > 0]:
-                    state = plan_.method.integrate(system, state, [t])
-                    if record(state):
-                        break
-            else:
-                ends = np.union1d(times[times > 0], [scene.t_end])   # always reach t_end, like fixed steps
-                state = plan_.method.integrate(system, state, ends, record)
-        traj.steps, traj.rhs_evals = plan_.method.steps, plan_.method.nfev
-    else:
-        grid = step_grid(scene.t_end, plan_.dt)
-        sample_steps = set(int(k) for k in np.searchsorted(grid, times[times > 0] - 0.5 * plan_.dt))
-        meth = plan_.method
-        prev = 0.0
-        for k, t_next in enumerate(grid):
-            if stop:
-                break
-            state = drive(meth, system, state, t_next - prev)
-            state.t = t_next
-            prev = t_next
-            traj.steps += 1
-            if k in sample_steps or k == len(grid) - 1:
-                stop = record(state)
-        traj.rhs_evals = traj.steps * meth.info.stages
+    recorder = _Recorder(traj, metrics, keep_states, progress, stop_when_converged)
+    stop = recorder.record(state)
+    if not stop:
+        run = plan_.method.solver(system, state, scene.t_end, times, plan_.dt)
+        while not stop and run.status == RUNNING:
+            for st in run.step():
+                stop = recorder.record(st)
+                if stop:
+                    break
+        traj.steps, traj.rhs_evals = run.nsteps, run.nfev
+        state = recorder.last if stop else run.state
     traj.wall_time = time.perf_counter() - t0
     traj.final = state
-    traj.converged_at = below[0]
+    traj.converged_at = recorder.below
     traj.stationarity = stationarity(system, state)
     return traj
 
 
-def explain(scene, method=None, dt=None, tolerance=None, distributed=False):
+def explain(scene: Scene, method: str | None = None, dt: float | None = None,
+            tolerance: float | None = None, distributed: bool = False) -> list[str]:
     """Lines saying which model, representation and integrator the scene will use, and why."""
     m = scene.model
     lines = [f"scene {scene.name!r}: d = {m.dim}, {m.n_agents} agents in {len(m.groups)} group(s)"]
@@ -230,21 +218,25 @@ def explain(scene, method=None, dt=None, tolerance=None, distributed=False):
         lines.append(f"model: first order (A-2), kappa = {m.kappa:g}, gamma = {m.gamma:g}: "
                      "no velocities are carried")
     else:
-        lines.append(f"model: second order (A-1), m = {m.mass:g}, gamma = {m.gamma:g}, kappa = {m.kappa:g}")
+        lines.append(f"model: second order (A-1), m = {m.mass:g}, gamma = {m.gamma:g}, "
+                     f"kappa = {m.kappa:g}")
     for g in m.groups:
         kind = "similar (F-1: torque weights s_k/s_i)" if g.scales is not None else \
             "congruent (no scale weights)"
         lines.append(f"group {g.name!r}: {g.size} x {len(g.reference)}-vertex polytope, {kind}")
     if m.inter_group:
-        lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; centroids integrated "
+        lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; "
+                     "centroids integrated "
                      "with the method's stages (the inter-group force is nonlinear)")
     elif m.centroids_exact:
         lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential)")
     else:
-        lines.append("centroids: integrated with the method's stages (model.centroids = integrated; "
+        lines.append("centroids: integrated with the method's stages "
+                     "(model.centroids = integrated; "
                      "the exact flow would be cheaper and exact)")
     rep = m.rotations
-    rep_text = {"angle": "angles (SO(2) is abelian: the first-order model is Kuramoto, exp is addition)",
+    rep_text = {"angle": "angles (SO(2) is abelian: the first-order model is Kuramoto, "
+                         "exp is addition)",
                 "so3": f"3x3 matrices, structure-of-arrays, {rep.retraction} map in closed form",
                 "matrix": f"{m.dim}x{m.dim} matrices, Cayley map by batched solves"}[rep.name]
     lines.append(f"rotations: {rep_text}")
@@ -254,26 +246,32 @@ def explain(scene, method=None, dt=None, tolerance=None, distributed=False):
         try:
             check_stability(p.method, m, p.dt)
             limit = max_stable_dt(p.method, m, 1e6)
-            stab = f"linear stability limit dt < {limit:.3g}" if limit < 1e6 else "no stability limit found"
+            stab = (f"linear stability limit dt < {limit:.3g}" if limit < 1e6
+                    else "no stability limit found")
         except StabilityError as exc:
             stab = f"REFUSED: {exc}"
-        lines.append(f"integrator: {info.name} (order {info.order}, {info.stages} evaluation(s)/step, "
-                     f"{info.rounds} exchange round(s)/step in lockstep), dt = {p.dt:g} — {p.reason}; {stab}")
+        lines.append(f"integrator: {info.name} (order {info.order}, {info.stages} "
+                     f"evaluation(s)/step, {info.rounds} exchange round(s)/step in lockstep), "
+                     f"dt = {p.dt:g} — {p.reason}; {stab}")
         if info.family == "projection" and rep.name == "angle":
-            lines.append("projection baselines need matrices: the run uses the full 2x2 matrix model")
+            lines.append("projection baselines need matrices: "
+                         "the run uses the full 2x2 matrix model")
     else:
         lines.append(f"integrator: adaptive DOP853-Lie, tolerance {p.tolerance:g} — {p.reason}")
     lines.extend(f"note: {n}" for n in scene.notes)
     return lines
 
 
-def convergence_verdict(scene, diameter, converged_at, stationarity=None):
+def convergence_verdict(scene: Scene, diameter: float, converged_at: float | None,
+                        stationarity: float | None = None) -> tuple[int, str]:
     """(exit code, message) for the end of a run."""
     if converged_at is not None:
         return 0, f"converged: matching diameter < {scene.tolerance:g} from t = {converged_at:g}"
-    msg = f"did not converge: matching diameter {diameter:.3e} >= tolerance {scene.tolerance:g} at t_end"
+    msg = (f"did not converge: matching diameter {diameter:.3e} >= tolerance "
+           f"{scene.tolerance:g} at t_end")
     if stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
-        msg += (f"; the rotations sit at an equilibrium that is not consensus (|W| = {stationarity:.1e}),"
+        msg += ("; the rotations sit at an equilibrium that is not consensus "
+                f"(|W| = {stationarity:.1e}),"
                 " e.g. antipodal or splay states of the Lohe model")
     if not scene.expect_convergence:
         return 0, msg + " (the scene expects this: convergence.expected = false)"

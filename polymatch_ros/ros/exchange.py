@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..core.errors import PolymatchError
 from . import wire
 
 
@@ -79,7 +80,7 @@ class DropCounter:
         return f"dropped {self.total} messages ({parts})"
 
 
-class RoundTimeout(Exception):
+class RoundTimeout(PolymatchError):
     pass
 
 

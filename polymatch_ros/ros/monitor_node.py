@@ -20,7 +20,7 @@ gets the last value.
 
 import sys
 import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -192,9 +192,9 @@ class MonitorNode:
         met = ensemble_metrics(model, state)
         self.last_metrics = (t, met, len(poses))
         self.reports += 1
-        for name, value in (("diameter", met["diameter"]),
-                            ("centroid", max(g["centroid_diameter"] for g in met["groups"])),
-                            ("rotation", max(g["rotation_diameter"] for g in met["groups"]))):
+        for name, value in (("diameter", met.diameter),
+                            ("centroid", max(g.centroid_diameter for g in met.groups)),
+                            ("rotation", max(g.rotation_diameter for g in met.groups))):
             self.pub[name].publish(Float64(data=float(value)))
         self._diagnostics(t, met, keep, len(poses))
         if self.marker_pub is not None:
@@ -206,23 +206,23 @@ class MonitorNode:
         arr.header.stamp = self.node.get_clock().now().to_msg()
         ens = self.params["ensemble"]
         top = DiagnosticStatus(name=f"polymatch/{ens}/monitor", hardware_id="monitor")
-        ok = met["diameter"] < self.scene.tolerance
+        ok = met.diameter < self.scene.tolerance
         top.level = DiagnosticStatus.OK if ok else DiagnosticStatus.WARN
-        top.message = (f"t = {t:.6g}: matching diameter {met['diameter']:.3e} "
+        top.message = (f"t = {t:.6g}: matching diameter {met.diameter:.3e} "
                        f"({'below' if ok else 'above'} tolerance {self.scene.tolerance:g}); "
                        f"{heard}/{self.n} agents heard; {self.drops.summary()}")
-        values = {"t": t, "diameter": met["diameter"], "agents_heard": heard, "agents": self.n,
+        values = {"t": t, "diameter": met.diameter, "agents_heard": heard, "agents": self.n,
                   "dropped": self.drops.total}
-        if "group_separation" in met:
-            values["group_separation"] = met["group_separation"]
+        if met.group_separation is not None:
+            values["group_separation"] = met.group_separation
         top.values = [KeyValue(key=k, value=repr(float(v)) if isinstance(v, float) else str(v))
                       for k, v in values.items()]
         statuses = [top]
-        for gi, gm in zip(keep, met["groups"]):
+        for gi, gm in zip(keep, met.groups):
             g = self.model.groups[gi]
             st = DiagnosticStatus(name=f"polymatch/{ens}/group/{g.name}", hardware_id=g.name,
-                                  level=DiagnosticStatus.OK, message=f"matching diameter {gm['matching_diameter']:.3e}")
-            st.values = [KeyValue(key=k, value=repr(float(v))) for k, v in gm.items()]
+                                  level=DiagnosticStatus.OK, message=f"matching diameter {gm.matching_diameter:.3e}")
+            st.values = [KeyValue(key=k, value=repr(float(v))) for k, v in asdict(gm).items()]
             statuses.append(st)
         arr.status = statuses
         self.diag_pub.publish(arr)
@@ -286,7 +286,7 @@ def main(args=None):
         if mon is not None:
             if mon.last_metrics is not None:
                 t, met, heard = mon.last_metrics
-                print(f"monitor: last report t = {t:.6g}, matching diameter {met['diameter']:.3e}, "
+                print(f"monitor: last report t = {t:.6g}, matching diameter {met.diameter:.3e}, "
                       f"{heard} agents heard, {mon.reports} reports; {mon.drops.summary()}", flush=True)
         with teardown_watchdog():
             if mon is not None:

@@ -464,8 +464,8 @@ def _summary(args, scene, the_plan, final, children, monitor, wall, quiet, watch
         dev = vertex_deviation(central.model, ref.final, _as_rep(central.model, scene.model, final))
         print(f"lockstep vs centralised simulation (same integrator and dt) at t = {final.t:g}: "
               f"max vertex deviation {dev:.3e}")
-    converged_at = final.t if met["diameter"] < scene.tolerance else None
-    code, msg = convergence_verdict(scene, met["diameter"], converged_at)
+    converged_at = final.t if met.diameter < scene.tolerance else None
+    code, msg = convergence_verdict(scene, met.diameter, converged_at)
     print(msg)
     return code, msg
 

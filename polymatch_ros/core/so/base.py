@@ -1,0 +1,137 @@
+"""The interface of the batched SO(d) representations, and the polar factor they share."""
+
+from collections.abc import Sequence
+from typing import Union
+
+import numpy as np
+
+#: a batch of N rotations, or of N so(d) elements, in a representation's own layout
+Array = np.ndarray
+#: S = sum_k w_k O_k: a complex number for angles, a (d, d) matrix otherwise
+MeanField = Union[complex, np.ndarray]
+
+
+class RotationGroup:
+    """Interface shared by the batched SO(d) representations."""
+
+    dim: int = 0
+    name: str = "abstract"
+    #: which map ``retract`` uses: "exp" or "cayley"
+    retraction: str = "exp"
+    #: True when rotations commute (SO(2)): dpsi_inv is the identity
+    abelian: bool = False
+
+    # -- construction and conversion -------------------------------------
+    def identity(self, n: int) -> Array:
+        raise NotImplementedError
+
+    def from_matrices(self, mats: np.ndarray) -> Array:
+        """(N, d, d) rotation matrices -> group array."""
+        raise NotImplementedError
+
+    def to_matrices(self, g: Array) -> np.ndarray:
+        """Group array -> (N, d, d) rotation matrices."""
+        raise NotImplementedError
+
+    def flat(self, g: Array) -> np.ndarray:
+        """(N, d*d) row-major matrix entries; Frobenius distances are Euclidean here."""
+        return self.to_matrices(g).reshape(self.count(g), -1)
+
+    def count(self, g: Array) -> int:
+        raise NotImplementedError
+
+    def take(self, g: Array, idx) -> Array:
+        raise NotImplementedError
+
+    def put(self, g: Array, idx, values: Array) -> None:
+        """Write rows ``idx`` of ``g`` in place."""
+        raise NotImplementedError
+
+    def concat(self, parts: Sequence[Array]) -> Array:
+        raise NotImplementedError
+
+    def rotate(self, g: Array, r: np.ndarray) -> np.ndarray:
+        """Apply every rotation to one vector r (d,): returns (N, d)."""
+        raise NotImplementedError
+
+    # -- Lie algebra -----------------------------------------------------
+    def algebra_zeros(self, n: int) -> Array:
+        raise NotImplementedError
+
+    def algebra_take(self, a: Array, idx) -> Array:
+        raise NotImplementedError
+
+    def algebra_concat(self, parts: Sequence[Array]) -> Array:
+        raise NotImplementedError
+
+    def algebra_from_skew(self, w: np.ndarray) -> Array:
+        """(N, d, d) skew matrices -> algebra array."""
+        raise NotImplementedError
+
+    def algebra_to_skew(self, a: Array) -> np.ndarray:
+        """Algebra array -> (N, d, d) skew matrices."""
+        raise NotImplementedError
+
+    def algebra_sq_norm(self, a: Array) -> np.ndarray:
+        """Squared Frobenius norm of hat(a), per rotation: (N,)."""
+        raise NotImplementedError
+
+    def algebra_scale_rows(self, a: Array, c: np.ndarray) -> Array:
+        """Multiply row i of an algebra array by c[i]."""
+        raise NotImplementedError
+
+    # -- maps the integrators use ------------------------------------------
+    def retract(self, xi: Array, g: Array) -> Array:
+        """psi(xi) O for each rotation; psi is exp or Cayley."""
+        raise NotImplementedError
+
+    def dpsi_inv(self, xi: Array, a: Array) -> Array:
+        """Inverse right-trivialised differential of psi at xi, applied to a."""
+        raise NotImplementedError
+
+    def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
+        """S = sum_k w_k O_k (representation-specific)."""
+        raise NotImplementedError
+
+    def coupling(self, g: Array, s: MeanField) -> Array:
+        """The skew kernel S O_i^T - O_i S^T of the Lohe torque (A-1, A-2), as an algebra array.
+
+        Only ``model.lohe_torque`` calls it: that is where gains and F-1 weights are applied.
+        """
+        raise NotImplementedError
+
+    # -- embedding-space operations (projection baselines) ----------------
+    def tangent(self, a: Array, g: Array) -> Array:
+        """hat(a) O in the embedding space (same layout as the group array)."""
+        raise NotImplementedError
+
+    def project(self, g: Array) -> Array:
+        """Nearest rotation (polar factor) of each near-orthogonal matrix."""
+        raise NotImplementedError
+
+
+def polar_newton_schulz(mats: np.ndarray, tol: float = 1e-15, max_iter: int = 12) -> np.ndarray:
+    """Polar factor of near-orthogonal (N, d, d) matrices.
+
+    Newton-Schulz X <- X (3 I - X^T X) / 2 converges quadratically when
+    |X^T X - I| < 1; anything further away falls back to an SVD.
+    """
+    mats = np.array(mats, dtype=float)
+    n, d, _ = mats.shape
+    eye = np.eye(d)
+    defect = np.linalg.norm(np.swapaxes(mats, 1, 2) @ mats - eye, axis=(1, 2))
+    far = defect >= 0.5
+    x = mats[~far]
+    for _ in range(max_iter):
+        gram = np.swapaxes(x, 1, 2) @ x
+        if x.shape[0] == 0 or np.max(np.abs(gram - eye)) < tol:
+            break
+        x = 0.5 * x @ (3.0 * eye - gram)
+    out = np.empty_like(mats)
+    out[~far] = x
+    if np.any(far):
+        u, _, vt = np.linalg.svd(mats[far])
+        det = np.linalg.det(u @ vt)
+        u[..., -1] *= det[:, None]
+        out[far] = u @ vt
+    return out
