@@ -10,35 +10,60 @@
     polymatch bench WHAT         benchmarks (figures for README)
 
 Errors are one line on stderr and a non-zero exit code: 2 for bad input
-(scene, parameters), 3 for a run that did not converge although the scene
-expects it, 1 for anything else.
+(scene, parameters, command line), 3 for a run that did not converge although
+the scene expects it, 1 for anything else.  POLYMATCH_DEBUG=1 shows the
+traceback of an unexpected error instead of its one line.
 """
 
 import argparse
-import math
 import os
 import sys
 import warnings
 
 import numpy as np
 
-from .console import SUMMARY_HEADER, Progress, format_table, positive_float, summary_rows
+from .console import (SUMMARY_HEADER, Progress, format_table, memory_size, positive_float,
+                      summary_rows, tolerance_arg, writable_output)
 from .core.errors import PolymatchError
+from .core.limits import Limits
+from .core.preflight import check_run
 from .core.scene import load_scene, shipped_config_dirs
 from .core.simulate import convergence_verdict
 
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``polymatch: error: ...; see ...--help``), exit code 2.
+
+    Subparsers inherit the class (``add_subparsers`` uses the parent's), so every
+    subcommand, including those other modules add, reports parse errors the same way.
+    """
+
+    def error(self, message):
+        hint = f"see `{self.prog} --help`"
+        self.exit(2, f"polymatch: error: {message.splitlines()[0]} ({hint})\n")
+
+
+def _limits(args):
+    return Limits(memory=args.memory_limit) if getattr(args, "memory_limit", None) else None
+
 def cmd_simulate(args):
     from .core.simulate import explain, simulate
-    scene = load_scene(args.scene, {"time.t_end": args.t_end})
+    save = writable_output(args.save, ".npz") if args.save else None
+    figure = writable_output(args.figure, ".png") if args.figure else None
+    scene = load_scene(args.scene, {"time.t_end": args.t_end}, limits=_limits(args))
+    samples = None
+    if figure:
+        samples = np.unique(np.concatenate([scene.samples,
+                                            [t for t in scene.snapshots if t <= scene.t_end]]))
+    kept = len(scene.samples if samples is None else samples) if (save or figure) else 0
+    check_run(scene, args.integrator, args.dt, args.tolerance, kept_samples=kept,
+              limits=_limits(args))
     if args.explain:
         print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
         return 0
-    samples = None
-    if args.figure:
-        samples = np.unique(np.concatenate([scene.samples, [t for t in scene.snapshots if t <= scene.t_end]]))
     progress = Progress(scene.t_end, args.quiet)
     traj = simulate(scene, args.integrator, args.dt, args.tolerance, samples=samples,
-                    keep_states=bool(args.save or args.figure), progress=progress,
+                    keep_states=bool(save or figure), progress=progress,
                     stop_when_converged=args.stop_when_converged)
     progress.done()
     p = traj.plan
@@ -50,13 +75,13 @@ def cmd_simulate(args):
     if "group_separation" in traj.metrics[-1]:
         print(f"distance between group centres: {traj.metrics[-1]['group_separation']:.4g} "
               f"(L = {scene.model.L:g})")
-    if args.save:
-        save_npz(traj, args.save)
-        print(f"trajectory saved to {args.save}")
-    if args.figure:
+    if save:
+        save_npz(traj, save)
+        print(f"trajectory saved to {save}")
+    if figure:
         from .figures import snapshot_figure
-        snapshot_figure(traj, args.figure)
-        print(f"snapshots saved to {args.figure}")
+        snapshot_figure(traj, figure)
+        print(f"snapshots saved to {figure}")
     code, msg = convergence_verdict(scene, traj.metrics[-1]["diameter"], traj.converged_at, traj.stationarity)
     print(msg)
     return code
@@ -83,8 +108,11 @@ def save_npz(traj, path):
 
 def cmd_explain(args):
     from .core.simulate import explain
-    scene = load_scene(args.scene)
-    print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed)))
+    scene = load_scene(args.scene, limits=_limits(args))
+    check_run(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed,
+              limits=_limits(args))
+    print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance,
+                            distributed=args.distributed)))
     return 0
 
 
@@ -124,12 +152,15 @@ def cmd_scenes(args):
 
 def add_integrator_options(p):
     p.add_argument("--integrator", "-i", metavar="NAME", help="integrator (see `polymatch integrators`)")
-    p.add_argument("--dt", type=positive_float, help="fixed step size")
-    p.add_argument("--tolerance", type=positive_float, help="tolerance for the adaptive integrator")
+    p.add_argument("--dt", type=positive_float, help="fixed step size (fixed-step methods only)")
+    p.add_argument("--tolerance", type=tolerance_arg,
+                   help="relative tolerance in [1e-14, 1) (the adaptive integrator only)")
+    p.add_argument("--memory-limit", type=memory_size, metavar="SIZE",
+                   help="refuse scenes estimated to need more memory (default 2G), e.g. 8G")
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="polymatch", description=__doc__.split("\n\n")[0])
+    parser = Parser(prog="polymatch", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
@@ -179,15 +210,34 @@ def main(argv=None):
         return mod.main([f"polymatch {argv[0]}"] + argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
-    warnings.showwarning = lambda msg, *a, **k: print(f"polymatch: warning: {msg}", file=sys.stderr)
+    warnings.showwarning = _one_line_warning
     try:
         return args.func(args)
     except PolymatchError as exc:
-        print(f"polymatch: error: {exc}", file=sys.stderr)
+        print(f"polymatch: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
         print("polymatch: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print("polymatch: error: out of memory; lower the scene's sizes or --memory-limit",
+              file=sys.stderr)
+        return 1
+    except Exception as exc:  # noqa: BLE001 -- the contract: one line, never a traceback
+        if os.environ.get("POLYMATCH_DEBUG"):
+            raise
+        print(f"polymatch: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              f"(POLYMATCH_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc):
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 400 else text[:397] + "..."
+
+
+def _one_line_warning(message, *args, **kwargs):
+    print(f"polymatch: warning: {_one_line(message)}", file=sys.stderr)
 
 
 if __name__ == "__main__":
