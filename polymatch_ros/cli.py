@@ -5,7 +5,7 @@
     polymatch integrators        the registry: order, evaluations and exchange rounds per step
     polymatch scenes             the scenes shipped in config/
     polymatch run SCENE          the distributed ROS 2 ensemble (one process per agent) + monitor
-    polymatch agent | monitor    single ROS 2 nodes (same as `ros2 run polymatch_ros agent|monitor`)
+    polymatch agent | monitor    single ROS 2 nodes (= `ros2 run polymatch_ros agent|monitor`)
     polymatch echo TOPIC         print a topic (stand-in for `ros2 topic echo`)
     polymatch bench WHAT         benchmarks (figures for README)
 
@@ -68,7 +68,8 @@ def cmd_simulate(args):
     progress.done()
     p = traj.plan
     print(f"scene {scene.name}: {scene.model.n_agents} agents, d = {scene.dim}, "
-          f"integrator {p.name}" + (f" dt = {p.dt:g}" if p.dt else f" tolerance = {p.tolerance:g}"))
+          f"integrator {p.name}"
+          + (f" dt = {p.dt:g}" if p.dt else f" tolerance = {p.tolerance:g}"))
     print(format_table(summary_rows(traj.scene, traj.metrics[-1]), SUMMARY_HEADER))
     print(f"t = {traj.times[-1]:g}, steps {traj.steps}, right-hand sides {traj.rhs_evals}, "
           f"wall time {traj.wall_time:.3f} s")
@@ -82,7 +83,8 @@ def cmd_simulate(args):
         from .figures import snapshot_figure
         snapshot_figure(traj, figure)
         print(f"snapshots saved to {figure}")
-    code, msg = convergence_verdict(scene, traj.metrics[-1]["diameter"], traj.converged_at, traj.stationarity)
+    code, msg = convergence_verdict(scene, traj.metrics[-1]["diameter"], traj.converged_at,
+                                    traj.stationarity)
     print(msg)
     return code
 
@@ -100,8 +102,10 @@ def save_npz(traj, path):
         if g.scales is not None:
             data[key + "scales"] = g.scales
         data[key + "centroids"] = np.array([st.groups[gi].x + scene.origin for st in traj.states])
-        data[key + "rotations"] = np.array([model.rotations.to_matrices(st.groups[gi].rot) for st in traj.states])
-        for name in ("centroid_diameter", "rotation_diameter", "matching_diameter", "energy", "orthogonality"):
+        data[key + "rotations"] = np.array([model.rotations.to_matrices(st.groups[gi].rot)
+                                            for st in traj.states])
+        for name in ("centroid_diameter", "rotation_diameter", "matching_diameter", "energy",
+                     "orthogonality"):
             data[key + name] = np.array([m["groups"][gi][name] for m in traj.metrics])
     np.savez_compressed(path, **data)
 
@@ -123,8 +127,10 @@ def cmd_integrators(args):
     for m in list(METHODS.values()) + [AdaptiveLie]:
         i = m.info
         models = "/".join({1: "1st", 2: "2nd"}[k] for k in i.models)
-        rows.append([i.name, i.order, i.stages, i.rounds if i.rounds else "-", i.family, models, i.summary])
-    print(format_table(rows, ["name", "order", "evals/step", "rounds/step", "family", "models", "what"]))
+        rows.append([i.name, i.order, i.stages, i.rounds if i.rounds else "-", i.family, models,
+                     i.summary])
+    print(format_table(rows, ["name", "order", "evals/step", "rounds/step", "family", "models",
+                              "what"]))
     return 0
 
 
@@ -151,7 +157,8 @@ def cmd_scenes(args):
 
 
 def add_integrator_options(p):
-    p.add_argument("--integrator", "-i", metavar="NAME", help="integrator (see `polymatch integrators`)")
+    p.add_argument("--integrator", "-i", metavar="NAME",
+                   help="integrator (see `polymatch integrators`)")
     p.add_argument("--dt", type=positive_float, help="fixed step size (fixed-step methods only)")
     p.add_argument("--tolerance", type=tolerance_arg,
                    help="relative tolerance in [1e-14, 1) (the adaptive integrator only)")
@@ -170,12 +177,15 @@ def build_parser():
     p.add_argument("--t-end", type=positive_float, help="override time.t_end")
     p.add_argument("--save", metavar="NPZ", help="save the trajectory (npz)")
     p.add_argument("--figure", metavar="PNG", help="render the snapshot figure (needs matplotlib)")
-    p.add_argument("--explain", action="store_true", help="say which model and integrator, then exit")
-    p.add_argument("--stop-when-converged", action="store_true", help="stop at the first sample under tolerance")
+    p.add_argument("--explain", action="store_true",
+                   help="say which model and integrator, then exit")
+    p.add_argument("--stop-when-converged", action="store_true",
+                   help="stop at the first sample under tolerance")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_simulate)
 
-    p = sub.add_parser("explain", help="which model, representation and integrator a scene uses, and why")
+    p = sub.add_parser("explain",
+                       help="which model, representation and integrator a scene uses, and why")
     p.add_argument("scene")
     add_integrator_options(p)
     p.add_argument("--distributed", action="store_true", help="as the ROS node set would run it")
@@ -188,7 +198,8 @@ def build_parser():
 
     for name, module in PASSTHROUGH.items():
         sub.add_parser(name, help=f"one {name} node (ROS 2); takes the same arguments as "
-                                  f"`ros2 run polymatch_ros {name}`, e.g. --ros-args -p scene:=FILE")
+                                  f"`ros2 run polymatch_ros {name}`, "
+                                  f"e.g. --ros-args -p scene:=FILE")
     for name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("bench", "bench")):
         try:
             mod = __import__(f"polymatch_ros.{module}", fromlist=["add_parser"])

@@ -20,7 +20,7 @@ def positive_float(text):
 
 
 def tolerance_arg(text):
-    """A relative tolerance in [MIN_RELATIVE_TOLERANCE, 1), like the scene key integrator.tolerance."""
+    """A relative tolerance in [MIN_RELATIVE_TOLERANCE, 1), as the scene's integrator.tolerance."""
     value = positive_float(text)
     if not value < 1:
         raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
@@ -107,9 +107,11 @@ class Progress:
 def summary_rows(scene, metrics):
     rows = []
     for g, m in zip(scene.model.groups, metrics["groups"]):
-        rows.append([g.name, g.size, f"{m['centroid_diameter']:.3e}", f"{m['rotation_diameter']:.3e}",
-                     f"{m['matching_diameter']:.3e}", f"{m['energy']:.3e}", f"{m['orthogonality']:.1e}"])
+        rows.append([g.name, g.size, f"{m['centroid_diameter']:.3e}",
+                     f"{m['rotation_diameter']:.3e}", f"{m['matching_diameter']:.3e}",
+                     f"{m['energy']:.3e}", f"{m['orthogonality']:.1e}"])
     return rows
 
 
-SUMMARY_HEADER = ["group", "N", "centroid diam", "rotation diam", "matching diam", "energy", "orth. defect"]
+SUMMARY_HEADER = ["group", "N", "centroid diam", "rotation diam", "matching diam", "energy",
+                  "orth. defect"]

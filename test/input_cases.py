@@ -130,7 +130,8 @@ CASES = [
     (12, "name_list", scene("name: [1, 2]"), [], "name: expected text, got a list"),
     (12, "group_name_null", scene(groups="  - {name: null, shape: triangle, count: 3}"), [],
      "groups[0].name: no value (null)"),
-    (12, "quoted_number", scene('dimension: "2"'), [], "dimension: expected a number, got the text '2'"),
+    (12, "quoted_number", scene('dimension: "2"'), [],
+     "dimension: expected a number, got the text '2'"),
     (12, "quoted_exponent", scene('time: {t_end: "1e3"}'), [],
      "time.t_end: expected a number, got the text '1e3'"),
     (12, "boolean_count", scene(groups="  - {shape: triangle, count: true}"), [],
@@ -145,7 +146,8 @@ CASES = [
     (13, "scene_fixed_step_with_tolerance", scene("integrator: {method: rkmk4, tolerance: 1e-6}"),
      [], "integrator.tolerance: rkmk4 takes fixed steps"),
     (13, "max_steps_1_fixed_step", scene("integrator: {method: rkmk4, dt: 0.1, max_steps: 1}"),
-     [], "integrator.dt: dt = 0.1 over t_end = 2 takes 20 steps, more than integrator.max_steps = 1"),
+     [], "integrator.dt: dt = 0.1 over t_end = 2 takes 20 steps, more than "
+         "integrator.max_steps = 1"),
     (13, "cli_tolerance_2", BASE, ["-i", "adaptive", "--tolerance", "2"],
      "argument --tolerance: must be in (0, 1), got 2"),
     # 14. wording and key paths

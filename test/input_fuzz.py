@@ -25,14 +25,16 @@ TRI = [[0.0, 1.0], [-0.8660254037844386, -0.5], [0.8660254037844386, -0.5]]
 
 BASES = [
     {"name": "first", "dimension": 2, "seed": 1, "model": {"order": 1, "kappa": 1.0},
-     "integrator": {"method": "rkmk4", "dt": 0.05}, "time": {"t_end": 1.0, "samples": {"every": 0.5}},
+     "integrator": {"method": "rkmk4", "dt": 0.05},
+     "time": {"t_end": 1.0, "samples": {"every": 0.5}},
      "convergence": {"tolerance": 1e-6, "expected": False},
      "groups": [{"name": "g", "shape": "triangle", "count": 3, "centroids": {"box": [-1.0, 1.0]},
                  "rotations": "uniform"}]},
     {"name": "second", "dimension": 3, "seed": 2,
      "model": {"order": 2, "mass": 0.5, "gamma": 1.0, "kappa": 1.0},
      "time": {"t_end": 1.0, "samples": {"count": 3}}, "convergence": {"expected": False},
-     "groups": [{"name": "t", "shape": "tetrahedron", "count": 3, "scales": {"uniform": [0.5, 1.5]},
+     "groups": [{"name": "t", "shape": "tetrahedron", "count": 3,
+                 "scales": {"uniform": [0.5, 1.5]},
                  "velocities": {"centroid": {"normal": 0.1}, "angular": "zero"}}]},
     {"name": "mixed", "dimension": 2, "seed": 3,
      "model": {"order": 1, "kappa_2": 0.5, "L": 2.0}, "integrator": {"method": "auto"},
@@ -111,7 +113,8 @@ def scene_dicts(draw):
             old = data
             for p in path:
                 old = old[p]
-            _set(data, path, [old] * draw(st.integers(1, 3)) if draw(st.booleans()) else {"x": old})
+            wrapped = [old] * draw(st.integers(1, 3)) if draw(st.booleans()) else {"x": old}
+            _set(data, path, wrapped)
         else:
             parent = data
             for p in path[:-1]:
@@ -136,8 +139,9 @@ def scene_files(draw):
         text = text[:draw(st.integers(0, len(text)))]
     elif kind == "insert":
         at = draw(st.integers(0, len(text)))
-        text = text[:at] + draw(st.sampled_from(["[", "]", "{", ": ", "- ", "&a ", "*a", "!!python/object ",
-                                                   "\t", "'", "\n  x: 1\n", "? [1]\n"])) + text[at:]
+        junk = draw(st.sampled_from(["[", "]", "{", ": ", "- ", "&a ", "*a", "!!python/object ",
+                                     "\t", "'", "\n  x: 1\n", "? [1]\n"]))
+        text = text[:at] + junk + text[at:]
     elif kind == "deep":
         depth = draw(st.integers(30, 5000))
         text += "deep: " + "[" * depth + "]" * depth + "\n"

@@ -30,7 +30,9 @@ def describe(value):
 
 def _short_number(value):
     if isinstance(value, int) and abs(value) > 10**15:
-        return f"{float(value):.3g}" if abs(value) < 10**308 else f"an integer of {len(str(abs(value)))} digits"
+        if abs(value) < 10**308:
+            return f"{float(value):.3g}"
+        return "an integer of more than 308 digits"
     return repr(value)
 
 
@@ -39,10 +41,12 @@ class Map:
 
     def __init__(self, data, path, allowed):
         if not isinstance(data, dict):
-            raise SceneError(f"{path or 'scene'}: expected a mapping of keys, got {describe(data)}")
+            raise SceneError(f"{path or 'scene'}: expected a mapping of keys, "
+                             f"got {describe(data)}")
         for key, value in data.items():
             if key not in allowed:
-                raise SceneError(f"{join(path, str(key))}: unknown key (allowed: {', '.join(allowed)})")
+                raise SceneError(f"{join(path, str(key))}: unknown key "
+                                 f"(allowed: {', '.join(allowed)})")
             if value is None:
                 raise SceneError(f"{join(path, key)}: no value (null); leave the key out for "
                                  f"the default")

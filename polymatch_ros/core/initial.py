@@ -88,7 +88,8 @@ def rotations(raw, path, dim, count, rng):
     if isinstance(raw, str) and raw == "uniform":
         if dim == 2:
             a = rng.uniform(-np.pi, np.pi, count)
-            return np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)], -1)], -2)
+            return np.stack([np.stack([np.cos(a), -np.sin(a)], -1),
+                             np.stack([np.sin(a), np.cos(a)], -1)], -2)
         if dim == 3:
             from scipy.spatial.transform import Rotation
             return Rotation.random(count, random_state=rng).as_matrix().reshape(count, 3, 3)
@@ -114,7 +115,8 @@ def rotations(raw, path, dim, count, rng):
             if kind == "rotvecs":
                 from scipy.spatial.transform import Rotation
                 if dim != 3:
-                    raise SceneError(f"{p}: rotation vectors define rotations only for dimension 3")
+                    raise SceneError(f"{p}: rotation vectors define rotations only for "
+                                     f"dimension 3")
                 return Rotation.from_rotvec(matrix_rows(val, p, count, 3, bound=1e6)).as_matrix()
             if kind == "matrices":
                 if not isinstance(val, list) or len(val) != count:

@@ -12,14 +12,14 @@ from dataclasses import dataclass
 from .errors import ParameterError, SceneError
 
 MAX_FILE_BYTES = 2 * 2**20        # a scene file; explicit vertices of ~25,000 triangles fit
-MAX_DEPTH = 32                    # YAML nesting (a scene needs 7: groups[0].rotations.matrices[0][0])
+MAX_DEPTH = 32                    # YAML nesting (a scene needs 7: groups[0].agents[0]...)
 MAX_NODES = 1_000_000             # YAML values after alias expansion (billion laughs)
 MAX_DIMENSION = 64                # d: rotations are d x d, a step costs O(N d^3)
-MAX_VERTICES = 4096               # per polytope (hypercube up to k = 12); metrics loop over vertices
+MAX_VERTICES = 4096               # per polytope (hypercube k <= 12); metrics visit every vertex
 MAX_SAMPLES = 100_000             # metric samples per run (each costs a pass over all vertices)
-MAX_LENGTH = 1e12                 # |coordinate|, size, L, spreads: squares and sums stay exact enough
+MAX_LENGTH = 1e12                 # |coordinate|, size, L, spreads: squares stay finite, resolved
 MIN_SIZE = 1e-12                  # circumradius and scales: below this the shape is round-off
-MAX_RATE = 1e15                   # kappa/gamma, kappa/m, gamma/m (1/s): stability analysis stays finite
+MAX_RATE = 1e15                   # kappa/gamma, kappa/m, gamma/m (1/s): stability analysis finite
 MIN_RELATIVE_TOLERANCE = 1e-14    # ~50 ulp: an adaptive tolerance below this is unattainable
 DEFAULT_MEMORY = 2 * 2**30        # estimated bytes of a run; --memory-limit overrides
 FLOAT = 8                         # bytes
@@ -74,7 +74,7 @@ class Budget:
         self.items = []
 
     def charge(self, path, nbytes, what):
-        """Add ``nbytes`` (for ``what``, at key ``path``); refuse once the total exceeds the limit."""
+        """Add ``nbytes`` (``what``, at key ``path``); refuse once the total exceeds the limit."""
         self.total += float(nbytes)
         self.items.append((path, nbytes, what))
         if not self.total <= self.limits.memory:
@@ -107,5 +107,6 @@ def check_rates(model_path, rates):
     """Refuse rates (1/s) beyond MAX_RATE: the linearisation and its step limits overflow."""
     for name, value in rates:
         if not value <= MAX_RATE:
-            raise SceneError(f"{model_path}: the rate {name} = {value:.3g} exceeds {MAX_RATE:g}/s; "
-                             f"no time step of a double-precision run can resolve it")
+            raise SceneError(f"{model_path}: the rate {name} = {value:.3g} exceeds "
+                             f"{MAX_RATE:g}/s; no time step of a double-precision run can "
+                             f"resolve it")

@@ -82,7 +82,7 @@ def resolve_scene_path(name):
         return name
     stem = name[:-5] if name.endswith(".yaml") else name
     for d in shipped_config_dirs():
-        cand = os.path.join(d, stem + ".yaml")          # e.g. congruent_triangles, extremes/stiff_mass
+        cand = os.path.join(d, stem + ".yaml")     # congruent_triangles, extremes/stiff_mass
         if os.path.isfile(cand):
             return cand
     raise SceneError(f"{name}: no such scene file (nor a shipped scene of that name; "
@@ -195,7 +195,8 @@ def _model_params(mm, dim):
         raise SceneError(f"model.representation: {exc}") from None
     out["centroids"] = mm.text("centroids", "exact")
     if out["centroids"] not in ("exact", "integrated"):
-        raise SceneError(f"model.centroids: expected exact or integrated, got {out['centroids']!r}")
+        raise SceneError(f"model.centroids: expected exact or integrated, "
+                         f"got {out['centroids']!r}")
     return out
 
 

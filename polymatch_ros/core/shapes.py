@@ -104,7 +104,8 @@ _FAMILIES = {"polygon": polygon, "simplex": simplex,
 
 
 def shape_names():
-    return sorted(_NAMED) + [f"{{{k}: n}}" for k in sorted(_FAMILIES)] + ["{vertices: [...], edges: [...]}"]
+    return (sorted(_NAMED) + [f"{{{k}: n}}" for k in sorted(_FAMILIES)]
+            + ["{vertices: [...], edges: [...]}"])
 
 
 def make_shape(spec, path="shape", max_dim=None):
@@ -154,7 +155,8 @@ def _custom_shape(spec, path, max_dim):
     if edges is None:
         edges = tuple((a, (a + 1) % n) for a in range(n)) if n > 2 else ((0, 1),)
     else:
-        pairs = matrix_rows(edges, f"{path}.edges", len(edges) if isinstance(edges, list) else 0, 2)
+        rows = len(edges) if isinstance(edges, list) else 0
+        pairs = matrix_rows(edges, f"{path}.edges", rows, 2)
         if np.any(pairs != np.round(pairs)) or np.any(pairs < 0) or np.any(pairs >= n):
             raise SceneError(f"{path}.edges: expected pairs [a, b] of vertex indices 0..{n - 1}")
         edges = tuple((int(a), int(b)) for a, b in pairs)
@@ -167,7 +169,7 @@ def _custom_shape(spec, path, max_dim):
 
 
 def check_vertex_array(value, path, dim=None, *, max_dim=None):
-    """A finite (n, k) float array, 2 <= n <= MAX_VERTICES, k == dim, k <= max_dim; or SceneError."""
+    """A finite (n, k) array, 2 <= n <= MAX_VERTICES, k == dim, k <= max_dim; or SceneError."""
     want = "a list of vertices, each a list of coordinates of the same length"
     if not isinstance(value, (list, np.ndarray)) or len(value) == 0:
         raise SceneError(f"{path}: expected {want}, got {describe(value)}")
@@ -183,7 +185,8 @@ def check_vertex_array(value, path, dim=None, *, max_dim=None):
         raise SceneError(f"{path}: vertices have {k} coordinates, the scene has dimension "
                          f"{dim or max_dim}")
     if len(rows) > MAX_VERTICES:
-        raise SceneError(f"{path}: {len(rows)} vertices; a polytope may have at most {MAX_VERTICES}")
+        raise SceneError(f"{path}: {len(rows)} vertices; a polytope may have at most "
+                         f"{MAX_VERTICES}")
     v = matrix_rows(rows, path, len(rows), len(rows[0]), bound=MAX_LENGTH)
     if v.shape[0] < 2:
         raise SceneError(f"{path}: a polytope needs at least 2 vertices, got {v.shape[0]}")

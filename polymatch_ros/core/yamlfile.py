@@ -70,7 +70,8 @@ def parse_yaml(text, label="scene"):
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise SceneError(f"{label}: not valid YAML ({where}{problem})") from None
     except (ValueError, OverflowError, RecursionError) as exc:   # e.g. a 5000-digit integer
-        raise SceneError(f"{label}: not a usable YAML value ({str(exc).splitlines()[0]})") from None
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise SceneError(f"{label}: not a usable YAML value ({detail})") from None
     if data is None:
         raise SceneError(f"{label}: empty; a scene is a mapping of keys "
                          f"(dimension, groups, ...; see README 'Scene files')")
@@ -160,7 +161,8 @@ def _check_key(frame, event, label):
     line = event.start_mark.line + 1 if event.start_mark else 0
     if key in frame.keys and key != "<<":
         path = _child_path(frame, key)
-        lines = f"lines {frame.keys[key]} and {line}" if frame.keys[key] != line else f"line {line}"
+        first = frame.keys[key]
+        lines = f"lines {first} and {line}" if first != line else f"line {line}"
         raise SceneError(f"{path}: duplicate key ({lines}); YAML would keep only the last")
     frame.keys[key] = line
     frame.key = key
