@@ -88,6 +88,9 @@ CASES = [
      "time.samples.count: must be <= 100000"),
     (6, "samples_every_1e-12", scene("time: {t_end: 2.0, samples: {every: 1e-12}}"), [],
      "time.samples.every: every 1e-12 over t_end = 2 is 2e+12 samples"),
+    (6, "t_end_1e-300_adaptive", scene("integrator: {method: adaptive, tolerance: 1e-6}",
+                                       "time: {t_end: 1e-300}"), [],
+     "time.t_end: must be >= 1e-06, got 1e-300"),
     (6, "cli_dt_1e-300", BASE, ["--dt", "1e-300"], "--dt: dt = 1e-300 over t_end = 2"),
     (6, "explain_dt_1e-300", BASE, ["EXPLAIN", "--dt", "1e-300"], "--dt: dt = 1e-300"),
     # 7. stability analysis inputs

@@ -20,6 +20,7 @@ MAX_SAMPLES = 100_000             # metric samples per run (each costs a pass ov
 MAX_LENGTH = 1e12                 # |coordinate|, size, L, spreads: squares stay finite, resolved
 MIN_SIZE = 1e-12                  # circumradius and scales: below this the shape is round-off
 MAX_RATE = 1e15                   # kappa/gamma, kappa/m, gamma/m (1/s): stability analysis finite
+MIN_T_END = 1e-6                  # time.t_end; samples closer than 1e-9 max(1, t_end) are merged
 MIN_RELATIVE_TOLERANCE = 1e-14    # ~50 ulp: an adaptive tolerance below this is unattainable
 DEFAULT_MEMORY = 2 * 2**30        # estimated bytes of a run; --memory-limit overrides
 FLOAT = 8                         # bytes

@@ -21,7 +21,7 @@ from .checks import Map, describe, number, vector
 from .errors import SceneError
 from .integrators import METHODS
 from .limits import (MAX_DIMENSION, MAX_LENGTH, MAX_RATE, MAX_SAMPLES, MIN_RELATIVE_TOLERANCE,
-                     Budget, check_rates)
+                     MIN_T_END, Budget, check_rates)
 from .model import Model, State, validate_model
 from .scene_groups import GroupContext, build_group
 from .so import group_for
@@ -148,7 +148,7 @@ def build_scene(data, limits=None):
     budget = Budget(limits)
     params = _model_params(Map(top.raw("model", {}), "model", MODEL_KEYS), dim)
     tm = Map(top.raw("time", {}), "time", ("t_end", "samples"))
-    t_end = tm.number("t_end", 20.0, positive=True)
+    t_end = tm.number("t_end", 20.0, minimum=MIN_T_END)
     samples = _samples(tm, t_end)
     budget.charge("time.samples", len(samples) * 2048, f"metrics at {len(samples)} samples")
     spec = _integrator_spec(Map(top.raw("integrator", {}), "integrator",
@@ -280,6 +280,16 @@ def check_step_count(t_end, dt, max_steps, path):
 
 
 def _samples(tm, t_end):
+    """Sample times in [0, t_end], both ends included; times closer than 1e-9 max(1, t_end)
+    are merged so no integrator is asked for a step of round-off size."""
+    times = _sample_times(tm, t_end)
+    gap = 1e-9 * max(1.0, t_end)
+    kept = times[np.insert(np.diff(times) > gap, 0, True)]
+    kept[-1] = t_end if len(kept) > 1 else kept[-1]
+    return kept if len(kept) > 1 else np.array([0.0, t_end])
+
+
+def _sample_times(tm, t_end):
     path = tm.at("samples")
     raw = tm.raw("samples")
     if raw is None:
