@@ -77,6 +77,7 @@ class Listener:
         if not self.complete:
             self.complete = True
             print("heard: " + ",".join(sorted(done)), flush=True)
+            print(f"heard everything at {time.time():.1f}", flush=True)
             print("done", flush=True)
         return True
 
@@ -91,7 +92,7 @@ def main(argv=None):
     qos = qos_for(args)
     expecting = bool(args.expect or args.expect_count)
     listener = Listener(args)
-    publishers = []
+    publishers, subscriptions = [], []
     for index in range(args.nodes):
         node = Node(f"probe_{args.name}_{index}".replace("-", "_").replace(".", "_"))
         executor.add_node(node)
@@ -99,11 +100,13 @@ def main(argv=None):
             publishers.append((f"{args.name}/{index}", node.create_publisher(String, args.topic,
                                                                             qos)))
         if expecting and index == 0:
-            node.create_subscription(String, args.topic, listener.on_message, qos)
+            subscriptions.append(node.create_subscription(String, args.topic,
+                                                          listener.on_message, qos))
     seq = 0
     next_send = 0.0
     end = time.monotonic() + args.seconds
-    print("ready", flush=True)
+    matched = 0
+    print(f"ready at {time.time():.1f}", flush=True)
     while not stop and time.monotonic() < end:
         now = time.monotonic()
         if publishers and now >= next_send and (not args.messages or seq < args.messages):
@@ -112,12 +115,17 @@ def main(argv=None):
             seq += 1
             next_send = now + (0.02 if args.messages else 0.2)
         executor.spin_once(timeout_sec=0.05)
+        if publishers and publishers[0][1].get_subscription_count() != matched:
+            matched = publishers[0][1].get_subscription_count()
+            print(f"matched subscriptions: {matched} at {time.time():.1f}", flush=True)
         if expecting:
             listener.check()
     ok = (listener.complete and listener.errors == 0) if expecting else True
     if expecting and not listener.complete:
-        print("missing after timeout; heard: " + ",".join(sorted(listener.senders_done())),
-              flush=True)
+        print("missing after timeout; heard: " + ",".join(sorted(listener.senders_done()))
+              + f"; matched publishers: {subscriptions[0].get_publisher_count()}", flush=True)
+    if publishers:
+        print(f"matched subscriptions: {publishers[0][1].get_subscription_count()}", flush=True)
     executor.shutdown()
     rclpy.try_shutdown()
     return 0 if ok else 1

@@ -36,11 +36,14 @@ sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 sock.bind(("0.0.0.0", int(sys.argv[1])))
 print("bound", flush=True)
 sock.settimeout(0.2)
-got, end = 0, time.monotonic() + float(sys.argv[2])
-while time.monotonic() < end:
+expected, end = int(sys.argv[3]), time.monotonic() + float(sys.argv[2])
+got, last = 0, None
+while got < expected and time.monotonic() < end:
+    if last is not None and time.monotonic() - last > 0.5:
+        break                                   # the sender is done; the rest was lost
     try:
         sock.recv(64)
-        got += 1
+        got, last = got + 1, time.monotonic()
     except OSError:
         pass
 print(got)
@@ -64,24 +67,25 @@ def unavailable_reason(tools=()):
         if shutil.which(tool) is None:
             return f"{tool} is not installed (scripts/install-system-packages.sh installs it)"
     name = f"{PREFIX}{os.getpid()}probe"
-    made = subprocess.run(["ip", "netns", "add", name], capture_output=True, text=True,
-                          timeout=10)
+    made = subprocess.run(["ip", "netns", "add", name], check=False, capture_output=True,
+                          text=True, timeout=10)
     if made.returncode != 0:
         return f"ip netns add failed: {made.stderr.strip()}"
-    subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=10)
+    subprocess.run(["ip", "netns", "del", name], check=False, capture_output=True, timeout=10)
     return None
 
 
 def _ip(*argv, namespace=None, check=True):
     command = ["ip"] + (["-n", namespace] if namespace else []) + list(argv)
-    done = subprocess.run(command, capture_output=True, text=True, timeout=15)
+    done = subprocess.run(command, check=False, capture_output=True, text=True, timeout=15)
     if check and done.returncode != 0:
         raise RuntimeError(f"{' '.join(command)}: {done.stderr.strip()}")
     return done
 
 
 def namespaces():
-    listed = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, timeout=10)
+    listed = subprocess.run(["ip", "netns", "list"], check=False, capture_output=True,
+                            text=True, timeout=10)
     return [line.split()[0] for line in listed.stdout.splitlines() if line.strip()]
 
 
@@ -153,7 +157,7 @@ class NetnsHosts:
     def run(self, index, argv, seconds=30):
         """Run ``argv`` inside host ``index`` under ``timeout -k 5``; a CompletedProcess."""
         return subprocess.run(list(self.prefix(index)) + ["timeout", "-k", "5", str(seconds)]
-                              + list(argv), capture_output=True, text=True,
+                              + list(argv), check=False, capture_output=True, text=True,
                               timeout=seconds + 10, stdin=subprocess.DEVNULL)
 
     def udp_delivered(self, source, target, count=50, seconds=3.0):
@@ -166,7 +170,8 @@ class NetnsHosts:
         port = 20000 + self.udp_calls
         receiver = subprocess.Popen(
             list(self.prefix(target)) + ["timeout", "-k", "2", str(seconds + 5), sys.executable,
-                                         "-c", _RECEIVE, str(port), str(seconds)],
+                                         "-c", _RECEIVE, str(port), str(seconds),
+                                         str(count)],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         try:
             deadline = time.monotonic() + 5
@@ -194,8 +199,8 @@ class NetnsHosts:
         if not 0 < percent <= 100:
             raise ValueError(f"loss {percent}% is not in (0, 100]")
         commands = [["nft", "add", "table", "inet", LOSS_TABLE],
-                    ["nft", f"add chain inet {LOSS_TABLE} in "
-                            "{ type filter hook input priority 0; }"],
+                    ["nft", (f"add chain inet {LOSS_TABLE} in "
+                             "{ type filter hook input priority 0; }")],
                     ["nft", "add", "rule", "inet", LOSS_TABLE, "in", "iifname", "eth0",
                      "numgen", "random", "mod", "100", "<", str(percent), "counter", "drop"]]
         for argv in commands:
@@ -211,6 +216,11 @@ class NetnsHosts:
 
     def remove_loss(self, index):
         self.run(index, ["nft", "delete", "table", "inet", LOSS_TABLE], seconds=10)
+
+
+def _read(path):
+    with open(path) as text:
+        return text.read()
 
 
 def root_interfaces():
@@ -242,15 +252,14 @@ class Capture:
             self.procs.append(proc)
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:
-            logs = [open(path + ".log").read() for path in self.files]
-            if all("listening on" in text for text in logs):
+            if all("listening on" in _read(path + ".log") for path in self.files):
                 return self
             if any(proc.poll() is not None for proc in self.procs):
                 break
             time.sleep(0.05)
         self.__exit__()
         raise RuntimeError("tcpdump did not start: " + " | ".join(
-            open(path + ".log").read().strip() for path in self.files))
+            _read(path + ".log").strip() for path in self.files))
 
     def __exit__(self, *exc):
         for proc in self.procs:
@@ -269,7 +278,7 @@ class Capture:
         lines = []
         for path in self.files:
             if os.path.exists(path) and os.path.getsize(path) > 0:
-                read = subprocess.run(["tcpdump", "-n", "-r", path], capture_output=True,
-                                      text=True, timeout=30)
+                read = subprocess.run(["tcpdump", "-n", "-r", path], check=False,
+                                      capture_output=True, text=True, timeout=30)
                 lines += read.stdout.splitlines()
         return lines

@@ -13,11 +13,11 @@ import os
 import time
 
 import pytest
-
 from netns_hosts import Capture, NetnsHosts, root_interfaces, unavailable_reason
-from polymatch_ros.ros import discovery
 from proc_group import Processes
 from ros_harness import needs_ros
+
+from polymatch_ros.ros import discovery
 
 HOSTS = 3
 SERVER_PORT = 11811          # inside host 0's own namespace: no other run can hold it
