@@ -17,6 +17,8 @@ Per group g:
   energy              (m/N) sum |O_i'|_F^2 + kappa/(2N^2) sum_{i,k} |O_i - O_k|_F^2   (Prop. 2.2 i)
                       = (m/N) sum |W_i|_F^2 + (kappa/N) sum |O_i - Obar|_F^2
   orthogonality       max_i |O_i^T O_i - I|_F                          (Lemma 2.1)
+  component_diameters matching_diameter of each component of a disconnected communication
+                      graph (``allow_disconnected: true``), else None
 """
 
 from dataclasses import dataclass
@@ -138,6 +140,7 @@ class GroupMetrics:
     vertex_diameter: float
     energy: float
     orthogonality: float
+    component_diameters: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -169,7 +172,22 @@ def group_metrics(model: Model, gi: int, gs: GroupState) -> GroupMetrics:
     vertex = matching if g.scales is None else _vertex_diameter(grp, gs, g.reference, g.scales)
     rotation = point_set_diameter(grp.flat(gs.rot), bound=max_rotation_distance(grp.dim))
     return GroupMetrics(point_set_diameter(gs.x), rotation, matching, vertex,
-                        rotation_energy(model, gs), orthogonality_defect(grp, gs.rot))
+                        rotation_energy(model, gs), orthogonality_defect(grp, gs.rot),
+                        _component_diameters(model, g, gs, ref))
+
+
+def _component_diameters(model: Model, g, gs: GroupState, reference: np.ndarray):
+    """Matching diameter of each component of the group's graph (None: one component)."""
+    labels = None if g.graph is None else g.graph.components
+    if labels is None or labels.max(initial=0) == 0:
+        return None
+    grp = model.rotations
+    parts = []
+    for c in range(int(labels.max()) + 1):
+        rows = np.flatnonzero(labels == c)
+        part = GroupState(gs.x[rows], grp.take(gs.rot, rows))
+        parts.append(_vertex_diameter(grp, part, reference))
+    return tuple(parts)
 
 
 def ensemble_metrics(model: Model, state: State) -> EnsembleMetrics:

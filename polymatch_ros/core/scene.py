@@ -14,12 +14,12 @@ import math
 import os
 import sys
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import yaml
 
-from . import initial
+from . import graph, initial
 from .checks import Map, vector
 from .decompose import RotationNotUniqueWarning, decompose
 from .errors import SceneError
@@ -127,7 +127,7 @@ def _apply_overrides(data, overrides):
 
 def build_scene(data):
     top = Map(data, "", ("name", "description", "dimension", "seed", "model", "integrator",
-                          "time", "convergence", "groups", "figure"))
+                          "time", "convergence", "groups", "figure", "graph"))
     dim = top.number("dimension", integer=True, minimum=2)
     seed = top.number("seed", 0, integer=True, minimum=0)
     rng = np.random.default_rng(seed)
@@ -165,6 +165,10 @@ def build_scene(data):
         groups.append(g)
         states.append(gs)
         start += g.size
+    # communication graphs: core.graph parses and validates the scene's and each group's `graph`
+    graphs = graph.group_graphs(top.raw("graph"), raw_groups, [g.size for g in groups],
+                                [gs.x for gs in states])
+    groups = [replace(g, graph=gr) for g, gr in zip(groups, graphs)]
     if (kappa_2 > 0 or mm.has("L")) and len(groups) == 1:
         notes.append("one group: the inter-group potential (kappa_2, L) has nothing to act on and is not modelled")
         kappa_2 = 0.0
@@ -234,7 +238,7 @@ def _samples(raw, path, t_end):
 
 def _build_group(raw, path, dim, order, rng, rotations, start, notes):
     gm = Map(raw, path, ("name", "shape", "size", "count", "centroids", "rotations", "scales",
-                          "velocities", "agents", "similar"))
+                          "velocities", "agents", "similar", "graph"))
     name = str(gm.raw("name", f"group{start}"))
     explicit = gm.has("agents")
     if explicit:
