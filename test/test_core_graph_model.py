@@ -102,7 +102,8 @@ def test_complete_scenes_carry_no_matrix_and_keep_the_mean_field():
 @pytest.mark.parametrize("dim", [2, 3, 4])
 @pytest.mark.parametrize("order", [1, 2])
 def test_complete_graph_as_explicit_edges_gives_the_same_trajectory_to_roundoff(dim, order):
-    runs = [simulate(scene(dim, order, graph=g, t_end=4.0, dt=0.05)) for g in (None, COMPLETE_EDGES)]
+    runs = [simulate(scene(dim, order, graph=g, t_end=4.0, dt=0.05))
+            for g in (None, COMPLETE_EDGES)]
     (x0, o0), (x1, o1) = (final(t) for t in runs)
     assert runs[0].scene.model.groups[0].graph is None
     assert runs[1].scene.model.groups[0].graph.kind == "edges"
@@ -115,7 +116,8 @@ def test_complete_graph_as_explicit_edges_gives_the_same_trajectory_to_roundoff(
 
 
 @pytest.mark.parametrize("order", [1, 2])
-@pytest.mark.parametrize("graph", [{"ring": 1}, {"k_nearest": 2}, {"ring": 1, "normalise": "degree"},
+@pytest.mark.parametrize("graph", [{"ring": 1}, {"k_nearest": 2},
+                                   {"ring": 1, "normalise": "degree"},
                                    {"random": {"p": 0.3, "seed": 2}, "allow_disconnected": True}])
 def test_graph_centroid_flow_is_expm_of_the_laplacian_prop_2_1(order, graph):
     sc = scene(3, order, graph=graph, count=10, t_end=3.7, dt=0.1,
@@ -201,8 +203,9 @@ def lockstep(sc, method, h, steps):
     return states
 
 
-@pytest.mark.parametrize("order, method, centroids", [(1, "rkmk4", "exact"), (1, "rkmk4", "integrated"),
-                                                      (2, "rkmk4", "exact"), (2, "etd2", "integrated")])
+@pytest.mark.parametrize("order, method, centroids", [
+    (1, "rkmk4", "exact"), (1, "rkmk4", "integrated"), (2, "rkmk4", "exact"),
+    (2, "etd2", "integrated")])
 def test_agents_hearing_only_their_sources_equal_the_centralised_run(order, method, centroids):
     sc = scene(3, order, graph={"ring": 1}, count=6, centroids=centroids)
     system = System(sc.model)
@@ -223,11 +226,12 @@ def test_agents_hearing_only_their_sources_equal_the_centralised_run(order, meth
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-@pytest.mark.parametrize("graph", [{"ring": 1}, {"k_nearest": 2}, {"random": {"p": 0.3, "seed": 5}}])
+@pytest.mark.parametrize("graph", [{"ring": 1}, {"k_nearest": 2},
+                                   {"random": {"p": 0.3, "seed": 5}}])
 def test_first_order_converges_on_connected_graphs_small_D0_thm_4_2_beyond_paper(dim, graph):
     """Theorem 4.2 assumes the complete graph; on connected graphs the same small-D0 claim
     holds (linear consensus for the centroids, Lohe/Kuramoto near consensus)."""
-    sc = scene(dim, graph=graph, count=8, seed=3, rotations={"within": 0.3}, t_end=400.0, dt=0.1)
+    sc = scene(dim, graph=graph, count=8, seed=3, rotations={"within": 0.3}, t_end=400.0, dt=0.25)
     traj = simulate(sc, samples=np.linspace(0.0, 400.0, 41), stop_when_converged=True)
     assert traj.metrics[0].groups[0].rotation_diameter < 1.0        # small D0
     assert traj.converged, traj.diameters[-1]
@@ -284,7 +288,8 @@ def test_allow_disconnected_reports_each_components_diameter():
 @pytest.mark.parametrize("graph, message", [
     ("star", r"^graph: unknown graph 'star'"),
     ({"ring": 1, "normalise": "mean"}, r"^graph\.normalise: expected size or degree"),
-    ({"ring": 1, "allow_disconnected": "yes"}, r"^graph\.allow_disconnected: expected true or false"),
+    ({"ring": 1, "allow_disconnected": "yes"},
+     r"^graph\.allow_disconnected: expected true or false"),
     ({"k_nearest": 8}, r"^graph\.k_nearest: must be < the group's 8 agents"),
 ])
 def test_bad_scene_graphs_are_one_line_scene_errors(graph, message):
@@ -326,3 +331,24 @@ def test_ring_evaluation_is_cheaper_than_complete_edges_at_n_2000():
     print(f"ring / complete-edges evaluation at N = {n}: {ratio:.3g}")
     assert ring.edge_count == 2 * n and complete.edge_count == n * (n - 1)
     assert ratio < 0.25
+
+
+def test_cli_refuses_a_disconnected_graph_exit_2_and_reports_the_twisted_ring(tmp_path, capsys):
+    from polymatch_ros.cli import main
+    path = tmp_path / "disconnected.yaml"
+    path.write_text("dimension: 2\ngraph: {edges: [[0, 1], [2, 3]]}\n"
+                    "groups:\n  - {shape: triangle, count: 4}\n")
+    assert main(["simulate", str(path), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["polymatch: error: graph (groups[0]): the graph is disconnected: "
+                   "components {0, 1} {2, 3}"]
+    assert main(["simulate", "extremes/twisted_ring_2d", "-q", "--t-end", "20"]) == 0
+    assert "twisted state" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_adaptive_run_on_a_graph_agrees_with_rkmk4(order):
+    runs = [simulate(scene(3, order, graph={"k_nearest": 2}, t_end=3.0, dt=0.01), method=m,
+                     tolerance=1e-10 if m == "adaptive" else None) for m in ("rkmk4", "adaptive")]
+    (x0, o0), (x1, o1) = (final(t) for t in runs)
+    assert np.max(np.abs(x0 - x1)) < 1e-9 and np.max(np.abs(o0 - o1)) < 1e-7

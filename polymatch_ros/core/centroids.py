@@ -80,7 +80,7 @@ class CentroidFlow:
 
 
 def mode_propagators(mass: float, gamma: float, stiffness: np.ndarray, h: float) -> tuple:
-    """CentroidFlow's 2x2 propagator of m y'' = -gamma y' - k y for an array of k: (xx, xv, vx, vv).
+    """CentroidFlow's 2x2 propagator of m y'' = -gamma y' - k y, per k of an array: xx, xv, vx, vv.
 
     The same roots and phi_1 formulas, vectorised (complex arithmetic covers both the
     over- and the under-damped modes).

@@ -5,7 +5,8 @@ The paper couples every pair of a group (the complete graph, kappa/N sum_k in (A
 with which agent i hears agent k (row i is the receiver):
 
     centroids  kappa/N_g sum_k a_ik (xbar_k - xbar_i)
-    rotations  kappa/(2 N_g) sum_k a_ik (O_k O_i^T - O_i O_k^T) = kappa/(2 N_g) (S_i O_i^T - O_i S_i^T),
+    rotations  kappa/(2 N_g) sum_k a_ik (O_k O_i^T - O_i O_k^T)
+             = kappa/(2 N_g) (S_i O_i^T - O_i S_i^T),
                S_i = sum_k a_ik O_k
 
 so one sparse product ``A @ O`` gives every agent's weighted field in O(|E| d^2).  With
@@ -65,7 +66,7 @@ class Graph:
         return self.weights is None
 
     def matrix(self) -> sparse.csr_matrix:
-        """The weights a_ik as a sparse matrix (the complete graph's too: ones off the diagonal)."""
+        """The weights a_ik as a sparse matrix (the complete graph's: ones off the diagonal)."""
         if self.weights is not None:
             return self.weights
         full = np.ones((self.size, self.size)) - np.eye(self.size)
@@ -197,7 +198,8 @@ def build_graph(spec, path: str, size: int, centroids: np.ndarray | None = None)
     if spec is None or spec == "complete":
         return Graph("complete", size)
     if isinstance(spec, str):
-        raise SceneError(f"{path}: unknown graph {spec!r} (expected complete or a mapping with one of "
+        raise SceneError(f"{path}: unknown graph {spec!r} (expected complete or a mapping "
+                         f"with one of "
                          f"{', '.join(KINDS[1:])})")
     m = Map(spec, path, KINDS[1:] + ("weights", "directed", "normalise", "allow_disconnected"))
     options = _options(m)
@@ -298,7 +300,8 @@ def _edges(m: Map, size: int) -> Graph:
     if weights is None:
         weights = [1.0] * len(pairs)
     if not isinstance(weights, list) or len(weights) != len(pairs):
-        raise SceneError(f"{m.at('weights')}: expected one positive weight per edge ({len(pairs)})")
+        raise SceneError(f"{m.at('weights')}: expected one positive weight per edge "
+                         f"({len(pairs)})")
     w = [number(v, f"{m.at('weights')}[{j}]", positive=True) for j, v in enumerate(weights)]
     directed = m.raw("directed", False)
     if not isinstance(directed, bool):
@@ -324,7 +327,8 @@ def check_connected(graph: Graph, path: str) -> None:
     if not graph.directed:
         count, labels = csgraph.connected_components(flow, directed=False)
         if count > 1:
-            raise SceneError(f"{path}: the graph is disconnected: components {_components(labels, count)}")
+            raise SceneError(f"{path}: the graph is disconnected: components "
+                             f"{_components(labels, count)}")
         return
     count, labels = csgraph.connected_components(flow, directed=True, connection="strong")
     reached = np.zeros(count, dtype=bool)

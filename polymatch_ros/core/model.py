@@ -232,10 +232,9 @@ class System:
         everyone = np.delete(np.arange(g.size), row)
         near = everyone if g.graph is None else g.graph.in_neighbours(row)
         fields = self.exchange_fields(first_stage)
+        cent = near                              # complete graph: near is everyone
         if m.centroids_exact and g.graph is not None:
             cent = everyone if first_stage else near[:0]
-        else:
-            cent = everyone if g.graph is None and m.centroids_exact else near
         return {f: near if f == "rot" else cent for f in fields}
 
     def evaluate(self, stage: State,
@@ -317,7 +316,7 @@ class System:
 
     def exact_centroids(self, gi: int, gs: GroupState, coupling: Coupling,
                         h: float) -> tuple[np.ndarray, np.ndarray | None]:
-        """(x, v) of group gi after h along the exact flow of Proposition 2.1 (or its graph form)."""
+        """(x, v) of group gi after h on the exact flow of Proposition 2.1 (or its graph form)."""
         c = coupling.groups[gi]
         if c.group_x is not None:
             return self.flows[gi].advance_group(c.group_x, c.group_v, h, c.index)
