@@ -276,7 +276,7 @@ def test_allow_disconnected_reports_each_components_diameter():
     spec = {"edges": [[0, 1], [1, 2], [2, 3], [4, 5], [5, 6], [6, 7]], "allow_disconnected": True}
     sc = scene(graph=spec, rotations={"within": 0.3}, t_end=300.0, dt=0.1)
     traj = simulate(sc)
-    parts = traj.metrics[-1].groups[0].component_diameters
+    parts = traj.metrics[-1].component_diameters[0]
     assert len(parts) == 2 and max(parts) < 1e-6           # each component matches itself
     assert traj.diameters[-1] > 1e-3 and not traj.converged  # but the group does not match as one
     code, msg = convergence_verdict(sc, traj.diameters[-1], traj.converged_at, traj.stationarity,

@@ -293,9 +293,10 @@ def convergence_verdict(scene: Scene, diameter: float, converged_at: float | Non
         return 0, f"converged: matching diameter < {scene.tolerance:g} from t = {converged_at:g}"
     msg = (f"did not converge: matching diameter {diameter:.3e} >= tolerance "
            f"{scene.tolerance:g} at t_end")
-    for g, gm in zip(scene.model.groups, [] if metrics is None else metrics.groups):
-        if gm.component_diameters is not None:
-            parts = ", ".join(f"{d:.3e}" for d in gm.component_diameters)
+    components = None if metrics is None else metrics.component_diameters
+    for g, diameters in zip(scene.model.groups, components or ()):
+        if diameters is not None:
+            parts = ", ".join(f"{d:.3e}" for d in diameters)
             msg += f"; group {g.name!r} is disconnected, component diameters [{parts}]"
     if stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
         graphs = any(g.graph is not None for g in scene.model.groups)
