@@ -84,7 +84,7 @@ def cmd_simulate(args):
         snapshot_figure(traj, figure)
         print(f"snapshots saved to {figure}")
     code, msg = convergence_verdict(scene, traj.metrics[-1].diameter, traj.converged_at,
-                                    traj.stationarity)
+                                    traj.stationarity, metrics=traj.metrics[-1])
     print(msg)
     return code
 

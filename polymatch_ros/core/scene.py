@@ -13,15 +13,16 @@ its own size even when coordinates are of magnitude 1e9.
 import math
 import os
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from . import graph
 from .checks import Map, describe, number, vector
 from .errors import SceneError
 from .integrators import METHODS
-from .limits import (MAX_DIMENSION, MAX_LENGTH, MAX_RATE, MAX_SAMPLES, MIN_RELATIVE_TOLERANCE,
-                     MIN_T_END, Budget, check_rates)
+from .limits import (FLOAT, MAX_DIMENSION, MAX_LENGTH, MAX_RATE, MAX_SAMPLES,
+                     MIN_RELATIVE_TOLERANCE, MIN_T_END, Budget, check_rates)
 from .model import Model, State, validate_model
 from .scene_groups import GroupContext, build_group
 from .so import group_for
@@ -136,7 +137,7 @@ def _apply_overrides(data, overrides):
 
 MODEL_KEYS = ("order", "kappa", "gamma", "mass", "kappa_2", "L", "representation", "centroids")
 TOP_KEYS = ("name", "description", "dimension", "seed", "model", "integrator", "time",
-            "convergence", "groups", "figure")
+            "convergence", "groups", "figure", "graph")
 
 
 def build_scene(data, limits=None):
@@ -220,6 +221,16 @@ def _groups(top, dim, params, seed, budget):
         groups.append(g)
         states.append(gs)
         ctx.start += g.size
+    # communication graphs: core.graph parses and validates the scene's and each group's `graph`
+    for gi, (raw, g) in enumerate(zip(raw_groups, groups)):
+        spec = raw.get("graph") if isinstance(raw, dict) else None
+        if (spec if spec is not None else top.raw("graph")) not in (None, "complete"):
+            # adjacency, Laplacian and its eigenmodes are dense N x N (a few copies)
+            budget.charge(f"groups[{gi}].graph", 4.0 * FLOAT * float(g.size) ** 2,
+                          f"a {g.size} x {g.size} graph Laplacian and its eigenmodes")
+    graphs = graph.group_graphs(top.raw("graph"), raw_groups, [g.size for g in groups],
+                                [gs.x for gs in states])
+    groups = [replace(g, graph=gr) for g, gr in zip(groups, graphs)]
     if (params["kappa_2"] > 0 or params["has_L"]) and len(groups) == 1:
         ctx.notes.append("one group: the inter-group potential (kappa_2, L) has nothing to act on "
                          "and is not modelled")

@@ -19,7 +19,7 @@ from .model import Group, GroupState
 from .shapes import check_vertex_array, make_shape
 
 GROUP_KEYS = ("name", "shape", "size", "count", "centroids", "rotations", "scales",
-              "velocities", "agents", "similar")
+              "velocities", "agents", "similar", "graph")
 
 
 @dataclass

@@ -224,12 +224,21 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
         kind = "similar (F-1: torque weights s_k/s_i)" if g.scales is not None else \
             "congruent (no scale weights)"
         lines.append(f"group {g.name!r}: {g.size} x {len(g.reference)}-vertex polytope, {kind}")
+        lines.append(f"group {g.name!r} graph: {_graph_line(g)}")
     if m.inter_group:
         lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; "
                      "centroids integrated "
                      "with the method's stages (the inter-group force is nonlinear)")
+    elif m.centroids_exact and any(g.graph is not None for g in m.groups):
+        lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential);"
+                     " on graphs mode by mode of the Laplacian (eigh once, O(N^3); O(N^2 d) "
+                     "per step)")
     elif m.centroids_exact:
         lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential)")
+    elif m.centroids == "exact":
+        lines.append("centroids: integrated with the method's stages (a directed graph: "
+                     "its Laplacian is not symmetric; stages keep the exchange between "
+                     "in-neighbours)")
     else:
         lines.append("centroids: integrated with the method's stages "
                      "(model.centroids = integrated; "
@@ -262,17 +271,40 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
     return lines
 
 
+def _graph_line(g) -> str:
+    """Which graph a group couples on and what an evaluation costs there."""
+    if g.graph is None:
+        return "complete (the paper's mean field S = sum_k O_k: O(N d^3) per evaluation)"
+    text = g.graph.describe()
+    if g.graph.allow_disconnected and g.graph.components.max(initial=0) > 0:
+        text += (f"; {int(g.graph.components.max()) + 1} components (allow_disconnected): "
+                 "the metrics report each one's diameter")
+    return text
+
+
 def convergence_verdict(scene: Scene, diameter: float, converged_at: float | None,
-                        stationarity: float | None = None) -> tuple[int, str]:
-    """(exit code, message) for the end of a run."""
+                        stationarity: float | None = None,
+                        metrics: EnsembleMetrics | None = None) -> tuple[int, str]:
+    """(exit code, message) for the end of a run.
+
+    ``metrics`` (the last sample's) adds the per-component diameters of disconnected graphs.
+    """
     if converged_at is not None:
         return 0, f"converged: matching diameter < {scene.tolerance:g} from t = {converged_at:g}"
     msg = (f"did not converge: matching diameter {diameter:.3e} >= tolerance "
            f"{scene.tolerance:g} at t_end")
+    components = None if metrics is None else metrics.component_diameters
+    for g, diameters in zip(scene.model.groups, components or ()):
+        if diameters is not None:
+            parts = ", ".join(f"{d:.3e}" for d in diameters)
+            msg += f"; group {g.name!r} is disconnected, component diameters [{parts}]"
     if stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
+        graphs = any(g.graph is not None for g in scene.model.groups)
         msg += ("; the rotations sit at an equilibrium that is not consensus "
                 f"(|W| = {stationarity:.1e}),"
-                " e.g. antipodal or splay states of the Lohe model")
+                + (" e.g. a twisted state theta_i = 2 pi q i / N of a ring (stable on graphs"
+                   " where the complete graph has none), antipodal or splay states" if graphs
+                   else " e.g. antipodal or splay states of the Lohe model"))
     if not scene.expect_convergence:
         return 0, msg + " (the scene expects this: convergence.expected = false)"
     return EXIT_NOT_CONVERGED, msg

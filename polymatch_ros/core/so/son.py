@@ -89,8 +89,15 @@ class SOn(RotationGroup):
     def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
         return g.sum(axis=0) if weights is None else np.tensordot(weights, g, axes=(0, 0))
 
+    def neighbour_fields(self, g: Array, weights) -> MeanField:
+        d = self.dim
+        return np.asarray(weights @ g.reshape(len(g), d * d)).reshape(-1, d, d)
+
     def coupling(self, g: Array, s: MeanField) -> Array:
         d = self.dim
+        if np.ndim(s) == 3:                      # one field per row
+            b = g @ np.swapaxes(s, 1, 2)
+            return np.swapaxes(b, 1, 2) - b
         b = (g.reshape(-1, d) @ s.T).reshape(-1, d, d)  # b_i = O_i S^T
         return np.swapaxes(b, 1, 2) - b
 
