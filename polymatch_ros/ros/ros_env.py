@@ -8,7 +8,6 @@ the user has set them.  The shipped Fast DDS profile shortens discovery.
 
 import contextlib
 import os
-import re
 
 PROFILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "resources", "fastdds_profile.xml")
 
@@ -57,7 +56,6 @@ def reserved_domain_id():
 
 TEARDOWN_SECONDS = 10.0
 TEARDOWN_MARK = "Timeout ("        # the first line faulthandler writes when the watchdog fires
-FINAL_LINE = re.compile(r"^(agent [0-9,]+|monitor): (?!error)")
 
 
 @contextlib.contextmanager
@@ -79,6 +77,7 @@ def teardown_watchdog(seconds=TEARDOWN_SECONDS):
 
 
 def hung_in_teardown(code, lines):
-    """True when a child reported its final line, then was ended by the teardown watchdog."""
+    """True when a child printed its final run record, then was ended by the teardown watchdog."""
+    from .wire import run_records
     return (code == 1 and any(line.startswith(TEARDOWN_MARK) for line in lines)
-            and any(FINAL_LINE.match(line) for line in lines))
+            and any(rec.finished for rec in run_records(lines)))
