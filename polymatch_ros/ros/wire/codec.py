@@ -179,7 +179,11 @@ def pose_fields(grp, x, g):
     pos = np.zeros(3)
     pos[:len(x)] = x
     if grp.dim == 2:
-        theta = float(grp.from_matrices(grp.to_matrices(g))[0]) if grp.name != "angle" else float(g[0])
+        if grp.name == "angle":
+            theta = float(g[0])
+        else:
+            mat = grp.to_matrices(g)[0]
+            theta = math.atan2(mat[1, 0], mat[0, 0])
         quat = np.array([0.0, 0.0, math.sin(theta / 2), math.cos(theta / 2)])
     else:
         from scipy.spatial.transform import Rotation
