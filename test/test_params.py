@@ -17,8 +17,14 @@ for spec_name, spec in (("agent", AGENT), ("monitor", MONITOR)):
         if p.bounds is not None:
             CASES.append((spec_name, p.name, p.bounds[1] * 2 + 1, "out of range"))
             below = p.bounds[0] - 1
-            CASES.append((spec_name, p.name, below if isinstance(p.default, float) else int(below),
-                          "out of range"))
+            CASES.append(
+                (
+                    spec_name,
+                    p.name,
+                    below if isinstance(p.default, float) else int(below),
+                    "out of range",
+                )
+            )
         if p.choices is not None:
             CASES.append((spec_name, p.name, "fast", "expected lockstep or realtime"))
 
@@ -36,7 +42,11 @@ def test_bad_parameter_is_one_line_parameter_error(spec_name, name, value, expec
 
 def test_good_parameters_pass_and_integers_are_numbers():
     values = check(AGENT, {"scene": "x", "t_end": 2, "agents": [1, 2], "mode": "realtime"})
-    assert values["t_end"] == 2.0 and isinstance(values["t_end"], float) and values["agents"] == [1, 2]
+    assert (
+        values["t_end"] == 2.0
+        and isinstance(values["t_end"], float)
+        and values["agents"] == [1, 2]
+    )
     assert check(MONITOR, {"scene": "x"})["markers"] is True
 
 

@@ -32,20 +32,44 @@ PROBE = textwrap.dedent("""
 
 
 def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
-    first = ["/polymatch/agent_%d" % i for i in range(8)] + ["/polymatch/monitor", "/polymatch/runner"]
+    first = ["/polymatch/agent_%d" % i for i in range(8)] + [
+        "/polymatch/monitor",
+        "/polymatch/runner",
+    ]
     second = ["/second/agents_0_7", "/second/monitor", "/second/runner"]
     probe = ros.start([PY, "-c", PROBE, json.dumps(first + second)], timeout=200)
-    runs = [ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path("congruent_triangles"), "-q",
-                       "--ensemble", name, "-k", k, "--timeout", "180", "--no-compare",
-                       "--round-timeout", "60"], timeout=200)          # two ensembles on 2 cores
-            for name, k in (("polymatch", "1"), ("second", "8"))]
+    runs = [
+        ros.start(
+            [
+                PY,
+                "-m",
+                "polymatch_ros.cli",
+                "run",
+                scene_path("congruent_triangles"),
+                "-q",
+                "--ensemble",
+                name,
+                "-k",
+                k,
+                "--timeout",
+                "180",
+                "--no-compare",
+                "--round-timeout",
+                "60",
+            ],
+            timeout=200,
+        )  # two ensembles on 2 cores
+        for name, k in (("polymatch", "1"), ("second", "8"))
+    ]
     for run in runs:
         rc = ros.wait(run, 210)
         assert rc in (0, 3), ros.output(run)
         assert "taken twice" not in ros.output(run)
     assert ros.wait(probe, 30) == 0, ros.output(probe)
     line = [x for x in ros.output(probe).splitlines() if x.startswith("GRAPH ")][-1]
-    graph = json.loads(line[len("GRAPH "):])
+    graph = json.loads(line[len("GRAPH ") :])
     assert set(first + second) <= set(graph["seen"]), graph
-    assert graph["twice"] == [], graph                                  # no duplicate node name
-    assert not [n for n in graph["seen"] if n.count("/") == 1 and "agent" in n], graph   # none at the root
+    assert graph["twice"] == [], graph  # no duplicate node name
+    assert not [n for n in graph["seen"] if n.count("/") == 1 and "agent" in n], (
+        graph
+    )  # none at the root

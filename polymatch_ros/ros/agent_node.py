@@ -28,9 +28,14 @@ def local_state(scene, layout):
     grp = scene.model.rotations
     groups = []
     for gs, rows in zip(scene.initial.groups, layout.rows):
-        groups.append(GroupState(gs.x[rows].copy(), grp.take(gs.rot, rows),
-                                 None if gs.v is None else gs.v[rows].copy(),
-                                 None if gs.w is None else grp.algebra_take(gs.w, rows)))
+        groups.append(
+            GroupState(
+                gs.x[rows].copy(),
+                grp.take(gs.rot, rows),
+                None if gs.v is None else gs.v[rows].copy(),
+                None if gs.w is None else grp.algebra_take(gs.w, rows),
+            )
+        )
     return State(0.0, tuple(groups))
 
 
@@ -44,6 +49,7 @@ class AgentBase:
 
     def __init__(self, node, params):
         from rclpy.executors import SingleThreadedExecutor
+
         self.node, self.params = node, params
         self.created = time.monotonic()
         self.matched_after = None
@@ -55,12 +61,15 @@ class AgentBase:
 
     def _configure(self, p):
         from ..core.scene import load_scene, resolve_scene_path
+
         scene = load_scene(resolve_scene_path(p["scene"]), {"time.t_end": p["t_end"] or None})
         local = p["agents"] or [p["agent"]]
         bad = [a for a in local if not 0 <= a < scene.model.n_agents]
         if bad:
-            raise ParameterError(f"parameter 'agents': agent {bad[0]} is not in the scene "
-                                 f"(0..{scene.model.n_agents - 1})")
+            raise ParameterError(
+                f"parameter 'agents': agent {bad[0]} is not in the scene "
+                f"(0..{scene.model.n_agents - 1})"
+            )
         self.plan = plan(scene, p["integrator"] or None, self.step_size(p), distributed=True)
         self.scene = scene = prepare(scene, self.plan)
         self.model = scene.model
@@ -83,9 +92,12 @@ class AgentBase:
         self.pose_pubs = {a: wire.publisher(node, "pose", dim, a) for a in local}
         self.final_pubs = {a: wire.publisher(node, "final_pose", dim, a) for a in local}
         second = self.model.order == 2
-        self.twist_pubs = {a: wire.publisher(node, "twist", dim, a) for a in local} if second else {}
-        self.final_twist_pubs = ({a: wire.publisher(node, "final_twist", dim, a) for a in local}
-                                 if second else {})
+        self.twist_pubs = (
+            {a: wire.publisher(node, "twist", dim, a) for a in local} if second else {}
+        )
+        self.final_twist_pubs = (
+            {a: wire.publisher(node, "final_twist", dim, a) for a in local} if second else {}
+        )
         self.diag_pub = wire.publisher(node, "diagnostics")
         self.status_pub = wire.publisher(node, "status")
         wire.subscription(node, "control", self._control)
@@ -109,8 +121,11 @@ class AgentBase:
 
         Per-step poses nobody subscribes to are not even built (the lockstep hot loop).
         """
-        pose_pubs, twist_pubs = ((self.final_pubs, self.final_twist_pubs) if final
-                                 else (self.pose_pubs, self.twist_pubs))
+        pose_pubs, twist_pubs = (
+            (self.final_pubs, self.final_twist_pubs)
+            if final
+            else (self.pose_pubs, self.twist_pubs)
+        )
         if final or any(p.get_subscription_count() for p in pose_pubs.values()):
             self._publish_rows(pose_pubs, twist_pubs)
         self._maybe_diagnostics()
@@ -122,27 +137,41 @@ class AgentBase:
             for r, row in enumerate(self.layout.rows[gi]):
                 a = g.start + row
                 x = gs.x[r] + self.scene.origin
-                pose_pubs[a].publish(wire.pose_message(self.grp, st.t, x, self.grp.take(gs.rot, [r]), frame))
+                pose_pubs[a].publish(
+                    wire.pose_message(self.grp, st.t, x, self.grp.take(gs.rot, [r]), frame)
+                )
                 if self.model.order == 2:
                     w_one = self.grp.algebra_take(gs.w, [r])
-                    twist_pubs[a].publish(wire.twist_message(self.grp, st.t, gs.v[r], w_one, frame))
+                    twist_pubs[a].publish(
+                        wire.twist_message(self.grp, st.t, gs.v[r], w_one, frame)
+                    )
 
     def time_split(self):
-        """Milliseconds per round spent publishing stages, waiting for peers, and everything else."""
+        """Milliseconds per round publishing stages, waiting for peers, and everything else."""
         return {}
 
     def record(self):
         """This process's run record (``wire.RunRecord``)."""
         rps = self.rounds / self.round_time if self.round_time > 0 else 0.0
-        return wire.RunRecord(role="agent", mode=self.mode, t=float(self.state.t),
-                              agents=tuple(self.layout.local), finished=self.finished, steps=self.steps,
-                              rounds=self.rounds, rounds_per_second=rps, ms_per_round=self.time_split(),
-                              late_ticks=self.late_ticks, matched_after=self.matched_after,
-                              dropped=dict(self.drops.counts))
+        return wire.RunRecord(
+            role="agent",
+            mode=self.mode,
+            t=float(self.state.t),
+            agents=tuple(self.layout.local),
+            finished=self.finished,
+            steps=self.steps,
+            rounds=self.rounds,
+            rounds_per_second=rps,
+            ms_per_round=self.time_split(),
+            late_ticks=self.late_ticks,
+            matched_after=self.matched_after,
+            dropped=dict(self.drops.counts),
+        )
 
     def flush_poses(self, timeout=3.0):
         """Wait until the last poses reached every subscriber (the monitor, the runner)."""
         from rclpy.duration import Duration
+
         pubs = [self.pose_pubs, self.twist_pubs, self.final_pubs, self.final_twist_pubs]
         for pub in [p for group in pubs for p in group.values()] + [self.status_pub]:
             pub.wait_for_all_acked(Duration(seconds=timeout))
@@ -155,18 +184,28 @@ class AgentBase:
         self._last_diag = now
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
         from std_msgs.msg import String
+
         rec = self.record()
         self.status_pub.publish(String(data=rec.to_json()))
-        status = DiagnosticStatus(name=f"polymatch{self.node.get_fully_qualified_name()}",
-                                  hardware_id=self.node.get_fully_qualified_name())
+        status = DiagnosticStatus(
+            name=f"polymatch{self.node.get_fully_qualified_name()}",
+            hardware_id=self.node.get_fully_qualified_name(),
+        )
         status.level = DiagnosticStatus.OK if self.drops.total == 0 else DiagnosticStatus.WARN
         status.message = f"{self.mode}: t = {self.state.t:.4g}; {self.drops.summary()}"
-        vals = {"t": rec.t, "steps": rec.steps, "rounds": rec.rounds,
-                "rounds_per_second": rec.rounds_per_second, "dropped": self.drops.total}
+        vals = {
+            "t": rec.t,
+            "steps": rec.steps,
+            "rounds": rec.rounds,
+            "rounds_per_second": rec.rounds_per_second,
+            "dropped": self.drops.total,
+        }
         vals.update({f"{k}_ms_per_round": v for k, v in rec.ms_per_round.items()})
         vals.update({f"dropped: {k}": v for k, v in self.drops.counts.items()})
-        status.values = [KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v))
-                         for k, v in vals.items()]
+        status.values = [
+            KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v))
+            for k, v in vals.items()
+        ]
         arr = DiagnosticArray(status=[status])
         arr.header.stamp = self.node.get_clock().now().to_msg()
         self.diag_pub.publish(arr)
@@ -181,14 +220,18 @@ class AgentBase:
         want = self.params["pose_subscribers"]
         while True:
             peers_ok = peers_matched is None or peers_matched()
-            if peers_ok and all(p.get_subscription_count() >= want for p in self.pose_pubs.values()):
+            if peers_ok and all(
+                p.get_subscription_count() >= want for p in self.pose_pubs.values()
+            ):
                 self.matched_after = time.monotonic() - self.created
                 return
             if time.monotonic() > deadline:
                 gone = missing() if missing is not None else []
                 what = f"agent(s) {', '.join(map(str, gone))}" if gone else "all subscribers"
-                raise PolymatchError(f"discovery timed out after {self.params['discovery_timeout']:g} s "
-                                     f"waiting for {what}")
+                raise PolymatchError(
+                    f"discovery timed out after {self.params['discovery_timeout']:g} s "
+                    f"waiting for {what}"
+                )
             self.spin_once(0.05)
 
     def loop(self):
@@ -217,13 +260,19 @@ class AgentBase:
 def make_agent(argv=None):
     """The agent of the mode the parameters ask for (checked before any topic is created)."""
     from rclpy.node import Node
-    node = Node("agent", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE),
-                automatically_declare_parameters_from_overrides=False)
+
+    node = Node(
+        "agent",
+        namespace=wire.namespace(wire.DEFAULT_ENSEMBLE),
+        automatically_declare_parameters_from_overrides=False,
+    )
     params = declare(node, AGENT)
     if params["mode"] == "lockstep":
         from .lockstep import LockstepAgent
+
         return LockstepAgent(node, params)
     from .realtime import RealtimeAgent
+
     return RealtimeAgent(node, params)
 
 

@@ -14,22 +14,31 @@ from .ros_env import hung_in_teardown
 
 
 def _die_with_parent():
-    """In the child, before exec: get SIGTERM if the runner dies (Linux), so nothing outlives it."""
+    """In the child, before exec: SIGTERM when the runner dies (Linux): nothing outlives it."""
     try:
         import ctypes
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
 
 
 class Child:
-    """A supervised process: output kept (last lines) and echoed on failure; ended by its own PID."""
+    """A supervised process: last lines of output kept (shown on failure); ended by its PID."""
 
     def __init__(self, name, argv, env):
         self.name = name
-        self.proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True, text=True, bufsize=1,
-                                     preexec_fn=_die_with_parent)
+        self.proc = subprocess.Popen(
+            argv,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+            text=True,
+            bufsize=1,
+            preexec_fn=_die_with_parent,
+        )
         self.lines = deque(maxlen=200)
         self.thread = threading.Thread(target=self._read, daemon=True)
         self.thread.start()
@@ -91,22 +100,25 @@ def fewest_agents_per_process(n_agents, own):
 
 
 def _agents_per_process(args, n_agents, localhost):
-    """-k as given (checked against the participant limit), or 1 if it fits, else the fewest that fit."""
-    own = 1 + (1 if args.monitor else 0)                      # the runner's node, the monitor
+    """-k as given (checked against the participant limit), else 1 if it fits, else the fewest."""
+    own = 1 + (1 if args.monitor else 0)  # the runner's node, the monitor
     need = fewest_agents_per_process(n_agents, own)
     if args.agents_per_process is None:
         if localhost and need > 1:
             if not args.quiet:
-                print(f"polymatch run: {n_agents} agents + {own} own processes exceed the {LOCALHOST_PARTICIPANTS} "
-                      f"DDS participants LOCALHOST discovery reaches: {need} agents per process (-k {need})",
-                      file=sys.stderr)
+                print(
+                    f"polymatch run: {n_agents} agents + {own} own processes exceed the "
+                    f"{LOCALHOST_PARTICIPANTS} DDS participants LOCALHOST discovery reaches: "
+                    f"{need} agents per process (-k {need})",
+                    file=sys.stderr,
+                )
             return need
         return 1
     procs = -(-n_agents // args.agents_per_process)
     if localhost and procs + own > LOCALHOST_PARTICIPANTS:
-        raise PolymatchError(f"{procs} agent processes + {own} own = {procs + own} DDS participants, but LOCALHOST "
-                             f"discovery reaches {LOCALHOST_PARTICIPANTS} per domain (rmw_fastrtps' initial-peer "
-                             f"range); use -k {need} or more")
+        raise PolymatchError(
+            f"{procs} agent processes + {own} own = {procs + own} DDS participants, but LOCALHOST "
+            f"discovery reaches {LOCALHOST_PARTICIPANTS} per domain (rmw_fastrtps' initial-peer "
+            f"range); use -k {need} or more"
+        )
     return args.agents_per_process
-
-

@@ -28,7 +28,9 @@ def message_to_lines(msg, indent=""):
         if hasattr(value, "get_fields_and_field_types"):
             lines.append(f"{indent}{name}:")
             lines.extend(message_to_lines(value, indent + "  "))
-        elif isinstance(value, (list, tuple)) or (hasattr(value, "__len__") and not isinstance(value, str)):
+        elif isinstance(value, (list, tuple)) or (
+            hasattr(value, "__len__") and not isinstance(value, str)
+        ):
             items = list(value)
             if items and hasattr(items[0], "get_fields_and_field_types"):
                 lines.append(f"{indent}{name}:")
@@ -37,7 +39,9 @@ def message_to_lines(msg, indent=""):
                     lines.append(f"{indent}- {sub[0].strip()}" if sub else f"{indent}-")
                     lines.extend(sub[1:])
             else:
-                shown = ", ".join(repr(float(v)) if isinstance(v, float) else str(v) for v in items[:16])
+                shown = ", ".join(
+                    repr(float(v)) if isinstance(v, float) else str(v) for v in items[:16]
+                )
                 more = ", ..." if len(items) > 16 else ""
                 lines.append(f"{indent}{name}: [{shown}{more}]")
         elif isinstance(value, float):
@@ -58,6 +62,7 @@ class Echo:
 
     def __init__(self, topic, count=None, until_below=None, timeout=None, stream=sys.stdout):
         from rclpy.node import Node
+
         self.node = Node(f"echo_{os.getpid()}")
         self.topic, self.count, self.until_below, self.timeout = topic, count, until_below, timeout
         self.stream = stream
@@ -67,11 +72,13 @@ class Echo:
 
     def _spin(self):
         import rclpy
+
         rclpy.spin_once(self.node, timeout_sec=0.1)
 
     def _qos(self):
         """The publishers' type, and a QoS that matches them (a latched topic's last value too)."""
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
         infos = []
         while not infos:
             infos = self.node.get_publishers_info_by_topic(self.topic)
@@ -80,9 +87,11 @@ class Echo:
             self._spin()
         latched = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
         reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
-        qos = QoSProfile(depth=10,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-                         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT)
+        qos = QoSProfile(
+            depth=10,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        )
         return message_class(infos[0].topic_type), qos
 
     def _receive(self, msg):
@@ -91,7 +100,11 @@ class Echo:
         self.stream.flush()
         if self.count is not None and self.seen >= self.count:
             self.done = True
-        if self.until_below is not None and hasattr(msg, "data") and float(msg.data) < self.until_below:
+        if (
+            self.until_below is not None
+            and hasattr(msg, "data")
+            and float(msg.data) < self.until_below
+        ):
             self.done = True
 
     def run(self):
@@ -99,9 +112,13 @@ class Echo:
         self.node.create_subscription(cls, self.topic, self._receive, qos)
         while not self.done:
             if self.deadline is not None and time.monotonic() > self.deadline:
-                below = f", none below {self.until_below:g}" if self.until_below is not None else ""
-                raise PolymatchError(f"{self.topic}: stopped after {self.timeout:g} s and "
-                                     f"{self.seen} message(s){below}")
+                below = (
+                    f", none below {self.until_below:g}" if self.until_below is not None else ""
+                )
+                raise PolymatchError(
+                    f"{self.topic}: stopped after {self.timeout:g} s and "
+                    f"{self.seen} message(s){below}"
+                )
             self._spin()
         return 0
 
@@ -110,8 +127,9 @@ class Echo:
 
 
 def echo(topic, count=None, until_below=None, timeout=None, stream=sys.stdout):
-    return ros_main(lambda argv: Echo(topic, count, until_below, timeout, stream), "polymatch",
-                    ["polymatch"])
+    return ros_main(
+        lambda argv: Echo(topic, count, until_below, timeout, stream), "polymatch", ["polymatch"]
+    )
 
 
 def cmd_echo(args):
@@ -124,6 +142,8 @@ def add_parser(sub):
     p = sub.add_parser("echo", help="print messages of a topic (stand-in for `ros2 topic echo`)")
     p.add_argument("topic")
     p.add_argument("--count", type=int, help="exit after this many messages")
-    p.add_argument("--until-below", type=float, metavar="X", help="exit 0 once a Float64 value is below X")
+    p.add_argument(
+        "--until-below", type=float, metavar="X", help="exit 0 once a Float64 value is below X"
+    )
     p.add_argument("--timeout", type=float, help="give up after this many seconds (exit 1)")
     p.set_defaults(func=cmd_echo)

@@ -30,8 +30,9 @@ class Layout:
         self.owner = {a: model.group_of(a) for a in range(model.n_agents)}
         self.rows = []
         for gi, g in enumerate(model.groups):
-            self.rows.append(np.array([a - g.start for a in self.local if self.owner[a][0] == gi],
-                                      dtype=int))
+            self.rows.append(
+                np.array([a - g.start for a in self.local if self.owner[a][0] == gi], dtype=int)
+            )
         self.local_groups = [gi for gi, r in enumerate(self.rows) if len(r)]
         needed = set()
         for gi in self.local_groups:
@@ -66,8 +67,10 @@ class DropCounter:
 
     def __call__(self, source, reason):
         self.counts[reason] += 1
-        self.logger.warning(f"dropped a message from {source}: {reason} "
-                            f"({self.counts[reason]} so far)", throttle_duration_sec=1.0)
+        self.logger.warning(
+            f"dropped a message from {source}: {reason} ({self.counts[reason]} so far)",
+            throttle_duration_sec=1.0,
+        )
 
     @property
     def total(self):
@@ -91,8 +94,14 @@ def lean_node(name, namespace=None):
     """
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
-    node = Node(name, namespace=namespace, use_global_arguments=False,
-                start_parameter_services=False, enable_rosout=False)
+
+    node = Node(
+        name,
+        namespace=namespace,
+        use_global_arguments=False,
+        start_parameter_services=False,
+        enable_rosout=False,
+    )
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     return node, executor
@@ -101,7 +110,8 @@ def lean_node(name, namespace=None):
 def quiet_events():
     """(publisher, subscription) event callbacks without rclpy's default QoS-event waitables."""
     from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-    return (PublisherEventCallbacks(use_default_callbacks=False),
-            SubscriptionEventCallbacks(use_default_callbacks=False))
 
-
+    return (
+        PublisherEventCallbacks(use_default_callbacks=False),
+        SubscriptionEventCallbacks(use_default_callbacks=False),
+    )

@@ -24,26 +24,45 @@ class LockstepExchange:
 
     def __init__(self, resolver, layout, run_id, rot_tol, drops, t_max):
         from std_msgs.msg import Float64MultiArray
-        self.node, self.executor = lean_node(resolver.get_name() + "_stages", resolver.get_namespace())
+
+        self.node, self.executor = lean_node(
+            resolver.get_name() + "_stages", resolver.get_namespace()
+        )
         self.layout, self.run_id, self.drops = layout, int(run_id), drops
         self.model = layout.model
         self.grp = self.model.rotations
         self.rot_tol, self.t_max = rot_tol, t_max
         pub_events, sub_events = quiet_events()
-        self.pubs = {a: wire.publisher(self.node, "stage", agent=a, resolver=resolver,
-                                       event_callbacks=pub_events) for a in layout.local}
-        self._out = {a: Float64MultiArray() for a in layout.local}     # reused: rclpy copies on publish
-        self.inbox = defaultdict(dict)            # agent -> {(step, stage): Stage}
+        self.pubs = {
+            a: wire.publisher(
+                self.node, "stage", agent=a, resolver=resolver, event_callbacks=pub_events
+            )
+            for a in layout.local
+        }
+        self._out = {
+            a: Float64MultiArray() for a in layout.local
+        }  # reused: rclpy copies on publish
+        self.inbox = defaultdict(dict)  # agent -> {(step, stage): Stage}
         self.current = (0, 0)
-        self.subs = [wire.subscription(self.node, "stage", self._callback(a), agent=a, resolver=resolver,
-                                       event_callbacks=sub_events) for a in layout.peers]
-        self.publish_time = 0.0       # seconds spent publishing stages (for the diagnostics)
-        self.wait_time = 0.0          # seconds spent waiting for (and taking) the peers' stages
+        self.subs = [
+            wire.subscription(
+                self.node,
+                "stage",
+                self._callback(a),
+                agent=a,
+                resolver=resolver,
+                event_callbacks=sub_events,
+            )
+            for a in layout.peers
+        ]
+        self.publish_time = 0.0  # seconds spent publishing stages (for the diagnostics)
+        self.wait_time = 0.0  # seconds spent waiting for (and taking) the peers' stages
 
     def _callback(self, agent):
         def receive(msg):
-            stage, reason = wire.decode_stage(msg, self.grp, self.model.dim, self.run_id, agent,
-                                              self.rot_tol, self.t_max)
+            stage, reason = wire.decode_stage(
+                msg, self.grp, self.model.dim, self.run_id, agent, self.rot_tol, self.t_max
+            )
             if stage is None:
                 self.drops(f"agent {agent}", reason)
                 return
@@ -52,13 +71,16 @@ class LockstepExchange:
                 self.drops(f"agent {agent}", "stale round (a stamp from the past)")
                 return
             self.inbox[agent][key] = stage
+
         return receive
 
     def matched(self):
         """All peers' publishers matched, and all expected remote subscribers matched."""
         subs_ok = all(s.get_publisher_count() >= 1 for s in self.subs)
-        pubs_ok = all(p.get_subscription_count() >= self.layout.expected_subscribers(a)
-                      for a, p in self.pubs.items())
+        pubs_ok = all(
+            p.get_subscription_count() >= self.layout.expected_subscribers(a)
+            for a, p in self.pubs.items()
+        )
         return subs_ok and pubs_ok
 
     def missing_peers(self):
@@ -96,12 +118,16 @@ class LockstepExchange:
         while waiting:
             left = deadline - time.monotonic()
             if left <= 0:
-                raise RoundTimeout(f"lockstep round (step {step}, stage {stage}) timed out after "
-                                   f"{timeout:g} s waiting for agent(s) {', '.join(map(str, waiting))}")
+                raise RoundTimeout(
+                    f"lockstep round (step {step}, stage {stage}) timed out after "
+                    f"{timeout:g} s waiting for agent(s) {', '.join(map(str, waiting))}"
+                )
             self.executor.spin_once(timeout_sec=min(left, 0.5))
             waiting = [a for a in waiting if key not in self.inbox[a]]
         self.wait_time += time.perf_counter() - t1
-        stop = stop_flag or any(self.inbox[a][key].flags & wire.FLAG_STOP for a in self.layout.peers)
+        stop = stop_flag or any(
+            self.inbox[a][key].flags & wire.FLAG_STOP for a in self.layout.peers
+        )
         return self._assemble(key, request), stop
 
     def _assemble(self, key, request):
@@ -112,11 +138,16 @@ class LockstepExchange:
             if gi not in self.layout.groups_needed:
                 out.append(None)
                 continue
-            own = gi in self.layout.local_groups       # other groups: only centroids are used (F-2)
-            rows = {a - g.start: wire.Row(m.x if m.x is not None else 0.0, m.rot, m.v)
-                    for a in g.indices if (m := self.inbox[a].get(key)) is not None}
+            own = gi in self.layout.local_groups  # other groups: only centroids are used (F-2)
+            rows = {
+                a - g.start: wire.Row(m.x if m.x is not None else 0.0, m.rot, m.v)
+                for a in g.indices
+                if (m := self.inbox[a].get(key)) is not None
+            }
             local = (self.layout.rows[gi], request.stage.groups[gi]) if own else None
-            e = wire.assemble(self.grp, model.dim, rows, local, with_rot=own, with_v=with_v, full=True)
+            e = wire.assemble(
+                self.grp, model.dim, rows, local, with_rot=own, with_v=with_v, full=True
+            )
             out.append(e)
         for a in self.layout.peers:
             self.inbox[a].pop(key, None)
@@ -125,6 +156,7 @@ class LockstepExchange:
     def flush(self, timeout=5.0):
         """Wait until every stage message this process sent has been acknowledged."""
         from rclpy.duration import Duration
+
         for p in self.pubs.values():
             p.wait_for_all_acked(Duration(seconds=timeout))
 
@@ -142,8 +174,9 @@ class LockstepAgent(AgentBase):
         super().__init__(node, params)
         projection = self.plan.method.info.family == "projection"
         rot_tol = wire.PROJECTION_STAGE_TOL if projection else wire.ROTATION_TOL
-        self.exchange = LockstepExchange(node, self.layout, params["run_id"], rot_tol, self.drops,
-                                         self.scene.t_end)
+        self.exchange = LockstepExchange(
+            node, self.layout, params["run_id"], rot_tol, self.drops, self.scene.t_end
+        )
 
     def step_size(self, p):
         return p["dt"] or None
@@ -162,6 +195,7 @@ class LockstepAgent(AgentBase):
         def matched():
             ex.spin_once(0.0)
             return ex.matched()
+
         self.wait_for_discovery(matched, ex.missing_peers)
 
     def loop(self):
@@ -180,7 +214,9 @@ class LockstepAgent(AgentBase):
             def answer(request, stage):
                 nonlocal stop
                 wait = first_wait if k == 0 and stage == 0 else timeout
-                ensemble, stop_seen = self.exchange.round(k, stage, request, self.stop_requested, wait)
+                ensemble, stop_seen = self.exchange.round(
+                    k, stage, request, self.stop_requested, wait
+                )
                 stop = stop or (request.boundary and stop_seen)
                 self.rounds += 1
                 return ensemble

@@ -34,28 +34,31 @@ from .process import ros_main
 
 
 class MonitorNode:
-    interrupted_exit = 0          # the monitor runs until it is stopped: Ctrl-C is its normal end
+    interrupted_exit = 0  # the monitor runs until it is stopped: Ctrl-C is its normal end
 
     def __init__(self, node, params):
         from rclpy.executors import SingleThreadedExecutor
         from ..core.scene import load_scene, resolve_scene_path
+
         self.node, self.params = node, params
         self.log = node.get_logger()
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(node)
-        self.scene = load_scene(resolve_scene_path(params["scene"]), {"time.t_end": params["t_end"] or None})
+        self.scene = load_scene(
+            resolve_scene_path(params["scene"]), {"time.t_end": params["t_end"] or None}
+        )
         self.model = self.scene.model
         self.grp = self.model.rotations
         self.n = self.model.n_agents
         self.lockstep = params["mode"] == "lockstep"
         self.drops = DropCounter(self.log)
-        self.repeats = 0                 # poses heard again at a stamp already heard: not a drop
-        self.latest = {}                 # agent -> (t key, wire.Row, heard)
-        self.velocity = {}               # agent -> (t key, v, w)
-        self.pending = {}                # time key -> {agent: Row}   (lockstep)
+        self.repeats = 0  # poses heard again at a stamp already heard: not a drop
+        self.latest = {}  # agent -> (t key, wire.Row, heard)
+        self.velocity = {}  # agent -> (t key, v, w)
+        self.pending = {}  # time key -> {agent: Row}   (lockstep)
         self.pending_v = {}
         self.reported = -1
-        self.last = None                 # (t, metrics, agents heard) of the last report
+        self.last = None  # (t, metrics, agents heard) of the last report
         self.reports = 0
         self._wire_up()
         if not self.lockstep:
@@ -68,14 +71,18 @@ class MonitorNode:
             wire.subscription(node, "pose", self._pose_cb(a), dim, a, mode=mode)
             if self.model.order == 2:
                 wire.subscription(node, "twist", self._twist_cb(a), dim, a, mode=mode)
-        self.pub = {key: wire.publisher(node, key)
-                    for key in ("diameter", "diameter_centroid", "diameter_rotation")}
+        self.pub = {
+            key: wire.publisher(node, key)
+            for key in ("diameter", "diameter_centroid", "diameter_rotation")
+        }
         self.diag_pub = wire.publisher(node, "diagnostics")
         self.status_pub = wire.publisher(node, "status")
         self.marker_pub = wire.publisher(node, "markers") if self.params["markers"] else None
 
     def _decode(self, agent, decoder, msg):
-        got, reason = decoder(msg, self.grp, self.model.dim, self.params["frame_id"], self.scene.t_end)
+        got, reason = decoder(
+            msg, self.grp, self.model.dim, self.params["frame_id"], self.scene.t_end
+        )
         if got is None:
             self.drops(f"agent {agent}", reason)
         return got
@@ -102,6 +109,7 @@ class MonitorNode:
             if self.lockstep and self._fresh(agent, got.key, self.pending):
                 self.pending.setdefault(got.key, {})[agent] = row
                 self._report_complete()
+
         return receive
 
     def _twist_cb(self, agent):
@@ -113,11 +121,12 @@ class MonitorNode:
             if self.lockstep and self._fresh(agent, got.key, self.pending_v):
                 self.pending_v.setdefault(got.key, {})[agent] = (got.vec, got.rot)
                 self._report_complete()
+
         return receive
 
     # -- reporting --------------------------------------------------------------------------
     def _state_from(self, rows, velocities):
-        """The sub-ensemble of the agents heard: (model of the groups present, State, group indices)."""
+        """The agents heard: (model of the groups present, their State, the group indices)."""
         groups, sub_groups, keep = [], [], []
         for gi, g in enumerate(self.model.groups):
             present = {a - g.start: rows[a] for a in g.indices if a in rows}
@@ -159,13 +168,16 @@ class MonitorNode:
 
     def _publish(self, t, rows, velocities):
         from std_msgs.msg import Float64, String
+
         model, state, keep = self._state_from(rows, velocities)
         met = ensemble_metrics(model, state)
         self.last = (t, met, len(rows))
         self.reports += 1
-        for key, value in (("diameter", met["diameter"]),
-                           ("diameter_centroid", max(g["centroid_diameter"] for g in met["groups"])),
-                           ("diameter_rotation", max(g["rotation_diameter"] for g in met["groups"]))):
+        for key, value in (
+            ("diameter", met["diameter"]),
+            ("diameter_centroid", max(g["centroid_diameter"] for g in met["groups"])),
+            ("diameter_rotation", max(g["rotation_diameter"] for g in met["groups"])),
+        ):
             self.pub[key].publish(Float64(data=float(value)))
         self.diag_pub.publish(diagnostics(self, t, met, keep, len(rows)))
         self.status_pub.publish(String(data=self.record().to_json()))
@@ -174,9 +186,15 @@ class MonitorNode:
 
     def record(self):
         t, met, heard = self.last if self.last is not None else (0.0, {"diameter": None}, 0)
-        return wire.RunRecord(role="monitor", mode=self.params["mode"], t=float(t),
-                              diameter=met["diameter"], agents_heard=heard, reports=self.reports,
-                              dropped=dict(self.drops.counts))
+        return wire.RunRecord(
+            role="monitor",
+            mode=self.params["mode"],
+            t=float(t),
+            diameter=met["diameter"],
+            agents_heard=heard,
+            reports=self.reports,
+            dropped=dict(self.drops.counts),
+        )
 
     def run(self):
         while True:
@@ -196,6 +214,7 @@ class MonitorNode:
 
 def make_monitor(argv=None):
     from rclpy.node import Node
+
     node = Node("monitor", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE))
     return MonitorNode(node, declare(node, MONITOR))
 

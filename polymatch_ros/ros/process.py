@@ -20,6 +20,7 @@ def ros_main(factory, label, argv=None):
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
+
     argv = sys.argv if argv is None else argv
     rclpy.init(args=argv)
     app = None

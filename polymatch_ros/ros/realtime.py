@@ -20,42 +20,59 @@ class PeerTable:
 
     def __init__(self, node, layout, frame_id, timeout, drops, origin, delay, t_max):
         self.node, self.layout, self.drops = node, layout, drops
-        self.delay = float(delay)    # injected transport delay (s): a pose is used this long after arrival
-        self.pending = defaultdict(list)   # agent -> [(arrival, kind, values)] not yet delivered
-        self.origin = np.asarray(origin, dtype=float)      # poses are absolute; the core works in offsets
+        self.delay = float(
+            delay
+        )  # injected transport delay (s): a pose is used this long after arrival
+        self.pending = defaultdict(list)  # agent -> [(arrival, kind, values)] not yet delivered
+        self.origin = np.asarray(
+            origin, dtype=float
+        )  # poses are absolute; the core works in offsets
         self.model = layout.model
         self.grp = self.model.rotations
         self.frame_id, self.timeout, self.t_max = frame_id, timeout, t_max
-        self.latest = {}             # agent -> SimpleNamespace(t, x, rot, v, heard)
+        self.latest = {}  # agent -> SimpleNamespace(t, x, rot, v, heard)
         self.silent = set()
         dim = self.model.dim
         self.subs = []
         want_v = self.model.order == 2 and self.model.centroids_exact
         for a in layout.peers:
-            self.subs.append(wire.subscription(node, "pose", self._pose_cb(a), dim, a, mode="realtime"))
+            self.subs.append(
+                wire.subscription(node, "pose", self._pose_cb(a), dim, a, mode="realtime")
+            )
             if want_v and self.layout.owner[a][0] in layout.local_groups:
-                self.subs.append(wire.subscription(node, "twist", self._twist_cb(a), dim, a,
-                                                   mode="realtime"))
+                self.subs.append(
+                    wire.subscription(node, "twist", self._twist_cb(a), dim, a, mode="realtime")
+                )
 
     def _entry(self, agent):
-        return self.latest.setdefault(agent, SimpleNamespace(t=-np.inf, x=None, rot=None, v=None, heard=0.0))
+        return self.latest.setdefault(
+            agent, SimpleNamespace(t=-np.inf, x=None, rot=None, v=None, heard=0.0)
+        )
 
     def _pose_cb(self, agent):
         def receive(msg):
-            got, reason = wire.decode_pose_msg(msg, self.grp, self.model.dim, self.frame_id, self.t_max)
+            got, reason = wire.decode_pose_msg(
+                msg, self.grp, self.model.dim, self.frame_id, self.t_max
+            )
             if got is None:
                 self.drops(f"agent {agent}", reason)
                 return
-            self.pending[agent].append((time.monotonic(), "pose", (got.t, got.vec - self.origin, got.rot)))
+            self.pending[agent].append(
+                (time.monotonic(), "pose", (got.t, got.vec - self.origin, got.rot))
+            )
+
         return receive
 
     def _twist_cb(self, agent):
         def receive(msg):
-            got, reason = wire.decode_twist_msg(msg, self.grp, self.model.dim, self.frame_id, self.t_max)
+            got, reason = wire.decode_twist_msg(
+                msg, self.grp, self.model.dim, self.frame_id, self.t_max
+            )
             if got is None:
                 self.drops(f"agent {agent}", reason)
                 return
             self.pending[agent].append((time.monotonic(), "twist", got.vec))
+
         return receive
 
     def _deliver(self, now):
@@ -83,7 +100,7 @@ class PeerTable:
             queue[:] = keep
 
     def newest_time(self):
-        """The newest simulated time heard from any peer (None if none heard): the ensemble's clock."""
+        """The newest simulated time heard from any peer (None if none): the ensemble's clock."""
         self._deliver(time.monotonic())
         times = [e.t for e in self.latest.values() if e.x is not None and np.isfinite(e.t)]
         return max(times) if times else None
@@ -100,14 +117,15 @@ class PeerTable:
             if now - e.heard > self.timeout:
                 if a not in self.silent:
                     self.silent.add(a)
-                    self.node.get_logger().warning(f"agent {a} silent for {self.timeout:g} s: "
-                                                   f"dropped from the sums")
+                    self.node.get_logger().warning(
+                        f"agent {a} silent for {self.timeout:g} s: dropped from the sums"
+                    )
                 continue
             alive.append(a)
         return alive
 
     def ensemble(self, request, alive):
-        """Frozen peers + the local stage rows, per needed group, with an ``index`` of rows present."""
+        """Frozen peers + the local stage rows, per needed group, ``index`` = the rows present."""
         model, out, alive = self.model, [], set(alive)
         with_v = model.order == 2 and "v" in request.fields
         for gi, g in enumerate(model.groups):
@@ -121,7 +139,9 @@ class PeerTable:
                     rows[a - g.start] = wire.Row(p.x, p.rot, p.v)
             own = len(self.layout.rows[gi]) > 0
             local = (self.layout.rows[gi], request.stage.groups[gi]) if own else None
-            out.append(wire.assemble(self.grp, model.dim, rows, local, with_rot=own, with_v=with_v))
+            out.append(
+                wire.assemble(self.grp, model.dim, rows, local, with_rot=own, with_v=with_v)
+            )
         return tuple(out)
 
 
@@ -133,8 +153,16 @@ class RealtimeAgent(AgentBase):
 
     def __init__(self, node, params):
         super().__init__(node, params)
-        self.peers = PeerTable(node, self.layout, params["frame_id"], params["peer_timeout"], self.drops,
-                               self.scene.origin, params["delay"], self.scene.t_end)
+        self.peers = PeerTable(
+            node,
+            self.layout,
+            params["frame_id"],
+            params["peer_timeout"],
+            self.drops,
+            self.scene.origin,
+            params["delay"],
+            self.scene.t_end,
+        )
 
     def step_size(self, p):
         return p["time_scale"] / p["rate"]
@@ -146,9 +174,9 @@ class RealtimeAgent(AgentBase):
         last = 0.0
         while self.start_epoch is None and not self.stop_requested:
             self.spin_once(0.05)
-            if time.monotonic() - last > 0.5:                    # keep announcing the initial pose
+            if time.monotonic() - last > 0.5:  # keep announcing the initial pose
                 self.publish_state()
-                self._maybe_diagnostics(force=True)              # the runner counts agents that are up
+                self._maybe_diagnostics(force=True)  # the runner counts agents that are up
                 last = time.monotonic()
         return self.start_epoch if self.start_epoch is not None else time.time()
 
@@ -158,16 +186,16 @@ class RealtimeAgent(AgentBase):
             if left <= 0 or self.stop_requested:
                 break
             self.spin_once(min(left, 0.05))
-        if time.monotonic() - next_tick > period:               # behind schedule: the CPU is short
+        if time.monotonic() - next_tick > period:  # behind schedule: the CPU is short
             self.late_ticks += 1
-        for _ in range(len(self.peers.subs) + 2):                 # drain what is ready
+        for _ in range(len(self.peers.subs) + 2):  # drain what is ready
             self.spin_once(0.0)
 
     def loop(self):
         self.wait_for_discovery()
         self.publish_state()
         start = self._start_epoch()
-        while time.time() < start and not self.stop_requested:      # the ensemble starts together
+        while time.time() < start and not self.stop_requested:  # the ensemble starts together
             self.spin_once(min(0.05, max(0.0, start - time.time())))
         h, period = self.plan.dt, 1.0 / self.params["rate"]
         next_tick = self._join_clock(start, period, h)
@@ -178,8 +206,13 @@ class RealtimeAgent(AgentBase):
             alive = self.peers.active()
             self.state.coupling = None
             t = self.state.t
-            self.state = drive(self.plan.method, self.system, self.state, h,
-                               lambda request, stage: self.peers.ensemble(request, alive))
+            self.state = drive(
+                self.plan.method,
+                self.system,
+                self.state,
+                h,
+                lambda request, stage: self.peers.ensemble(request, alive),
+            )
             self.state.t = t + h
             self.steps += 1
             self.rounds += 1
@@ -201,9 +234,17 @@ class RealtimeAgent(AgentBase):
             self.state.t = 0.0
             return time.monotonic() - behind
         heard_by = time.monotonic() + self.params["peer_timeout"]
-        while self.peers.newest_time() is None and time.monotonic() < heard_by and not self.stop_requested:
+        while (
+            self.peers.newest_time() is None
+            and time.monotonic() < heard_by
+            and not self.stop_requested
+        ):
             self.spin_once(0.05)
         newest = self.peers.newest_time()
         skipped = int(round(newest / h)) if newest is not None else int(behind / period)
         self.state.t = skipped * h
-        return time.monotonic() if newest is not None else time.monotonic() - (behind - skipped * period)
+        return (
+            time.monotonic()
+            if newest is not None
+            else time.monotonic() - (behind - skipped * period)
+        )

@@ -14,31 +14,29 @@ import random
 import signal
 import sys
 import time
-from dataclasses import replace
-
-import numpy as np
-
 from . import wire
-from ..console import SUMMARY_HEADER, Progress, format_table, positive_float, summary_rows
+from ..console import Progress, positive_float
 from ..core.errors import PolymatchError
-from ..core.metrics import ensemble_metrics
-from ..core.model import GroupState, State
 from ..core.scene import load_scene, resolve_scene_path
-from ..core.simulate import convergence_verdict, plan, prepare, simulate
-from .children import (LOCALHOST_PARTICIPANTS, Child, _agents_per_process,  # noqa: F401
-                       fewest_agents_per_process, partition)
+from ..core.simulate import plan
+from .children import Child, _agents_per_process, partition
+from .children import LOCALHOST_PARTICIPANTS, fewest_agents_per_process  # noqa: F401 (API)
 from .ros_env import reserved_domain_id, ros_environment, teardown_watchdog
+from .summary import report, verdict
 from .watcher import Watcher
 
 
 def _check_ensemble(name):
     from rclpy.exceptions import InvalidNamespaceException
     from rclpy.validate_namespace import validate_namespace
+
     try:
         validate_namespace(wire.namespace(name))
     except InvalidNamespaceException:
-        raise PolymatchError(f"--ensemble: {name!r} is not a valid ROS namespace "
-                             f"(letters, digits, underscores; not starting with a digit)") from None
+        raise PolymatchError(
+            f"--ensemble: {name!r} is not a valid ROS namespace "
+            f"(letters, digits, underscores; not starting with a digit)"
+        ) from None
 
 
 def cmd_run(args):
@@ -46,16 +44,24 @@ def cmd_run(args):
     scene = load_scene(scene_path, {"time.t_end": args.t_end})
     rt = args.mode == "realtime"
     dt = args.time_scale / args.rate if rt else args.dt
-    the_plan = plan(scene, args.integrator, dt, distributed=True)     # one-line errors before spawning
+    the_plan = plan(
+        scene, args.integrator, dt, distributed=True
+    )  # one-line errors before spawning
     if args.agents_per_process is not None and args.agents_per_process < 1:
         raise PolymatchError("--agents-per-process must be >= 1")
     _check_ensemble(args.ensemble)
     with reserved_domain_id() as domain:
         env = ros_environment(domain, mode=args.mode)
-        args.agents_per_process = _agents_per_process(args, scene.model.n_agents,
-                                                      env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST")
-        for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID", "RMW_IMPLEMENTATION",
-                    "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_BUILTIN_TRANSPORTS"):
+        args.agents_per_process = _agents_per_process(
+            args, scene.model.n_agents, env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+        )
+        for key in (
+            "ROS_AUTOMATIC_DISCOVERY_RANGE",
+            "ROS_DOMAIN_ID",
+            "RMW_IMPLEMENTATION",
+            "FASTRTPS_DEFAULT_PROFILES_FILE",
+            "FASTDDS_BUILTIN_TRANSPORTS",
+        ):
             if key in env:
                 os.environ[key] = env[key]
         return _run(args, scene, scene_path, the_plan, env, domain)
@@ -64,18 +70,44 @@ def cmd_run(args):
 def _node_args(args, scene, scene_path, the_plan):
     """(--ros-args of the monitor, of every agent process) without the node's own remaps."""
     n = scene.model.n_agents
-    common = ["-r", f"__ns:={wire.namespace(args.ensemble)}", "-p", f"scene:={os.path.abspath(scene_path)}",
-              "-p", f"t_end:={scene.t_end!r}", "-p", f"mode:={args.mode}"]
-    agent = common + ["-p", f"run_id:={random.randrange(1, 2 ** 31 - 1)}",
-                      "-p", f"agents_per_process:={args.agents_per_process}",
-                      "-p", f"pose_subscribers:={1 if args.monitor else 0}",
-                      "-p", f"integrator:={the_plan.name}", "-p", f"round_timeout:={args.round_timeout!r}",
-                      # start-up of many processes on few cores takes a while: scale the patience
-                      "-p", f"discovery_timeout:={30.0 + 2.0 * len(partition(n, args.agents_per_process))!r}",
-                      "-p", f"peer_timeout:={args.peer_timeout!r}"]
+    common = [
+        "-r",
+        f"__ns:={wire.namespace(args.ensemble)}",
+        "-p",
+        f"scene:={os.path.abspath(scene_path)}",
+        "-p",
+        f"t_end:={scene.t_end!r}",
+        "-p",
+        f"mode:={args.mode}",
+    ]
+    agent = common + [
+        "-p",
+        f"run_id:={random.randrange(1, 2**31 - 1)}",
+        "-p",
+        f"agents_per_process:={args.agents_per_process}",
+        "-p",
+        f"pose_subscribers:={1 if args.monitor else 0}",
+        "-p",
+        f"integrator:={the_plan.name}",
+        "-p",
+        f"round_timeout:={args.round_timeout!r}",
+        # start-up of many processes on few cores takes a while: scale the patience
+        "-p",
+        f"discovery_timeout:={30.0 + 2.0 * len(partition(n, args.agents_per_process))!r}",
+        "-p",
+        f"peer_timeout:={args.peer_timeout!r}",
+    ]
     if args.mode == "realtime":
-        agent += ["-p", f"rate:={args.rate!r}", "-p", f"time_scale:={args.time_scale!r}",
-                  "-p", "start_time:=-1.0", "-p", f"delay:={args.delay!r}"]
+        agent += [
+            "-p",
+            f"rate:={args.rate!r}",
+            "-p",
+            f"time_scale:={args.time_scale!r}",
+            "-p",
+            "start_time:=-1.0",
+            "-p",
+            f"delay:={args.delay!r}",
+        ]
     else:
         agent += ["-p", f"dt:={the_plan.dt!r}"]
     monitor = common + ["-p", f"peer_timeout:={args.peer_timeout!r}"]
@@ -90,30 +122,56 @@ def _start(args, scene, scene_path, the_plan, env):
     py = [sys.executable, "-m"]
     monitor = None
     if args.monitor:
-        monitor = Child("monitor", py + ["polymatch_ros.ros.monitor_node", "--ros-args"] + mon_args
-                        + ["-r", "__node:=monitor"], env)
+        monitor = Child(
+            "monitor",
+            py
+            + ["polymatch_ros.ros.monitor_node", "--ros-args"]
+            + mon_args
+            + ["-r", "__node:=monitor"],
+            env,
+        )
     children = []
     for agents in partition(scene.model.n_agents, args.agents_per_process):
         name = f"agent_{agents[0]}" if len(agents) == 1 else f"agents_{agents[0]}_{agents[-1]}"
-        sel = ["-p", f"agent:={agents[0]}"] if len(agents) == 1 else \
-            ["-p", "agents:=[" + ",".join(map(str, agents)) + "]"]
-        children.append(Child(name, py + ["polymatch_ros.ros.agent_node", "--ros-args"] + agent_args + sel
-                              + ["-r", f"__node:={name}"], env))
+        sel = (
+            ["-p", f"agent:={agents[0]}"]
+            if len(agents) == 1
+            else ["-p", "agents:=[" + ",".join(map(str, agents)) + "]"]
+        )
+        children.append(
+            Child(
+                name,
+                py
+                + ["polymatch_ros.ros.agent_node", "--ros-args"]
+                + agent_args
+                + sel
+                + ["-r", f"__node:={name}"],
+                env,
+            )
+        )
     return monitor, children
 
 
 def _run(args, scene, scene_path, the_plan, env, domain):
     import rclpy
     from rclpy.signals import SignalHandlerOptions
+
     n = scene.model.n_agents
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
-    say(f"polymatch run: {n} agents in {len(partition(n, args.agents_per_process))} processes, {args.mode}, "
+    say(
+        f"polymatch run: {n} agents in {len(partition(n, args.agents_per_process))} processes, "
+        f"{args.mode}, "
         f"integrator {the_plan.name}, dt {the_plan.dt:g}, ROS_DOMAIN_ID={domain}, "
-        f"discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']}, ensemble {wire.namespace(args.ensemble)}")
+        f"discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
+        f"ensemble {wire.namespace(args.ensemble)}"
+    )
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     children, monitor, watcher = [], None, None
     interrupted = []
-    old = {s: signal.signal(s, lambda sig, frame: interrupted.append(sig)) for s in (signal.SIGINT, signal.SIGTERM)}
+    old = {
+        s: signal.signal(s, lambda sig, frame: interrupted.append(sig))
+        for s in (signal.SIGINT, signal.SIGTERM)
+    }
     start = time.monotonic()
     code, message = 1, "not started"
     progress = Progress(scene.t_end, args.quiet)
@@ -129,9 +187,19 @@ def _run(args, scene, scene_path, the_plan, env, domain):
         for s, h in old.items():
             signal.signal(s, h)
     try:
-        _report(args, scene, the_plan, watcher, children, monitor, progress, code, message,
-                time.monotonic() - start)
-        code = code if code != 0 or watcher.final_state() is None else _verdict(scene, watcher)
+        report(
+            args,
+            scene,
+            the_plan,
+            watcher,
+            children,
+            monitor,
+            progress,
+            code,
+            message,
+            time.monotonic() - start,
+        )
+        code = code if code != 0 or watcher.final_state() is None else verdict(scene, watcher)
     finally:
         sys.stdout.flush()
         sys.stderr.flush()
@@ -153,40 +221,20 @@ def _stop_all(children, monitor, watcher):
         monitor.stop()
 
 
-def _report(args, scene, the_plan, watcher, children, monitor, progress, code, message, wall):
-    final = watcher.final_state() if watcher is not None else None
-    records = [r for c in children + ([monitor] if monitor else []) for r in c.records()]
-    if args.records:
-        with open(args.records, "w", encoding="utf-8") as fh:
-            fh.writelines(r.to_json() + "\n" for r in records)
-    if code == 0 and final is not None:
-        _final_progress(progress, scene, final, records)
-        _summary(args, scene, the_plan, final, records, wall, watcher)
-    elif message:
-        progress.done()
-        print(f"polymatch: error: {message}", file=sys.stderr)
-    for c in children + ([monitor] if monitor is not None else []):
-        if c.hung_in_teardown():
-            print(f"note: {c.name} reported its result, then its DDS teardown hung (a rare Fast DDS "
-                  f"shutdown spin); its watchdog ended it", file=sys.stderr)
-
-
-def _final_progress(progress, scene, final, records):
-    """The last progress line: the final state's true diameter and the agents' mean rate."""
-    met = ensemble_metrics(scene.model, final)
-    rates = [r.rounds_per_second for r in records if r.role == "agent"]
-    progress.last, progress._ended = -float("inf"), False      # always shown, however recent the last
-    progress(final.t, met["diameter"], f"  {np.mean(rates) if rates else 0.0:7.1f} rounds/s")
-    progress.done()
-
-
 class Supervision:
     """The runner's loop: progress, start (realtime), stop on convergence, failures, the end."""
 
     def __init__(self, args, scene, the_plan, watcher, children, monitor, progress):
         self.args, self.scene, self.plan = args, scene, the_plan
-        self.watcher, self.children, self.monitor, self.progress = watcher, children, monitor, progress
-        self.rounds_per_step = 1 if args.mode == "realtime" else max(1, the_plan.method.info.rounds)
+        self.watcher, self.children, self.monitor, self.progress = (
+            watcher,
+            children,
+            monitor,
+            progress,
+        )
+        self.rounds_per_step = (
+            1 if args.mode == "realtime" else max(1, the_plan.method.info.rounds)
+        )
         self.rate_mark, self.rps = None, 0.0
         self.below_since, self.stop_sent = None, 0.0
         self.graph_checked = False
@@ -194,7 +242,11 @@ class Supervision:
     def failure(self):
         """The first child that ended badly, as (code, message), or None."""
         failed = [c for c in self.children if not c.ended_well() and c.poll() is not None]
-        if self.monitor is not None and not self.monitor.ended_well() and self.monitor.poll() is not None:
+        if (
+            self.monitor is not None
+            and not self.monitor.ended_well()
+            and self.monitor.poll() is not None
+        ):
             failed.append(self.monitor)
         if not failed:
             return None
@@ -215,7 +267,7 @@ class Supervision:
         while True:
             watcher.spin(0.05)
             if not started and watcher.agents_up():
-                watcher.start(time.time() + 0.5)       # every agent is up: start the clock together
+                watcher.start(time.time() + 0.5)  # every agent is up: start the clock together
                 started = True
             self.check_graph()
             if interrupted:
@@ -226,7 +278,7 @@ class Supervision:
                 self.progress.done()
                 return failed
             if all(c.ended_well() for c in self.children):
-                drain = time.monotonic() + 3.0          # the latched final poses may still be in flight
+                drain = time.monotonic() + 3.0  # the latched final poses may still be in flight
                 while time.monotonic() < drain and not watcher.have_final():
                     watcher.spin(0.05)
                 return 0, ""
@@ -241,7 +293,7 @@ class Supervision:
             return
         now = time.monotonic()
         if self.rate_mark is None or t < self.rate_mark[1]:
-            self.rate_mark = (now, t)       # (re)start the rate where the ensemble's time is
+            self.rate_mark = (now, t)  # (re)start the rate where the ensemble's time is
         elif now - self.rate_mark[0] > 1.0:
             steps = (t - self.rate_mark[1]) / max(self.plan.dt, 1e-12)
             self.rps = steps * self.rounds_per_step / (now - self.rate_mark[0])
@@ -256,100 +308,85 @@ class Supervision:
             self.below_since = None
 
 
-def _summary(args, scene, the_plan, final, records, wall, watcher):
-    met = ensemble_metrics(scene.model, final)
-    print(f"scene {scene.name}: {scene.model.n_agents} agents, {args.mode}, integrator {the_plan.name}, "
-          f"dt {the_plan.dt:g}")
-    print(format_table(summary_rows(scene, met), SUMMARY_HEADER))
-    agents = [r for r in records if r.role == "agent"]
-    text = f"t = {final.t:g}, wall time {wall:.2f} s"
-    if agents and args.mode == "lockstep":
-        text += f", {np.mean([r.rounds_per_second for r in agents]):.1f} rounds/s per agent (mean)"
-    print(text)
-    for rec in agents:
-        if args.verbose or rec.dropped_total:
-            print(rec.describe())
-    if args.mode == "lockstep":
-        for rec in records:
-            if rec.role == "monitor":
-                print(rec.describe())
-    if args.save:
-        _save(args.save, scene, final, watcher.pose_times())
-    if args.mode == "lockstep" and args.compare:
-        ref = simulate(replace(scene, t_end=final.t), the_plan.name, the_plan.dt, samples=[final.t],
-                       keep_states=False, metrics=False)
-        central = prepare(scene, the_plan)
-        dev = vertex_deviation(central.model, ref.final, _as_rep(central.model, scene.model, final))
-        print(f"lockstep vs centralised simulation (same integrator and dt) at t = {final.t:g}: "
-              f"max vertex deviation {dev:.3e}")
-
-
-def _verdict(scene, watcher):
-    final = watcher.final_state()
-    met = ensemble_metrics(scene.model, final)
-    converged_at = final.t if met["diameter"] < scene.tolerance else None
-    code, msg = convergence_verdict(scene, met["diameter"], converged_at)
-    print(msg)
-    return code
-
-
-def _save(path, scene, final, times):
-    data = {"t": final.t, "origin": scene.origin}
-    for gi, g in enumerate(scene.model.groups):
-        data[f"group{gi}_times"] = np.array([times[a] for a in g.indices])
-    for gi, gs in enumerate(final.groups):
-        data[f"group{gi}_centroids"] = gs.x + scene.origin
-        data[f"group{gi}_rotations"] = scene.model.rotations.to_matrices(gs.rot)
-    np.savez(path, **data)
-    print(f"final poses (as received on the pose topics) saved to {path}")
-
-
-def vertex_deviation(model, a, b):
-    """max over agents and vertices of |x^i_a(a) - x^i_a(b)|."""
-    worst = 0.0
-    grp = model.rotations
-    for g, ga, gb in zip(model.groups, a.groups, b.groups):
-        for r in g.reference:
-            pa = ga.x + grp.rotate(ga.rot, r)
-            pb = gb.x + grp.rotate(gb.rot, r)
-            worst = max(worst, float(np.max(np.linalg.norm(pa - pb, axis=1))))
-    return worst
-
-
-def _as_rep(target_model, model, state):
-    if type(target_model.rotations) is type(model.rotations):
-        return state
-    src, dst = model.rotations, target_model.rotations
-    return State(state.t, tuple(GroupState(gs.x, dst.from_matrices(src.to_matrices(gs.rot)), gs.v, None)
-                                for gs in state.groups))
-
-
 def add_parser(sub):
-    p = sub.add_parser("run", help="run the distributed ROS 2 ensemble of a scene (one process per agent)")
+    p = sub.add_parser(
+        "run", help="run the distributed ROS 2 ensemble of a scene (one process per agent)"
+    )
     p.add_argument("scene", help="scene file or shipped scene name")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
-    p.add_argument("--integrator", "-i", metavar="NAME", help="fixed-step integrator (default: the scene's)")
+    p.add_argument(
+        "--integrator", "-i", metavar="NAME", help="fixed-step integrator (default: the scene's)"
+    )
     p.add_argument("--dt", type=positive_float, help="lockstep step size (default: the scene's)")
     p.add_argument("--t-end", type=positive_float, help="override time.t_end")
-    p.add_argument("--agents-per-process", "-k", type=int, default=None, metavar="K",
-                   help="agents per process (default 1, or the fewest that keep the processes within the 32 "
-                        "DDS participants that LOCALHOST discovery reaches)")
-    p.add_argument("--rate", type=positive_float, default=50.0, help="realtime: steps per second (default 50)")
-    p.add_argument("--time-scale", type=positive_float, default=1.0,
-                   help="realtime: simulated seconds per wall-clock second")
-    p.add_argument("--peer-timeout", type=positive_float, default=1.0, help="realtime: drop silent peers after S s")
-    p.add_argument("--delay", type=float, default=0.0, help="realtime: injected transport delay (s), experiments")
-    p.add_argument("--round-timeout", type=positive_float, default=10.0, help="lockstep: give up a round after S s")
-    p.add_argument("--hold", type=float, default=1.0,
-                   help="stop once the diameter stayed under the tolerance this long (simulated s)")
-    p.add_argument("--timeout", type=positive_float, default=600.0, help="wall-clock limit for the whole run (s)")
-    p.add_argument("--ensemble", default="polymatch", help="ensemble namespace (default polymatch)")
-    p.add_argument("--no-monitor", dest="monitor", action="store_false", help="do not start the monitor")
-    p.add_argument("--no-compare", dest="compare", action="store_false",
-                   help="lockstep: skip the comparison with the centralised simulation")
-    p.add_argument("--save", metavar="NPZ", help="save the final poses received from the agents (npz)")
+    p.add_argument(
+        "--agents-per-process",
+        "-k",
+        type=int,
+        default=None,
+        metavar="K",
+        help="agents per process (default 1, or the fewest that keep the processes within the 32 "
+        "DDS participants that LOCALHOST discovery reaches)",
+    )
+    p.add_argument(
+        "--rate", type=positive_float, default=50.0, help="realtime: steps per second (default 50)"
+    )
+    p.add_argument(
+        "--time-scale",
+        type=positive_float,
+        default=1.0,
+        help="realtime: simulated seconds per wall-clock second",
+    )
+    p.add_argument(
+        "--peer-timeout",
+        type=positive_float,
+        default=1.0,
+        help="realtime: drop silent peers after S s",
+    )
+    p.add_argument(
+        "--delay",
+        type=float,
+        default=0.0,
+        help="realtime: injected transport delay (s), experiments",
+    )
+    p.add_argument(
+        "--round-timeout",
+        type=positive_float,
+        default=10.0,
+        help="lockstep: give up a round after S s",
+    )
+    p.add_argument(
+        "--hold",
+        type=float,
+        default=1.0,
+        help="stop once the diameter stayed under the tolerance this long (simulated s)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=positive_float,
+        default=600.0,
+        help="wall-clock limit for the whole run (s)",
+    )
+    p.add_argument(
+        "--ensemble", default="polymatch", help="ensemble namespace (default polymatch)"
+    )
+    p.add_argument(
+        "--no-monitor", dest="monitor", action="store_false", help="do not start the monitor"
+    )
+    p.add_argument(
+        "--no-compare",
+        dest="compare",
+        action="store_false",
+        help="lockstep: skip the comparison with the centralised simulation",
+    )
+    p.add_argument(
+        "--save", metavar="NPZ", help="save the final poses received from the agents (npz)"
+    )
     p.add_argument("--quiet", "-q", action="store_true")
     p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
-    p.add_argument("--records", metavar="JSONL",
-                   help="write every process's run record (JSON, one a line) to this file")
+    p.add_argument(
+        "--records",
+        metavar="JSONL",
+        help="write every process's run record (JSON, one a line) to this file",
+    )
     p.set_defaults(func=cmd_run)

@@ -17,14 +17,15 @@ class Watcher:
     def __init__(self, scene, ensemble):
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
+
         self.node = Node("runner", namespace=wire.namespace(ensemble))
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
         self.scene, self.model = scene, scene.model
         self.grp = self.model.rotations
         self.diameter = None
-        self.monitor = None              # the monitor's latest run record
-        self.agents = {}                 # agents tuple -> latest run record of that process
+        self.monitor = None  # the monitor's latest run record
+        self.agents = {}  # agents tuple -> latest run record of that process
         self.poses, self.velocities = {}, {}
         node, dim = self.node, self.model.dim
         wire.subscription(node, "diameter", self._diam)
@@ -52,6 +53,7 @@ class Watcher:
             got, _ = wire.decode_pose_msg(msg, self.grp, self.model.dim, t_max=self.scene.t_end)
             if got is not None:
                 self.poses[agent] = (got.t, wire.Row(got.vec - self.scene.origin, got.rot))
+
         return receive
 
     def _twist(self, agent):
@@ -59,6 +61,7 @@ class Watcher:
             got, _ = wire.decode_twist_msg(msg, self.grp, self.model.dim, t_max=self.scene.t_end)
             if got is not None:
                 self.velocities[agent] = (got.vec, got.rot)
+
         return receive
 
     def spin(self, timeout):
@@ -88,8 +91,10 @@ class Watcher:
         found = [n for n, space in self.node.get_node_names_and_namespaces() if space == ns]
         twice = sorted({n for n in found if found.count(n) > 1})
         if twice:
-            raise PolymatchError(f"node name {ns}/{twice[0]} is taken twice: another ensemble named "
-                                 f"{ns.strip('/')!r} runs in this ROS domain (use --ensemble)")
+            raise PolymatchError(
+                f"node name {ns}/{twice[0]} is taken twice: another ensemble named "
+                f"{ns.strip('/')!r} runs in this ROS domain (use --ensemble)"
+            )
         return not set(names) - set(found)
 
     def pose_times(self):
@@ -98,14 +103,17 @@ class Watcher:
 
     def have_final(self):
         return len(self.poses) >= self.model.n_agents and (
-            self.model.order == 1 or len(self.velocities) >= self.model.n_agents)
+            self.model.order == 1 or len(self.velocities) >= self.model.n_agents
+        )
 
     def stop(self):
         from std_msgs.msg import String
+
         self.control.publish(String(data="stop"))
 
     def start(self, epoch):
         from std_msgs.msg import String
+
         self.control.publish(String(data=f"start {epoch!r}"))
 
     def final_state(self):

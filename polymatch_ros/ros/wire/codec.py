@@ -16,10 +16,9 @@
                      (angle in 2-D, row-major matrix otherwise), so the distributed run computes
                      with exactly the numbers the centralised one does.
 
-Every decoder returns ``(value, None)`` or ``(None, reason)`` and never raises: a value is
-finite, within MAX_ABS, stamped inside the run, and its rotation is in SO(d) (Lemma 2.1: the
-flow keeps O_i orthogonal, so anything else is not an agent's state); agents and the monitor
-drop and count a message with a reason, never use it.
+Every decoder returns ``(value, None)`` or ``(None, reason)``, never raises: a value is finite,
+within MAX_ABS, stamped inside the run, its rotation in SO(d) (Lemma 2.1: the flow keeps O_i
+orthogonal); agents and the monitor drop and count a message with a reason, never use it.
 """
 
 import math
@@ -30,7 +29,7 @@ import numpy as np
 STAGE_FORMAT = 2
 HEADER = 8
 FLAG_STOP = 1
-FIELDS = (("x", 1), ("v", 2), ("rot", 4))     # field, bit in the header's field mask, in wire order
+FIELDS = (("x", 1), ("v", 2), ("rot", 4))  # field, bit in the header's field mask, in wire order
 
 # One tolerance for every rotation on the wire: the quaternion's norm, a matrix's orthogonality
 # defect, a planar pose's out-of-plane parts, an angular velocity's skewness.  Agents send
@@ -106,7 +105,7 @@ class Stage:
     t: float
     x: np.ndarray = None
     v: np.ndarray = None
-    rot: np.ndarray = None      # one-row group array
+    rot: np.ndarray = None  # one-row group array
 
 
 def encode_stage(msg, run_id, agent, step, stage, flags, t, fields):
@@ -117,16 +116,27 @@ def encode_stage(msg, run_id, agent, step, stage, flags, t, fields):
         if label in fields:
             mask |= bit
             body.extend(fields[label])
-    msg.data = [float(STAGE_FORMAT), float(run_id), float(agent), float(step), float(stage),
-                float(flags), float(t), float(mask)] + body
+    msg.data = [
+        float(STAGE_FORMAT),
+        float(run_id),
+        float(agent),
+        float(step),
+        float(stage),
+        float(flags),
+        float(t),
+        float(mask),
+    ] + body
     return msg
 
 
 def _stage_header(data, run_id, agent, t_max):
     """(step, stage, flags, t, mask) of a stage message's header, or the reason it is refused."""
     head = data[:HEADER]
-    if np.any(head[[0, 1, 2, 3, 4, 5, 7]] != np.round(head[[0, 1, 2, 3, 4, 5, 7]])) \
-            or np.any(head[[1, 2, 3, 4, 5, 7]] < 0) or np.any(np.abs(head) > 2.0 ** 53):
+    if (
+        np.any(head[[0, 1, 2, 3, 4, 5, 7]] != np.round(head[[0, 1, 2, 3, 4, 5, 7]]))
+        or np.any(head[[1, 2, 3, 4, 5, 7]] < 0)
+        or np.any(np.abs(head) > 2.0**53)
+    ):
         return None, "malformed header"
     if int(head[0]) != STAGE_FORMAT:
         return None, "unknown format"
@@ -153,14 +163,18 @@ def decode_stage(msg, grp, dim, run_id, agent, rot_tol=ROTATION_TOL, t_max=None)
         return None, reason
     step, stage, flags, t, mask = head
     sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
-    if mask & ~7 or not mask & 4 or len(data) != HEADER + sum(sizes[f] for f, bit in FIELDS if mask & bit):
+    if (
+        mask & ~7
+        or not mask & 4
+        or len(data) != HEADER + sum(sizes[f] for f, bit in FIELDS if mask & bit)
+    ):
         return None, "malformed layout"
     out = Stage(agent, step, stage, flags, t)
     pos = HEADER
     for label, bit in FIELDS:
         if not mask & bit:
             continue
-        values = data[pos:pos + sizes[label]]
+        values = data[pos : pos + sizes[label]]
         pos += sizes[label]
         if label == "rot":
             if grp.name != "angle" and orthogonality(values.reshape(grp.dim, grp.dim)) > rot_tol:
@@ -177,7 +191,7 @@ def decode_stage(msg, grp, dim, run_id, agent, rot_tol=ROTATION_TOL, t_max=None)
 def pose_fields(grp, x, g):
     """(position xyz, quaternion xyzw) of one agent for a PoseStamped (d <= 3)."""
     pos = np.zeros(3)
-    pos[:len(x)] = x
+    pos[: len(x)] = x
     if grp.dim == 2:
         if grp.name == "angle":
             theta = float(g[0])
@@ -187,6 +201,7 @@ def pose_fields(grp, x, g):
         quat = np.array([0.0, 0.0, math.sin(theta / 2), math.cos(theta / 2)])
     else:
         from scipy.spatial.transform import Rotation
+
         quat = Rotation.from_matrix(grp.to_matrices(g)[0]).as_quat()
     return pos, quat
 
@@ -194,19 +209,26 @@ def pose_fields(grp, x, g):
 def twist_fields(grp, v, w_row):
     """(linear xyz, angular xyz) of one agent's velocities for a TwistStamped (d <= 3)."""
     lin = np.zeros(3)
-    lin[:len(v)] = v
+    lin[: len(v)] = v
     skew = grp.algebra_to_skew(w_row)[0]
-    ang = np.array([skew[2, 1], skew[0, 2], skew[1, 0]]) if grp.dim == 3 else np.array([0.0, 0.0, skew[1, 0]])
+    ang = (
+        np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
+        if grp.dim == 3
+        else np.array([0.0, 0.0, skew[1, 0]])
+    )
     return lin, ang
 
 
 def _array_message(t, vec, mat, labels):
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
     msg = Float64MultiArray()
     d = len(vec)
-    msg.layout.dim = [MultiArrayDimension(label=labels[0], size=1, stride=1),
-                      MultiArrayDimension(label=labels[1], size=d, stride=d),
-                      MultiArrayDimension(label=labels[2], size=d * d, stride=d * d)]
+    msg.layout.dim = [
+        MultiArrayDimension(label=labels[0], size=1, stride=1),
+        MultiArrayDimension(label=labels[1], size=d, stride=d),
+        MultiArrayDimension(label=labels[2], size=d * d, stride=d * d),
+    ]
     msg.data = [float(t)] + [float(v) for v in vec] + [float(v) for v in np.asarray(mat).ravel()]
     return msg
 
@@ -221,8 +243,11 @@ def _stamped(cls, t, frame_id):
 def pose_message(grp, t, x, one, frame_id):
     """One agent's pose message at simulated time t (type by dimension: see the module doc)."""
     if grp.dim >= 4:
-        return _array_message(t, x, grp.to_matrices(one)[0], ("t", "centroid", "rotation_row_major"))
+        return _array_message(
+            t, x, grp.to_matrices(one)[0], ("t", "centroid", "rotation_row_major")
+        )
     from geometry_msgs.msg import PoseStamped
+
     msg = _stamped(PoseStamped, t, frame_id)
     pos, quat = pose_fields(grp, x, one)
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = map(float, pos)
@@ -234,8 +259,11 @@ def pose_message(grp, t, x, one, frame_id):
 def twist_message(grp, t, v, w_one, frame_id):
     """One agent's velocity message (centroid velocity, spatial angular velocity W_i)."""
     if grp.dim >= 4:
-        return _array_message(t, v, grp.algebra_to_skew(w_one)[0], ("t", "velocity", "angular_row_major"))
+        return _array_message(
+            t, v, grp.algebra_to_skew(w_one)[0], ("t", "velocity", "angular_row_major")
+        )
     from geometry_msgs.msg import TwistStamped
+
     msg = _stamped(TwistStamped, t, frame_id)
     lin, ang = twist_fields(grp, v, w_one)
     msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = map(float, lin)
@@ -258,8 +286,12 @@ def pose_to_state(grp, dim, position, quat):
             return None, "not a planar pose"
         theta = 2.0 * math.atan2(q[2], q[3])
         mat = np.array([[[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]]])
-        return (p[:2].copy(), grp.from_matrices(mat) if grp.name != "angle" else np.array([theta])), None
+        return (
+            p[:2].copy(),
+            grp.from_matrices(mat) if grp.name != "angle" else np.array([theta]),
+        ), None
     from scipy.spatial.transform import Rotation
+
     mat = Rotation.from_quat(q / norm).as_matrix()[None]
     return (p[:3].copy(), grp.from_matrices(mat)), None
 
@@ -288,18 +320,19 @@ def array_to_state(msg, dim, rot_check=True):
     reason = _bad_numbers(data)
     if reason:
         return None, reason
-    mat = data[1 + dim:].reshape(dim, dim)
+    mat = data[1 + dim :].reshape(dim, dim)
     if rot_check:
         if orthogonality(mat) > ROTATION_TOL or np.linalg.det(mat) < 0:
             return None, "rotation not in SO(d)"
     elif np.max(np.abs(mat + mat.T)) > ROTATION_TOL * max(1.0, np.max(np.abs(mat))):
         return None, "angular velocity not skew"
-    return (float(data[0]), data[1:1 + dim].copy(), mat), None
+    return (float(data[0]), data[1 : 1 + dim].copy(), mat), None
 
 
 @dataclass
 class Received:
     """A decoded pose or twist: stamp (s and integer ns key), vector, rotation or algebra row."""
+
     t: float
     key: int
     vec: np.ndarray
@@ -339,11 +372,15 @@ def decode_pose_msg(msg, grp, dim, frame_id=None, t_max=None):
         return None, reason
     t, x, mat = res
     stamp, reason = _array_time(t, t_max)
-    return (None, reason) if stamp is None else (Received(*stamp, x, grp.from_matrices(mat[None])), None)
+    return (
+        (None, reason)
+        if stamp is None
+        else (Received(*stamp, x, grp.from_matrices(mat[None])), None)
+    )
 
 
 def decode_twist_msg(msg, grp, dim, frame_id=None, t_max=None):
-    """TwistStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) or (None, reason)."""
+    """TwistStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) | (None, reason)."""
     if dim <= 3:
         stamp, reason = _header_time(msg, frame_id, t_max)
         if stamp is None:
@@ -356,5 +393,8 @@ def decode_twist_msg(msg, grp, dim, frame_id=None, t_max=None):
         return None, reason
     t, v, skew = res
     stamp, reason = _array_time(t, t_max)
-    return (None, reason) if stamp is None else \
-        (Received(*stamp, v, grp.algebra_from_skew(skew[None])), None)
+    return (
+        (None, reason)
+        if stamp is None
+        else (Received(*stamp, v, grp.algebra_from_skew(skew[None])), None)
+    )

@@ -9,6 +9,7 @@ import numpy as np
 @dataclass
 class Row:
     """One agent's values as heard: centroid x, one-row rotation, velocity v, algebra row w."""
+
     x: np.ndarray
     rot: np.ndarray = None
     v: np.ndarray = None
@@ -28,9 +29,13 @@ def assemble(grp, dim, rows, local=None, with_rot=True, with_v=False, with_w=Fal
     index = np.array(sorted(set(rows) | set(local_rows)), dtype=int)
     pos = {row: k for k, row in enumerate(index.tolist())}
     n = len(index)
-    out = SimpleNamespace(x=np.zeros((n, dim)), rot=grp.identity(n) if with_rot else None,
-                          v=np.zeros((n, dim)) if with_v else None, w=None,
-                          index=None if full else index)
+    out = SimpleNamespace(
+        x=np.zeros((n, dim)),
+        rot=grp.identity(n) if with_rot else None,
+        v=np.zeros((n, dim)) if with_v else None,
+        w=None,
+        index=None if full else index,
+    )
     for row, rec in rows.items():
         k = pos[row]
         out.x[k] = rec.x

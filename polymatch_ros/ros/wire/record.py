@@ -83,16 +83,22 @@ class RunRecord:
     def describe(self):
         """The line for people (README: `polymatch run -v` shows the agents')."""
         if self.role == "monitor":
-            return (f"monitor: last report t = {self.t:.6g}, matching diameter {self.diameter:.3e}, "
-                    f"{self.agents_heard} agents heard, {self.reports} reports; "
-                    f"{drop_summary(self.dropped)}")
+            return (
+                f"monitor: last report t = {self.t:.6g}, matching diameter {self.diameter:.3e}, "
+                f"{self.agents_heard} agents heard, {self.reports} reports; "
+                f"{drop_summary(self.dropped)}"
+            )
         if self.mode == "lockstep":
             split = ", ".join(f"{k} {v:.2f}" for k, v in self.ms_per_round.items())
-            text = (f"finished at t = {self.t:.6g} after {self.steps} steps ({self.rounds} rounds, "
-                    f"{self.rounds_per_second:.1f} rounds/s; ms per round: {split})")
+            text = (
+                f"finished at t = {self.t:.6g} after {self.steps} steps ({self.rounds} rounds, "
+                f"{self.rounds_per_second:.1f} rounds/s; ms per round: {split})"
+            )
         else:
-            text = (f"finished at t = {self.t:.6g} after {self.steps} realtime steps, "
-                    f"{self.late_ticks} started more than one period late")
+            text = (
+                f"finished at t = {self.t:.6g} after {self.steps} realtime steps, "
+                f"{self.late_ticks} started more than one period late"
+            )
         if self.matched_after is not None:
             text += f"; peers matched after {self.matched_after:.2f} s"
         return f"{self.name()}: {text}; {drop_summary(self.dropped)}"
