@@ -361,12 +361,12 @@ def decode_pose_msg(msg, grp, dim, frame_id=None, t_max=None):
     [0, t_max].
     """
     if dim <= 3:
-        stamp, reason = _header_time(msg, frame_id, t_max)
-        if stamp is None:
-            return None, reason
         p, q = msg.pose.position, msg.pose.orientation
         val, reason = pose_to_state(grp, dim, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
-        return (None, reason) if val is None else (Received(*stamp, val[0], val[1]), None)
+        if val is None:                 # the contents first: a corrupt message is named as such
+            return None, reason
+        stamp, reason = _header_time(msg, frame_id, t_max)
+        return (None, reason) if stamp is None else (Received(*stamp, val[0], val[1]), None)
     res, reason = array_to_state(msg, dim)
     if res is None:
         return None, reason
@@ -382,12 +382,12 @@ def decode_pose_msg(msg, grp, dim, frame_id=None, t_max=None):
 def decode_twist_msg(msg, grp, dim, frame_id=None, t_max=None):
     """TwistStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) | (None, reason)."""
     if dim <= 3:
-        stamp, reason = _header_time(msg, frame_id, t_max)
-        if stamp is None:
-            return None, reason
         lin, ang = msg.twist.linear, msg.twist.angular
         val, reason = twist_to_state(grp, dim, (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z))
-        return (None, reason) if val is None else (Received(*stamp, val[0], val[1]), None)
+        if val is None:
+            return None, reason
+        stamp, reason = _header_time(msg, frame_id, t_max)
+        return (None, reason) if stamp is None else (Received(*stamp, val[0], val[1]), None)
     res, reason = array_to_state(msg, dim, rot_check=False)
     if res is None:
         return None, reason
