@@ -11,7 +11,7 @@ from ros_harness import needs_ros
 
 pytestmark = needs_ros
 
-SETTINGS = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 T_MAX = 30.0
 RUN_ID = 77
 
