@@ -6,6 +6,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from collections import deque
 
 from . import wire
@@ -122,3 +123,14 @@ def _agents_per_process(args, n_agents, localhost):
             f"range); use -k {need} or more"
         )
     return args.agents_per_process
+
+
+def stop_all(children, monitor, watcher):
+    """End every child by its PID; the monitor last, after the watcher heard its last reports."""
+    for c in children:
+        c.stop()
+    if monitor is not None:
+        t0 = time.monotonic()
+        while watcher is not None and time.monotonic() - t0 < 0.5:
+            watcher.spin(0.05)
+        monitor.stop()

@@ -19,7 +19,7 @@ from ..console import Progress, positive_float
 from ..core.errors import PolymatchError
 from ..core.scene import load_scene, resolve_scene_path
 from ..core.simulate import plan
-from .children import Child, _agents_per_process, partition
+from .children import Child, _agents_per_process, partition, stop_all
 from .children import LOCALHOST_PARTICIPANTS, fewest_agents_per_process  # noqa: F401 (API)
 from .ros_env import reserved_domain_id, ros_environment, teardown_watchdog
 from .summary import report, verdict
@@ -183,7 +183,7 @@ def _run(args, scene, scene_path, the_plan, env, domain):
     except PolymatchError as exc:
         code, message = exc.exit_code, str(exc)
     finally:
-        _stop_all(children, monitor, watcher)
+        stop_all(children, monitor, watcher)
         for s, h in old.items():
             signal.signal(s, h)
     try:
@@ -209,16 +209,6 @@ def _run(args, scene, scene_path, the_plan, env, domain):
             if rclpy.ok():
                 rclpy.shutdown()
     return code
-
-
-def _stop_all(children, monitor, watcher):
-    for c in children:
-        c.stop()
-    if monitor is not None:
-        t0 = time.monotonic()
-        while watcher is not None and time.monotonic() - t0 < 0.5:
-            watcher.spin(0.05)
-        monitor.stop()
 
 
 class Supervision:
@@ -261,14 +251,28 @@ class Supervision:
         names = [c.name for c in self.children] + (["monitor"] if self.monitor is not None else [])
         self.graph_checked = self.watcher.check_graph(names)
 
+    def start_clock(self):
+        """Realtime: once every agent is up, 'start <epoch>' for all; repeated (same epoch) each
+        second while an agent has not begun stepping - one whose control reader matched late
+        would otherwise wait forever (agents take the first 'start' only)."""
+        now = time.monotonic()
+        if self.epoch is None:
+            if self.watcher.agents_up():
+                self.epoch, self.start_sent = time.time() + 0.5, now
+                self.watcher.start(self.epoch)
+        elif now - self.start_sent > 1.0 and any(
+            r.steps == 0 and not r.finished for r in self.watcher.agents.values()
+        ):
+            self.start_sent = now
+            self.watcher.start(self.epoch)
+
     def watch(self, interrupted, start):
         watcher, args = self.watcher, self.args
-        started = args.mode != "realtime"
+        self.epoch, self.start_sent = None, 0.0
         while True:
             watcher.spin(0.05)
-            if not started and watcher.agents_up():
-                watcher.start(time.time() + 0.5)  # every agent is up: start the clock together
-                started = True
+            if args.mode == "realtime":
+                self.start_clock()
             self.check_graph()
             if interrupted:
                 self.progress.done()
