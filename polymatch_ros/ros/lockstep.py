@@ -204,7 +204,8 @@ class LockstepAgent(AgentBase):
         grid = step_grid(self.scene.t_end, self.plan.dt)
         timeout = self.params["round_timeout"]
         # matching is not simultaneous: a peer that matched us may still be matching others and
-        # start later, so the first round also allows the peers' discovery time
+        # start later, and its lag reaches us through every peer that waits for it in the next
+        # rounds: the first two steps also allow the peers' discovery time
         first_wait = timeout + self.params["discovery_timeout"]
         start = last_spin = time.monotonic()
         prev = 0.0
@@ -213,7 +214,7 @@ class LockstepAgent(AgentBase):
 
             def answer(request, stage):
                 nonlocal stop
-                wait = first_wait if k == 0 and stage == 0 else timeout
+                wait = first_wait if k <= 1 else timeout
                 ensemble, stop_seen = self.exchange.round(
                     k, stage, request, self.stop_requested, wait
                 )
