@@ -36,7 +36,7 @@ def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
         "/polymatch/monitor",
         "/polymatch/runner",
     ]
-    second = ["/second/agents_0_7", "/second/monitor", "/second/runner"]
+    second = ["/second/agents_0_3", "/second/agents_4_7", "/second/monitor", "/second/runner"]
     probe = ros.start([PY, "-c", PROBE, json.dumps(first + second)], timeout=200)
     runs = [
         ros.start(
@@ -59,7 +59,7 @@ def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
             ],
             timeout=200,
         )  # two ensembles on 2 cores
-        for name, k in (("polymatch", "1"), ("second", "8"))
+        for name, k in (("polymatch", "1"), ("second", "4"))
     ]
     for run in runs:
         rc = ros.wait(run, 210)
