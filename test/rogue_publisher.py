@@ -24,8 +24,8 @@ def main():
     rclpy.init()
     node = Node("rogue")
     qos = wire.qos_profiles()
-    pose = node.create_publisher(PoseStamped, wire.agent_topic(ensemble, agent, "pose"), qos["pose"])
-    stage = node.create_publisher(Float64MultiArray, wire.agent_topic(ensemble, agent, "stage"), qos["stage"])
+    pose = node.create_publisher(PoseStamped, wire.full_name(ensemble, "pose", agent), qos["pose"])
+    stage = node.create_publisher(Float64MultiArray, wire.full_name(ensemble, "stage", agent), qos["stage"])
     end = time.monotonic() + seconds
     k = 0
     while time.monotonic() < end:

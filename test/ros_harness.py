@@ -80,10 +80,12 @@ class Ros:
         return proc
 
     def agent(self, scene, agent, timeout=120, **params):
-        return self.start(node_argv("agent_node", scene, agent=agent, **params), timeout, f"agent {agent}")
+        argv = node_argv("agent_node", scene, agent=agent, **params) + ["-r", f"__node:=agent_{agent}"]
+        return self.start(argv, timeout, f"agent {agent}")
 
     def monitor(self, scene, timeout=120, **params):
-        return self.start(node_argv("monitor_node", scene, **params), timeout, "monitor")
+        return self.start(node_argv("monitor_node", scene, **params) + ["-r", "__node:=monitor"], timeout,
+                          "monitor")
 
     @staticmethod
     def output(proc):

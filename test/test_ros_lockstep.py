@@ -13,6 +13,7 @@ import pytest
 
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
+from polymatch_ros.ros.wire import run_records
 
 from ros_harness import PY, needs_ros, scene_path
 
@@ -77,14 +78,15 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
     assert moved > 0.1
 
 
-def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros):
+def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros, tmp_path):
     """README's demo: `polymatch run` converges and stops early; a separate subscriber process
     (the launch-free stand-in for `ros2 topic echo /polymatch/diameter`) sees the diameter fall
     below the scene's tolerance; the runner reports the lockstep deviation."""
     echo = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/polymatch/diameter", "--until-below", "1e-6",
                       "--timeout", "200"], timeout=220)
+    records = tmp_path / "records.jsonl"
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path("congruent_triangles"),
-                      "-k", "2", "--timeout", "200"], timeout=230)
+                      "-k", "2", "--timeout", "200", "--records", str(records)], timeout=230)
     rc = ros.wait(proc, 240)
     text = ros.output(proc)
     assert rc == 0, text
@@ -95,4 +97,9 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     assert m and float(m.group(1)) <= 1e-9, text
     assert "converged: matching diameter < 1e-06" in text
     t_final = float(re.search(r"\nt = ([0-9.e+-]+), wall time", text).group(1))
+    # a normal run is clean: nothing dropped, by the monitor or any agent
+    assert re.search(r"^monitor: last report .*; no messages dropped$", text, re.M), text
+    recs = run_records(records.read_text().splitlines())
+    assert len(recs) == 5 and all(r.finished for r in recs if r.role == "agent"), recs
+    assert all(r.dropped == {} for r in recs), [r.dropped for r in recs]
     assert t_final < load_scene(scene_path("congruent_triangles")).t_end     # stopped on convergence

@@ -4,7 +4,7 @@ and re-admit it when it comes back (Theorem 4.2 under delays and churn)."""
 import re
 import time
 
-from ros_harness import PY, needs_ros
+from ros_harness import PY, needs_ros, scene_path
 
 pytestmark = needs_ros
 
@@ -75,3 +75,20 @@ def test_realtime_converges_survives_sigkill_and_rejoin_theorem_4_2(ros):
         ros.output(diag)[-2000:]
     assert _wait_for(ros, diag, lambda h: any(n == 8 and below for n, _, below in h[marked:]), RUN_BOUND,
                      agents), ros.output(diag)[-3000:] + "".join(ros.output(a)[-300:] for a in agents)
+
+
+def test_last_realtime_progress_line_has_the_true_diameter_and_a_rate(ros):
+    """The runner's last progress line is the final state's: its diameter is the summary's, its
+    rate is not negative (a monitor report of fewer agents after the end must not count)."""
+    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path(SCENE), "--mode", "realtime",
+                      "--rate", str(RATE), "--time-scale", "2", "--t-end", "6", "--timeout", "120"],
+                     timeout=150)
+    rc = ros.wait(proc, 160)
+    text = ros.output(proc)
+    assert rc in (0, 3), text
+    progress = re.findall(r"^t = +([0-9.]+) / .*diameter = (\S+) +(\S+) rounds/s", text, re.M)
+    assert progress, text
+    t, diameter, rate = (float(v) for v in progress[-1])
+    summary = re.search(r"^triangles +8 +\S+ +\S+ +(\S+) ", text, re.M)
+    assert summary and diameter == float(summary.group(1)), text
+    assert diameter > 0.0 and rate >= 0.0 and t == 6.0, text

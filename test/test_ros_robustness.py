@@ -70,6 +70,17 @@ def test_bad_agent_parameter_is_one_line_and_exit_code_2(ros, params, expect):
     assert len(text.splitlines()) == 1 and expect in text and "Traceback" not in text, text
 
 
+@pytest.mark.parametrize("params,expect", [
+    ({"rate": -1.0}, "out of range"),
+    ({"markers": "maybe"}, "expected a boolean"),
+])
+def test_bad_monitor_parameter_is_one_line_and_exit_code_2(ros, params, expect):
+    proc = ros.start(node_argv("monitor_node", "congruent_triangles", **params), timeout=60)
+    assert ros.wait(proc, 70) == 2
+    text = ros.output(proc).strip()
+    assert len(text.splitlines()) == 1 and expect in text and "Traceback" not in text, text
+
+
 def test_missing_scene_is_one_line_and_exit_code_2(ros):
     proc = ros.start([PY, "-m", "polymatch_ros.ros.monitor_node", "--ros-args", "-p", "scene:=/nonexistent.yaml"],
                      timeout=60)

@@ -64,23 +64,29 @@ def _bare(n, rounds, env, timeout):
 
 def _agents(n, path, env, timeout, run_id):
     argvs = [[sys.executable, "-m", "polymatch_ros.ros.agent_node", "--ros-args", "-p", f"scene:={path}",
-              "-p", f"agent:={i}", "-p", f"run_id:={run_id}"] for i in range(n)]
-    return _parse_agents("\n".join(_parallel(argvs, env, timeout)))
+              "-p", f"agent:={i}", "-p", f"run_id:={run_id}", "-r", f"__node:=agent_{i}"] for i in range(n)]
+    return _parse_agents("\n".join(_parallel(argvs, env, timeout)).splitlines())
 
 
-def _parse_agents(text):
-    rates = [float(x) for x in re.findall(r"^agent [0-9,]+: finished .*?\(\d+ rounds, ([0-9.]+) rounds/s", text,
-                                          re.M)]
-    matched = [float(x) for x in re.findall(r"peers matched after ([0-9.]+) s", text)]
-    return rates, matched
+def _parse_agents(lines):
+    """(rounds/s, seconds until peers matched) of every agent's run record among ``lines``."""
+    from ..ros.wire import run_records
+    records = [r for r in run_records(lines) if r.role == "agent" and r.finished]
+    return ([r.rounds_per_second for r in records],
+            [r.matched_after for r in records if r.matched_after is not None])
 
 
 def _deployed(path, env, timeout, per_process):
+    records = path + ".records.jsonl"
     out = subprocess.run(["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli", "run", path,
-                          "--no-compare", "--hold", "1e9", "--timeout", str(timeout - 10), "-q", "-v",
-                          "-k", str(per_process)],
+                          "--no-compare", "--hold", "1e9", "--timeout", str(timeout - 10), "-q",
+                          "--records", records, "-k", str(per_process)],
                          env=env, capture_output=True, text=True)
-    rates, matched = _parse_agents(out.stdout)
+    lines = []
+    if os.path.exists(records):
+        with open(records, encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    rates, matched = _parse_agents(lines)
     errors = [line for line in out.stderr.splitlines() if line.startswith("polymatch: error:")]
     if out.returncode in (0, 3):           # 3: ran to t_end without matching yet (t_end is short here)
         return rates, None

@@ -13,7 +13,6 @@ rates and injected transport delays.
 """
 
 import os
-import re
 import subprocess
 import sys
 import tempfile
@@ -74,6 +73,15 @@ def _reference(scene, times):
     return {"times": np.array(traj.times), "verts": [_verts(scene, st) for st in traj.states]}
 
 
+def _agent_records(path):
+    """The agents' run records a `polymatch run --records` wrote (none if the run failed early)."""
+    from ..ros.wire import run_records
+    if not os.path.exists(path):
+        return []
+    with open(path, encoding="utf-8") as fh:
+        return [r for r in run_records(fh) if r.role == "agent"]
+
+
 def run(args, log):
     from dataclasses import replace
 
@@ -102,9 +110,11 @@ def run(args, log):
             per_step = METHODS[method].info.rounds
             t_run = (40 if args.quick else ROUNDS) * dt / per_step      # enough rounds for a steady rate
             log(f"lockstep {method} dt = {dt}: {t_run:g} simulated s")
-            out = _cli(env, ["run", path, "--integrator", method, "--dt", str(dt), "--t-end", str(t_run),
-                             "--hold", "1e9", "--no-monitor", "--no-compare", "-q", "-v", "--timeout", "300"], 340)
-            rates = [float(x) for x in re.findall(r"\(\d+ rounds, ([0-9.]+) rounds/s", out.stdout)]
+            records = os.path.join(tmp, f"lockstep_{method}_{dt}.jsonl")
+            _cli(env, ["run", path, "--integrator", method, "--dt", str(dt), "--t-end", str(t_run),
+                       "--hold", "1e9", "--no-monitor", "--no-compare", "-q", "--records", records,
+                       "--timeout", "300"], 340)
+            rates = [r.rounds_per_second for r in _agent_records(records)]
             rps = float(np.mean(rates)) if rates else float("nan")
             wall_per_s = per_step / (dt * rps) if rates else float("nan")
             err = _vertex_error_over_run(scene, method, dt, ref)
@@ -120,11 +130,11 @@ def run(args, log):
         for rate, delay in cases:
             log(f"realtime rate {rate:g} Hz, delay {delay:g} s")
             npz = os.path.join(tmp, f"rt_{rate}_{delay}.npz")
+            records = os.path.join(tmp, f"rt_{rate}_{delay}.jsonl")
             out = _cli(env, ["run", path, "--mode", "realtime", "--rate", str(rate), "--time-scale", str(scale),
                              "--delay", str(delay), "--t-end", str(t_end), "--hold", "1e9", "--no-monitor",
-                             "-q", "-v", "--save", npz, "--timeout", "200"], 240)
-            ticks = [(int(a), int(b)) for a, b in re.findall(r"after (\d+) realtime steps, (\d+) started more",
-                                                             out.stdout)]
+                             "-q", "--records", records, "--save", npz, "--timeout", "200"], 240)
+            ticks = [(r.steps, r.late_ticks) for r in _agent_records(records)]
             late = f"{sum(b for _, b in ticks) / max(1, sum(a for a, _ in ticks)):.0%}" if ticks else "-"
             if not os.path.exists(npz):
                 rt_rows.append([rate, scale / rate, delay, "-", "-", "run failed: " + out.stderr.strip()[-80:]])
