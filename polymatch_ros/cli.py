@@ -22,8 +22,16 @@ import warnings
 
 import numpy as np
 
-from .console import (SUMMARY_HEADER, Progress, format_table, memory_size, positive_float,
-                      summary_rows, tolerance_arg, writable_output)
+from .console import (
+    SUMMARY_HEADER,
+    Progress,
+    format_table,
+    memory_size,
+    positive_float,
+    summary_rows,
+    tolerance_arg,
+    writable_output,
+)
 from .core.errors import PolymatchError
 from .core.limits import Limits
 from .core.preflight import check_run

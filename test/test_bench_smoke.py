@@ -50,7 +50,8 @@ def test_family_quick(name, capsys):
 
 def test_all_writes_one_report(tmp_path, capsys):
     out_dir = tmp_path / "bench"
-    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield", "--out", str(out_dir)]) == 0
+    assert cli.main(["bench", "all", "--quick", "--quiet", "--only",
+                    "meanfield", "--out", str(out_dir)]) == 0
     text = (out_dir / "report.md").read_text(encoding="utf-8")
     assert text.startswith("# polymatch benchmark report")
     assert "mean field best ms" in text
@@ -65,7 +66,8 @@ def test_all_only_keeps_the_other_families_reports(tmp_path, capsys):
     out_dir.mkdir()
     (out_dir / "reductions.md").write_text("# Reductions from an earlier run\n\nkept figure 1.23x\n",
                                            encoding="utf-8")
-    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield", "--out", str(out_dir)]) == 0
+    assert cli.main(["bench", "all", "--quick", "--quiet", "--only",
+                    "meanfield", "--out", str(out_dir)]) == 0
     text = (out_dir / "report.md").read_text(encoding="utf-8")
     assert "mean field best ms" in text                       # the family just run
     assert "## Reductions from an earlier run" in text         # the earlier one, one heading level down

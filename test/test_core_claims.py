@@ -11,12 +11,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from core_testlib import (
+    brute_diameter,
+    brute_matching_diameter,
+    brute_rotation_diameter,
+    make_scene,
+    rot_matrices,
+    rotation_energy,
+    skew_matrices,
+)
 from scipy.integrate import simpson
 
 from polymatch_ros.core import METHODS, System, drive, load_scene, point_set_diameter, simulate
-
-from core_testlib import (brute_diameter, brute_matching_diameter, brute_rotation_diameter, make_scene,
-                          rot_matrices, rotation_energy, skew_matrices)
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
 
@@ -66,7 +72,8 @@ def test_centroid_decay_rate_underdamped_envelope_prop_2_1():
 
 def test_centroid_decay_rate_first_order_prop_2_1():
     gamma, kappa = 2.0, 1.5
-    scene = make_scene(3, 1, count=6, seed=33, gamma=gamma, kappa=kappa, t_end=8.0, samples=[1.0, 8.0])
+    scene = make_scene(3, 1, count=6, seed=33, gamma=gamma,
+                       kappa=kappa, t_end=8.0, samples=[1.0, 8.0])
     t, d = _centroid_diameters(simulate(scene, "lie_euler", 0.05))
     measured = (np.log(d[-1]) - np.log(d[1])) / (t[-1] - t[1])
     assert measured == pytest.approx(-kappa / gamma, rel=0.01)
@@ -162,7 +169,8 @@ def test_energy_conserved_without_drift_gamma_0_lie_verlet_prop_2_2_i():
     dev1, early1 = _energy_run("lie_verlet", 0.05)
     dev2, early2 = _energy_run("lie_verlet", 0.025)
     assert dev1 < 1e-3
-    assert dev1 / dev2 > 2.5                               # O(dt^2) oscillation (O(dt) would give 2)
+    # O(dt^2) oscillation (O(dt) would give 2)
+    assert dev1 / dev2 > 2.5
     assert dev1 < 3 * early1 and dev2 < 3 * early2         # bounded: no growth over 8x the time
     # the criterion does detect drift: a non-symplectic 2nd-order method fails it
     dev_h, early_h = _energy_run("lie_heun", 0.05)
@@ -193,7 +201,8 @@ def test_complete_vertex_matching_config_theorems_4_1_4_2(name, order):
     assert traj.metrics[0].diameter == pytest.approx(d0, rel=1e-12)
     # and the components the proofs use: centroids and rotations both reach consensus
     assert brute_diameter(traj.final.groups[0].x) < 1e-6
-    assert brute_rotation_diameter(rot_matrices(scene.model.rotations, traj.final.groups[0].rot)) < 1e-6
+    assert brute_rotation_diameter(rot_matrices(
+        scene.model.rotations, traj.final.groups[0].rot)) < 1e-6
 
 
 @pytest.mark.parametrize("order,dim", [(1, 3), (2, 3), (1, 4)])
@@ -203,7 +212,8 @@ def test_complete_vertex_matching_inline_theorems_4_1_4_2(order, dim):
                        mass=0.5, velocities={"centroid": {"normal": 0.5}, "angular": {"normal": 0.5}},
                        t_end=30.0, samples={"every": 5.0})
     if order == 1:
-        assert brute_rotation_diameter(rot_matrices(scene.model.rotations, scene.initial.groups[0].rot)) < 1
+        assert brute_rotation_diameter(rot_matrices(
+            scene.model.rotations, scene.initial.groups[0].rot)) < 1
     traj = simulate(scene, "rkmk4", 0.05)
     dend = brute_matching_diameter(scene.model, traj.final, 0)
     assert dend < 1e-6

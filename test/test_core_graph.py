@@ -25,7 +25,8 @@ def test_complete_graph_is_the_mean_field_of_a2():
     mean_field = s @ np.swapaxes(rots, 1, 2) - rots @ s.T
     assert graph.complete and graph.weights is None
     assert np.max(np.abs(_torques(graph, rots) - mean_field)) < 1e-14
-    naive = np.array([sum(rots[k] @ rots[i].T - rots[i] @ rots[k].T for k in range(7)) for i in range(7)])
+    naive = np.array([sum(rots[k] @ rots[i].T - rots[i] @ rots[k].T for k in range(7))
+                     for i in range(7)])
     assert np.max(np.abs(mean_field - naive)) < 1e-13
 
 
@@ -66,7 +67,8 @@ def test_random_graph_is_reproducible_and_its_extremes_are_empty_and_complete():
     full = build_graph({"random": {"p": 1.0, "seed": 0}}, "graph", 5).matrix().toarray()
     assert np.array_equal(full, np.ones((5, 5)) - np.eye(5))
     with pytest.raises(SceneError, match=r"^groups\[0\]\.graph: the graph is disconnected: components \{0\} \{1\}"):
-        check_connected(build_graph({"random": {"p": 0.0}}, "groups[0].graph", 5), "groups[0].graph")
+        check_connected(build_graph({"random": {"p": 0.0}},
+                        "groups[0].graph", 5), "groups[0].graph")
 
 
 def test_disconnected_undirected_graph_is_refused_naming_components():
@@ -98,7 +100,8 @@ def test_weights_scale_the_sums():
     ({"random": {"p": 1.5}}, r"graph\.random\.p: must be <= 1"),
     ({"edges": [[0, 0]]}, r"graph\.edges\[0\]: an agent is not its own neighbour"),
     ({"edges": [[0, 7]]}, r"graph\.edges\[0\]: agent indices must be < the group's 5 agents"),
-    ({"edges": [[0, 1]], "weights": [1, 2]}, r"graph\.weights: expected one positive weight per edge"),
+    ({"edges": [[0, 1]], "weights": [1, 2]},
+     r"graph\.weights: expected one positive weight per edge"),
     ({"edges": [[0, 1]], "weights": [-1]}, r"graph\.weights\[0\]: must be > 0"),
     ({"ring": 1, "directed": True}, r"graph: weights and directed go with edges"),
 ])

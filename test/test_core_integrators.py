@@ -4,14 +4,19 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from core_testlib import defect, make_scene, rot_matrices, skew_matrices, state_error
 
-from polymatch_ros.core import (METHODS, PolymatchError, StabilityError, System, simulate,
-                                with_representation)
+from polymatch_ros.core import (
+    METHODS,
+    PolymatchError,
+    StabilityError,
+    System,
+    simulate,
+    with_representation,
+)
 from polymatch_ros.core.errors import StepLimitError
 from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState
-
-from core_testlib import defect, make_scene, rot_matrices, skew_matrices, state_error
 
 # ---------------------------------------------------------------------------------------------
 # Lemma 2.1: rotations stay in SO(d)
@@ -30,7 +35,8 @@ def _lively_second_order(dim, rep, seed=1):
 @pytest.mark.parametrize("method", LIE_METHODS)
 def test_orthogonality_preserved_10k_steps_lemma_2_1(method, dim, rep):
     scene = _lively_second_order(dim, rep)
-    assert scene.model.rotations.name in ("matrix", "so3")        # not the trivially exact angle model
+    # not the trivially exact angle model
+    assert scene.model.rotations.name in ("matrix", "so3")
     traj = simulate(scene, method, 0.01)
     assert traj.steps == 10_000
     assert traj.final.t == pytest.approx(100.0)
@@ -49,7 +55,8 @@ def test_orthogonality_preserved_10k_steps_lemma_2_1(method, dim, rep):
 
 def test_projection_baseline_keeps_so_d_while_plain_euler_drifts_lemma_2_1():
     """euler_proj's polar projection is what keeps Lemma 2.1; without it Euler leaves SO(d)."""
-    scene = make_scene(3, 1, count=4, seed=2, representation="matrix", t_end=100.0, samples={"every": 50.0})
+    scene = make_scene(3, 1, count=4, seed=2, representation="matrix",
+                       t_end=100.0, samples={"every": 50.0})
     traj = simulate(scene, "euler_proj", 0.01)
     assert traj.steps == 10_000
     for st in traj.states:
@@ -160,7 +167,8 @@ def test_so3_cayley_reduction_equals_full_matrix_model_A_1_A_2(method, order):
 
 
 def _angle_vs_matrix(method, dt, order=1):
-    scene = make_scene(2, order, count=5, seed=6, velocities={"angular": {"normal": 0.7}}, t_end=1.0)
+    scene = make_scene(2, order, count=5, seed=6, velocities={
+                       "angular": {"normal": 0.7}}, t_end=1.0)
     assert scene.model.rotations.name == "angle"
     full = with_representation(scene, "matrix")
     a = simulate(scene, method, dt, samples=[0.0], keep_states=False, metrics=False)
@@ -226,7 +234,8 @@ def test_adaptive_final_state_at_t_end_like_fixed_step_theorem_4_2():
     scene = make_scene(2, 1, count=4, seed=5, t_end=5.0)
     fixed = simulate(scene, "rkmk4", 0.05, samples=[0.0, 1.0], keep_states=False, metrics=False)
     assert fixed.final.t == pytest.approx(5.0)
-    ada = simulate(scene, "adaptive", tolerance=1e-10, samples=[0.0, 1.0], keep_states=False, metrics=False)
+    ada = simulate(scene, "adaptive", tolerance=1e-10,
+                   samples=[0.0, 1.0], keep_states=False, metrics=False)
     assert ada.final.t == pytest.approx(5.0)
 
 
@@ -266,7 +275,8 @@ def test_explicit_methods_refuse_stiff_mass_A_1(method):
         # damping is exact; the kick-drift-kick is stable for h < 2 / sqrt(kappa / m)
         expected = 2.0 / np.sqrt(1.5 / 1e-8)
     else:
-        coefs = {1: [1, 1], 2: [1, 1, 1 / 2], 4: [1, 1, 1 / 2, 1 / 6, 1 / 24]}[METHODS[method].info.order]
+        coefs = {1: [1, 1], 2: [1, 1, 1 / 2], 4: [1, 1, 1 / \
+            2, 1 / 6, 1 / 24]}[METHODS[method].info.order]
         expected = _rk_real_stability_boundary(coefs) / fast
     assert limit == pytest.approx(expected, rel=5e-3)
 
@@ -282,7 +292,8 @@ def test_etd2_stiff_mass_tends_to_first_order_model_A_2():
         diam = float(np.max(np.abs(a.diameters - b.diameters)))
         err = state_error(second, a.final, first, b.final)
         assert diam < 1e-3 and err["rot"] < 1e-3
-        assert err["x"] < 1e-7                                   # O(m/gamma) for the exact centroid flow
+        # O(m/gamma) for the exact centroid flow
+        assert err["x"] < 1e-7
         results.append(err["rot"])
         for st in a.states:
             m = ensemble_metrics(second.model, st)

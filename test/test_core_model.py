@@ -9,12 +9,11 @@ Prop. 2.1: the centroid flow is the exact solution of a linear system (expm).
 
 import numpy as np
 import pytest
+from core_testlib import make_scene, rot_matrices, skew_matrices
 from scipy.linalg import expm
 
 from polymatch_ros.core import System, load_scene
 from polymatch_ros.core.model import CentroidFlow, pair_force
-
-from core_testlib import make_scene, rot_matrices, skew_matrices
 
 REPRESENTATIONS = [(2, "angle"), (2, "matrix"), (3, "so3"), (3, "so3-exp"), (3, "matrix"), (4, "matrix"),
                    (5, "matrix")]
@@ -118,7 +117,8 @@ def paper_f2_force(xs, gi, i, kappa_1, kappa_2, L):
 
 
 def _mixed_scene(order, centroids=None, dim=2):
-    shapes = ["triangle", "square", "pentagon"] if dim == 2 else ["triangle", "tetrahedron", "cube"]
+    shapes = ["triangle", "square", "pentagon"] if dim == 2 else [
+        "triangle", "tetrahedron", "cube"]
     counts = [3, 4, 5]
     groups = []
     for k, (shape, count) in enumerate(zip(shapes, counts)):
@@ -151,7 +151,8 @@ def test_mixed_centroid_force_matches_paper_F_2(order, dim):
             np.testing.assert_allclose(k_x, expected / model.gamma, rtol=0, atol=1e-13)
         else:
             np.testing.assert_allclose(k_x, gs.v, rtol=0, atol=0)
-            np.testing.assert_allclose(k_v, (expected - model.gamma * gs.v) / model.mass, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(
+                k_v, (expected - model.gamma * gs.v) / model.mass, rtol=0, atol=1e-12)
         # rotations couple only inside the group, with the group's own N_g (F-2, third/fourth lines)
         mats = rot_matrices(model.rotations, gs.rot)
         scale = 1.3 / (2.0 * len(mats)) if order == 2 else 1.3 / (2.0 * 1.2 * len(mats))
@@ -178,7 +179,8 @@ def test_mixed_force_coincident_centroids_zero_not_nan_F_2():
     # pair_force alone: a coincident pair contributes exactly zero, other pairs the paper's term
     x = np.array([[0.0, 0.0]])
     y = np.array([[0.0, 0.0], [2.0, 0.0]])
-    np.testing.assert_allclose(pair_force(x, y, 0.7, 1.5), [[0.7 / 2 * (2.0 - 1.5), 0.0]], atol=1e-15)
+    np.testing.assert_allclose(pair_force(x, y, 0.7, 1.5), [
+                               [0.7 / 2 * (2.0 - 1.5), 0.0]], atol=1e-15)
     np.testing.assert_array_equal(pair_force(x, y[:1], 0.7, 1.5), [[0.0, 0.0]])
     # chunked evaluation (one row at a time) gives the same numbers
     rng = np.random.default_rng(3)
@@ -275,5 +277,6 @@ def test_exact_centroid_flow_stiff_mass_tends_to_first_order_prop_2_1(m):
         x, v = flow.advance(x, v, x.mean(axis=0), v.mean(axis=0), h)
     assert np.all(np.isfinite(x)) and np.all(np.isfinite(v))
     # after the O(m/gamma) initial layer the velocity has been absorbed: x(1) = e^{-kappa/gamma} x_slow(0)
-    x_slow0 = np.array([[1.0, -2.0], [-1.0, 2.0]]) + (m / gamma) * np.array([[3.0, 0.0], [-3.0, 0.0]])
+    x_slow0 = np.array([[1.0, -2.0], [-1.0, 2.0]]) + (m / gamma) * \
+                       np.array([[3.0, 0.0], [-3.0, 0.0]])
     np.testing.assert_allclose(x, np.exp(-kappa * 1.0 / gamma) * x_slow0, rtol=1e-6, atol=1e-12)

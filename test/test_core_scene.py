@@ -4,11 +4,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from core_testlib import defect, rot_matrices, skew_matrices
 
 from polymatch_ros.core import SceneError, load_scene
 from polymatch_ros.core.shapes import polygon
-
-from core_testlib import defect, rot_matrices, skew_matrices
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
 TRI = polygon(3).vertices
@@ -46,7 +45,8 @@ GROUP_CASES = [
     ("groups[0].count", _base(groups=[_group(count=2.5)])),
     ("groups[0].rotations", _base(groups=[_group(rotations="sideways")])),
     ("groups[0].rotations.within", _base(groups=[_group(rotations={"within": -1.0})])),
-    ("groups[0].rotations.matrices[0]", _base(groups=[_group(rotations={"matrices": [[[1, 0], [0, -1]]] * 3})])),
+    ("groups[0].rotations.matrices[0]", _base(
+        groups=[_group(rotations={"matrices": [[[1, 0], [0, -1]]] * 3})])),
     ("groups[1].shape", _base(groups=[_group(), _group(name="b", shape="dodecagonal-blob")])),
     ("groups[0].shape", _base(groups=[_group(shape="tetrahedron")])),
     ("groups[0].shape.vertices", _base(groups=[_group(shape={"vertices": [[0.0, 0.0]]})])),
@@ -112,7 +112,8 @@ def test_config_initial_data_satisfy_constraints_B_4(path):
             np.testing.assert_allclose(w + np.swapaxes(w, 1, 2), 0.0, atol=0)
             assert gs.v.shape == gs.x.shape
         else:
-            assert gs.v is None and gs.w is None                                # carries no velocities
+            # carries no velocities
+            assert gs.v is None and gs.w is None
 
 
 def test_explicit_vertices_round_trip_section_3():
@@ -120,7 +121,8 @@ def test_explicit_vertices_round_trip_section_3():
     rng = np.random.default_rng(4)
     angles = rng.uniform(-np.pi, np.pi, 4)
     cents = rng.normal(scale=3.0, size=(4, 2))
-    verts = [c + TRI @ np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]).T for a, c in zip(angles, cents)]
+    verts = [c + TRI @ np.array([[np.cos(a), -np.sin(a)], [np.sin(a),
+                                np.cos(a)]]).T for a, c in zip(angles, cents)]
     scene = load_scene(_base(groups=[{"shape": {"vertices": TRI.tolist()},
                                       "agents": [{"vertices": v.tolist()} for v in verts]}]))
     gs = scene.initial.groups[0]

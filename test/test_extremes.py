@@ -44,6 +44,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from core_testlib import (
+    brute_matching_diameter,
+    brute_rotation_diameter,
+    defect,
+    make_scene,
+    rot_matrices,
+    rotation_energy,
+    state_error,
+    vertices,
+)
 from scipy.spatial import ConvexHull
 from scipy.spatial.distance import pdist
 
@@ -52,9 +62,6 @@ from polymatch_ros.bench.extremes_cases import CASES
 from polymatch_ros.bench.extremes_lib import EQUILIBRIA, QUICK
 from polymatch_ros.bench.extremes_lib import finite as all_finite
 from polymatch_ros.core import METHODS, PolymatchError, StabilityError, load_scene, simulate
-
-from core_testlib import (brute_matching_diameter, brute_rotation_diameter, defect, make_scene, rot_matrices,
-                          rotation_energy, state_error, vertices)
 
 ROOT = Path(__file__).resolve().parent.parent
 EXTREMES = lib.EXTREMES_DIR
@@ -212,7 +219,8 @@ def test_extreme_stiff_mass_m_1e_8_auto_picks_etd2_prop_2_1():
 
 def test_extreme_stiff_mass_m_1e_8_auto_with_tolerance_finishes_or_refuses_promptly_prop_2_1():
     scene = _stiff_scene(2, t_end=1.0)
-    scene = replace(scene, integrator=replace(scene.integrator, method="auto", tolerance=1e-6, max_steps=300))
+    scene = replace(scene, integrator=replace(scene.integrator,
+                    method="auto", tolerance=1e-6, max_steps=300))
     traj = simulate(scene, samples=[0.0], keep_states=False)
     assert traj.plan.name == "etd2"
     assert traj.final.t == pytest.approx(1.0)
@@ -304,7 +312,8 @@ def test_extreme_stiff_coupling_kappa_1e4_compliant_dt_accurate_adaptive_cost_A_
         for p, q in zip(fixed.metrics, ref.metrics):                # to 1e-6 of the initial diameter
             assert abs(p.diameter - q.diameter) < 1e-6 * d0
     assert errs[1] < 1e-6
-    assert errs[0] / errs[1] > 10.0                              # 4th order (16) up to the transient
+    # 4th order (16) up to the transient
+    assert errs[0] / errs[1] > 10.0
     ada = simulate(scene, "adaptive", tolerance=1e-9)
     assert all_finite(ada)
     assert max(state_error(scene, ada.final, scene, ref.final).values()) < 1e-7
@@ -442,8 +451,10 @@ def test_extreme_huge_coordinates_1e9_scene_file_resolves_shape_theorem_4_2():
     assert np.max(np.abs(scene.initial.groups[0].x)) < 10       # offsets, not coordinates
     traj = simulate(scene, samples=[0.0, 30.0])
     assert traj.converged_at == pytest.approx(30.0)
-    assert traj.diameters[-1] < 1e-6                            # resolvable only because of the offsets
-    assert traj.diameters[-1] == pytest.approx(brute_matching_diameter(scene.model, traj.final, 0), abs=1e-13)
+    # resolvable only because of the offsets
+    assert traj.diameters[-1] < 1e-6
+    assert traj.diameters[-1] == pytest.approx(
+        brute_matching_diameter(scene.model, traj.final, 0), abs=1e-13)
 
 
 _explicit_triangles_at = lib.explicit_triangles_at
@@ -520,7 +531,8 @@ def test_extreme_scale_ratios_1e_6_1e_6_adaptive_refuses_early_naming_stiffness_
     assert "\n" not in msg and exc.value.exit_code == 1
     assert "stiff" in msg and "s_k/s_i" in msg and "max_steps = 100000" in msg
     needed = float(re.search(r"at least ([0-9.eE+-]+) steps", msg).group(1))
-    assert needed == pytest.approx(0.9 * 6.0 * 0 + 1.0 / (0.9 * _dop853_real_limit() / _f1_stiffness(scene)), rel=0.2)
+    assert needed == pytest.approx(
+        0.9 * 6.0 * 0 + 1.0 / (0.9 * _dop853_real_limit() / _f1_stiffness(scene)), rel=0.2)
 
 
 def _dop853_real_limit():
@@ -543,10 +555,13 @@ def test_extreme_non_consensus_equilibrium_reproduced_roundoff_grows_at_linear_r
     c, m, gamma, kappa = EQUILIBRIA[name][-1], 0.5, 1.0, 1.0
     scene, traj, t, eps, rate = lib.equilibrium_run(name, order, rep, 40.0, 0.5, m=m, gamma=gamma)
     # the independent linearisation: first order kappa c, second order m l^2 + gamma l - kappa c = 0
-    assert rate == pytest.approx(kappa * c if order == 1 else max(np.roots([m, gamma, -kappa * c]).real))
+    assert rate == pytest.approx(
+        kappa * c if order == 1 else max(np.roots([m, gamma, -kappa * c]).real))
     assert all_finite(traj)
-    assert eps[0] < 1e-15                                      # starts at the equilibrium (to round-off)
-    assert np.all(eps[t <= 10.0 / rate] < 1e-9)                # and stays there for 10 e-folding times
+    # starts at the equilibrium (to round-off)
+    assert eps[0] < 1e-15
+    # and stays there for 10 e-folding times
+    assert np.all(eps[t <= 10.0 / rate] < 1e-9)
     window = (eps > 1e-11) & (eps < 1e-3)
     assert window.sum() >= 10
     slope, intercept = np.polyfit(t[window], np.log(eps[window]), 1)
@@ -565,7 +580,8 @@ def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
     code, msg = convergence_verdict(replace(scene, expect_convergence=True), traj.diameters[-1],
                                     traj.converged_at, traj.stationarity)
     assert code == 3 and "not consensus" in msg
-    code, msg = convergence_verdict(scene, traj.diameters[-1], traj.converged_at, traj.stationarity)
+    code, msg = convergence_verdict(
+        scene, traj.diameters[-1], traj.converged_at, traj.stationarity)
     assert code == 0 and "not consensus" in msg and "expected = false" in msg
 
 
@@ -573,7 +589,8 @@ def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
 def test_extreme_d0_ge_1_uniform_random_n_8_still_converges_outside_theorem_4_2(dim):
     for seed in (1, 2, 3):
         scene = make_scene(dim, 1, count=8, seed=seed, t_end=60.0, samples={"every": 10.0})
-        d0 = brute_rotation_diameter(rot_matrices(scene.model.rotations, scene.initial.groups[0].rot))
+        d0 = brute_rotation_diameter(rot_matrices(
+            scene.model.rotations, scene.initial.groups[0].rot))
         assert d0 >= 1.0                                      # outside Theorem 4.2's D0 < 1
         traj = simulate(scene, "rkmk4", 0.1)
         assert brute_matching_diameter(scene.model, traj.final, 0) < 1e-6
@@ -590,7 +607,8 @@ _coincident = lib.coincident_scene
                                           (2, "etd2"), (2, "lie_verlet"), (2, "adaptive")])
 def test_extreme_coincident_centroids_mixed_finite_zero_force_keeps_them_F_2(order, method):
     scene = _coincident(order)
-    traj = simulate(scene, "adaptive", tolerance=1e-9) if method == "adaptive" else simulate(scene, method, 0.05)
+    traj = simulate(scene, "adaptive",
+                    tolerance=1e-9) if method == "adaptive" else simulate(scene, method, 0.05)
     assert all_finite(traj)
     for met, st in zip(traj.metrics, traj.states):
         assert met.group_separation == 0.0                 # the defined zero force: nothing moves them
@@ -670,13 +688,15 @@ def test_extreme_nearly_collinear_triangle_3d_decomposes_lemma_3_2():
 @pytest.mark.parametrize("order,method", [(1, "lie_euler"), (1, "rkmk4"), (1, "rk4_proj"), (2, "rkmk4"),
                                           (2, "etd2"), (2, "lie_verlet")])
 def test_extreme_dt_larger_than_t_end_warns_takes_one_step_section_5(order, method):
-    scene = make_scene(3, order, count=4, seed=2, t_end=0.3, velocities={"angular": {"normal": 0.5}})
+    scene = make_scene(3, order, count=4, seed=2, t_end=0.3,
+                       velocities={"angular": {"normal": 0.5}})
     with pytest.warns(UserWarning, match=r"dt = 5 is larger than t_end = 0.3: taking one step of t_end"):
         traj = simulate(scene, method, 5.0)
     assert traj.steps == 1 and traj.plan.dt == 0.3
     assert traj.final.t == pytest.approx(0.3) and all_finite(traj)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")                           # dt = t_end: no warning, same state
+        # dt = t_end: no warning, same state
+        warnings.simplefilter("error")
         same = simulate(scene, method, 0.3)
     assert max(state_error(scene, traj.final, scene, same.final).values()) == 0.0
 
@@ -701,11 +721,13 @@ def test_extreme_one_agent_trivially_converged_any_integrator_theorem_4_2(order,
     for name in names:
         scene = make_scene(dim, order, count=1, t_end=1.0, velocities={"angular": {"normal": 0.5},
                                                                         "centroid": {"normal": 0.5}})
-        traj = simulate(scene, "adaptive", tolerance=1e-8) if name == "adaptive" else simulate(scene, name, 0.05)
+        traj = simulate(scene, "adaptive",
+                        tolerance=1e-8) if name == "adaptive" else simulate(scene, name, 0.05)
         assert all_finite(traj), name
         assert np.all(traj.diameters == 0.0) and traj.converged_at == 0.0
         assert traj.stationarity == 0.0
-        assert convergence_verdict(scene, traj.diameters[-1], traj.converged_at, traj.stationarity)[0] == 0
+        assert convergence_verdict(
+            scene, traj.diameters[-1], traj.converged_at, traj.stationarity)[0] == 0
 
 
 def test_extreme_one_agent_per_group_mixed_separates_to_L_F_2():
@@ -728,7 +750,8 @@ def test_extreme_cli_stiff_mass_refusal_exit_2_one_line_dt_limit_prop_2_1():
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1, res.stderr
-    assert lines[0].startswith("polymatch: error: rkmk4 is unstable") and "dt < 1.39e-08" in lines[0]
+    assert lines[0].startswith(
+        "polymatch: error: rkmk4 is unstable") and "dt < 1.39e-08" in lines[0]
     assert "Traceback" not in res.stderr and res.stdout == ""
 
 
@@ -743,15 +766,18 @@ def test_extreme_cli_antipodal_exit_3_names_non_consensus_equilibrium_D0_ge_1(tm
     res = run_cli("simulate", path, "-q")
     assert res.returncode == 3
     verdict = res.stdout.strip().splitlines()[-1]
-    assert verdict.startswith("did not converge") and "equilibrium that is not consensus" in verdict
+    assert verdict.startswith(
+        "did not converge") and "equilibrium that is not consensus" in verdict
     assert res.stderr == ""
 
 
 def test_extreme_cli_dt_larger_than_t_end_one_warning_line_section_5():
-    res = run_cli("simulate", EXTREMES / "antipodal_triangles_2d.yaml", "--t-end", "1", "--dt", "50", "-q")
+    res = run_cli("simulate", EXTREMES / "antipodal_triangles_2d.yaml",
+                  "--t-end", "1", "--dt", "50", "-q")
     assert res.returncode == 0
     lines = res.stderr.strip().splitlines()
-    assert lines == ["polymatch: warning: dt = 50 is larger than t_end = 1: taking one step of t_end"]
+    assert lines == [
+        "polymatch: warning: dt = 50 is larger than t_end = 1: taking one step of t_end"]
     assert "steps 1," in res.stdout
     # clipped to t_end = 10 the step is beyond rkmk4's limit 2.79: the refusal still comes, in one line
     res = run_cli("simulate", EXTREMES / "antipodal_triangles_2d.yaml", "--dt", "50", "-q")

@@ -50,7 +50,8 @@ def families():
         try:
             mod = importlib.import_module(f"{__name__}.{info.name}")
         except Exception as exc:   # a broken family must not take `polymatch` down with it
-            print(f"polymatch: warning: benchmark family {info.name!r} not loaded: {exc}", file=sys.stderr)
+            print(
+                f"polymatch: warning: benchmark family {info.name!r} not loaded: {exc}", file=sys.stderr)
             continue
         if hasattr(mod, "NAME") and hasattr(mod, "run"):
             mods.append(mod)
@@ -61,7 +62,8 @@ def add_common_options(p):
     p.add_argument("--out", metavar="DIR", help="also write DIR/<family>.md and PNG plots")
     p.add_argument("--quick", action="store_true",
                    help="tiny sizes, a few seconds (smoke test; the figures mean nothing)")
-    p.add_argument("--repeats", type=_positive_int, metavar="R", help="timing repeats (default: the family's)")
+    p.add_argument("--repeats", type=_positive_int, metavar="R",
+                   help="timing repeats (default: the family's)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
 
 
@@ -78,7 +80,8 @@ def _positive_int(text):
 def add_parser(subparsers):
     """Register `polymatch bench` and one sub-subcommand per family, plus `all`."""
     p = subparsers.add_parser("bench", help="benchmarks: speed and accuracy figures (see `polymatch bench -h`)",
-                              description=__doc__.split("\n\n")[0] + "\n\n" + __doc__.split("\n\n")[1],
+                              description=__doc__.split(
+                                  "\n\n")[0] + "\n\n" + __doc__.split("\n\n")[1],
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="family", metavar="FAMILY")
     sub.required = True
@@ -95,7 +98,8 @@ def add_parser(subparsers):
     ap.add_argument("--only", metavar="A,B", help="only these families (comma separated); report.md keeps the "
                     "other families' last reports found in DIR")
     ap.add_argument("--quick", action="store_true", help="tiny sizes for every family")
-    ap.add_argument("--repeats", type=_positive_int, metavar="R", help="timing repeats for every family")
+    ap.add_argument("--repeats", type=_positive_int, metavar="R",
+                    help="timing repeats for every family")
     ap.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     ap.set_defaults(func=cmd_all, bench_parsers=parsers)
     return p
@@ -171,7 +175,8 @@ def cmd_all(args):
         head += ["**--quick: tiny sizes; these figures only show that the benchmarks run.**", ""]
     if args.only:                       # keep the other families' last reports: report.md stays whole
         fresh = dict(sections)
-        sections = [(n, fresh[n] if n in fresh else _previous_section(args.out, n)) for n in parsers]
+        sections = [(n, fresh[n] if n in fresh else _previous_section(args.out, n))
+                     for n in parsers]
         sections = [(n, text) for n, text in sections if text is not None]
     head += ["Families: " + ", ".join(f"[{n}]({n}.md)" for n, _ in sections), ""]
     text = "\n".join(head) + "\n" + "\n".join(s for _, s in sections)
@@ -191,5 +196,6 @@ def _previous_section(out_dir, name):
     with open(path, encoding="utf-8") as fh:
         text = fh.read()
     if text.startswith("# "):           # written by `polymatch bench NAME --out`: one level up
-        text = "\n".join("#" + line if line.startswith("#") else line for line in text.splitlines()) + "\n"
+        text = "\n".join("#" + line if line.startswith("#")
+                         else line for line in text.splitlines()) + "\n"
     return text

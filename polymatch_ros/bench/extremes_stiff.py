@@ -38,9 +38,11 @@ def stiff_mass_refusals(v):
 
 
 def stiff_mass_verlet(v):
-    exc = lib.refusal(lib.stiff_mass_scene(2, v.fields()["n_stiff"], t_end=2.0), "lie_verlet", 0.02)
+    exc = lib.refusal(lib.stiff_mass_scene(
+        2, v.fields()["n_stiff"], t_end=2.0), "lie_verlet", 0.02)
     msg, limit = str(exc), lib.refusal_limit(exc)
-    ok = limit is not None and abs(limit / (2.0 / np.sqrt(1.5 / 1e-8)) - 1) < 5e-3 and "etd2" in msg
+    ok = limit is not None and abs(
+        limit / (2.0 / np.sqrt(1.5 / 1e-8)) - 1) < 5e-3 and "etd2" in msg
     return Outcome(f"refuses: dt < {limit:.3g} = 2 sqrt(m/kappa); message blames 'damping stiff' "
                    "(it is exact)", ok)
 

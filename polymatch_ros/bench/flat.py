@@ -94,7 +94,8 @@ class FlatSystem:
         out[sl["x"]] = v.ravel()
         out[sl["v"]] = ((self.kappa * pull - self.gamma * v) / self.mass).ravel()
         out[sl["rot"]] = (w @ o).ravel()
-        out[sl["w"]] = (((self.kappa / (2.0 * n)) * self.torque(o) - self.gamma * w) / self.mass).ravel()
+        out[sl["w"]] = (((self.kappa / (2.0 * n)) * self.torque(o) - \
+                        self.gamma * w) / self.mass).ravel()
         return out
 
     # -- diagnostics ------------------------------------------------------------------------

@@ -26,8 +26,10 @@ ORDER = 50
 
 def add_arguments(p):
     from .options import at_least, float_list
-    p.add_argument("--steps", type=at_least(10), default=100_000, help="fixed steps per run (default 100000)")
-    p.add_argument("--dt", type=at_least(1e-300, float), default=0.05, help="fixed step (default 0.05)")
+    p.add_argument("--steps", type=at_least(10), default=100_000,
+                   help="fixed steps per run (default 100000)")
+    p.add_argument("--dt", type=at_least(1e-300, float),
+                   default=0.05, help="fixed step (default 0.05)")
     p.add_argument("--n", type=at_least(2), default=4, help="agents (default 4)")
     p.add_argument("--dim", type=at_least(2), default=3, help="dimension (default 3)")
     p.add_argument("--tolerances", type=float_list(1e-300), default=[1e-6, 1e-9],
@@ -120,12 +122,13 @@ def run(args, log):
     import numpy as np
 
     from .report import Report
-    from .solve import solvers_for, measure
+    from .solve import measure, solvers_for
 
     report = Report(NAME, "Long horizons (`polymatch bench longhorizon`)")
     steps = 1000 if args.quick else args.steps
     tols = [1e-6] if args.quick else sorted(args.tolerances, reverse=True)
-    dt, n, dim = args.dt, args.n, (2 if args.quick else args.dim)   # quick: angles, the cheapest steps
+    # quick: angles, the cheapest steps
+    dt, n, dim = args.dt, args.n, (2 if args.quick else args.dim)
     repeats = args.repeats or 1
     t_end = steps * dt
     marks_steps = _checkpoints(steps)
@@ -195,7 +198,8 @@ def run(args, log):
 
     def draw(plt):
         fig, axes = plt.subplots(1, 3, figsize=(16, 4.4))
-        panels = [(axes[0], figures["A"], 1), (axes[1], figures["A"], 2), (axes[2], figures["B"], 2)]
+        panels = [(axes[0], figures["A"], 1), (axes[1], figures["A"], 2),
+                   (axes[2], figures["B"], 2)]
         for ax, runs_, which in panels:
             for k, r in enumerate(runs_):
                 t, series = r.series[0], r.series[which]

@@ -72,7 +72,8 @@ def run(args, log):
         model = base.model
         scale = model.kappa / (2.0 * model.gamma * n)
         mats = model.rotations.to_matrices(base.initial.groups[0].rot)
-        reps = [base] if model.rotations.name == "matrix" else [base, with_representation(base, "matrix")]
+        reps = [base] if model.rotations.name == "matrix" else [
+            base, with_representation(base, "matrix")]
         mf = []
         for scene in reps:
             system = System(scene.model)
@@ -137,7 +138,8 @@ def run(args, log):
         fig, ax = plt.subplots(figsize=(6, 4.5))
         for rep in dict.fromkeys(r["rep"] for r in results):
             rs = [r for r in results if r["rep"] == rep]
-            ax.loglog([r["n"] for r in rs], [r["mf"].best * 1e3 for r in rs], "o-", label=f"mean field, {rep}")
+            ax.loglog([r["n"] for r in rs], [r["mf"].best * 1e3 for r in rs],
+                      "o-", label=f"mean field, {rep}")
         first = [r for r in results if r["rep"] == results[0]["rep"]]
         ax.loglog([r["n"] for r in first], [r["naive"].best * 1e3 for r in first], "s--",
                   label="naive double sum (sampled, scaled by N/sample)")

@@ -63,7 +63,8 @@ def add_arguments(p):
     p.add_argument("--targets", type=float_list(1e-300), default=TARGETS,
                    help="target errors of the frontier table (default 1e-4,1e-6,1e-8)")
     p.add_argument("--n", type=at_least(2), default=10, help="agents per case (default 10)")
-    p.add_argument("--t-end", type=at_least(1e-300, float), default=20.0, help="time span (default 20)")
+    p.add_argument("--t-end", type=at_least(1e-300, float),
+                   default=20.0, help="time span (default 20)")
     p.add_argument("--sample-every", type=at_least(1e-300, float), default=0.2,
                    help="spacing of the sample times the error is taken at (default 0.2)")
     p.add_argument("--ref-tol", type=at_least(1e-300, float), default=1e-13,
@@ -229,7 +230,8 @@ def _check_grid(steps, every, t_end):
                                  "the error is taken at the sample times, which every step grid must contain")
     k = t_end / every
     if abs(k - round(k)) > 1e-9 * k:
-        raise PolymatchError(f"bench precision: the sample spacing {every:g} must divide t_end = {t_end:g}")
+        raise PolymatchError(
+            f"bench precision: the sample spacing {every:g} must divide t_end = {t_end:g}")
 
 
 def run(args, log):
@@ -250,7 +252,8 @@ def run(args, log):
         n, t_end, every, ref_tol, ref_dt = args.n, args.t_end, args.sample_every, args.ref_tol, args.ref_dt
     unknown = [c for c in cases if c not in CASES]
     if unknown:
-        raise PolymatchError(f"bench precision: unknown case {unknown[0]!r}; known: {', '.join(CASES)}")
+        raise PolymatchError(
+            f"bench precision: unknown case {unknown[0]!r}; known: {', '.join(CASES)}")
     _check_grid(list(steps) + [ref_dt], every, t_end)
     repeats = args.repeats or (1 if args.quick else 3)
     targets = sorted(args.targets, reverse=True)
@@ -274,10 +277,12 @@ def run(args, log):
         log(f"precision: {case} ({label}, D0 = {d0:.2f}): references")
         ref = solve(scene, Solver("adaptive", "adaptive", ref_tol), times)
         ref_verts = vertices(ref.centroids, ref.mats, reference)
-        gap = vertex_error(solve(scene, Solver("rkmk4", "fixed", ref_dt), times), ref_verts, reference)
+        gap = vertex_error(solve(scene, Solver("rkmk4", "fixed", ref_dt),
+                           times), ref_verts, reference)
         cells = solvers_for(scene.model.order, steps, tols)
         log(f"precision: {case}: {len(cells)} cells x {repeats} interleaved repeats")
-        measure(cells, scene, times, repeats, lambda text: log(f"precision:   {text}"), warmup=True)
+        measure(cells, scene, times, repeats, lambda text: log(
+            f"precision:   {text}"), warmup=True)
         _score(cells, times, ref_verts, reference)
 
         m = scene.model
@@ -294,10 +299,13 @@ def run(args, log):
         report.table(["method", "nominal order", "observed order (consecutive h, errors > 100 x floor)", "note"],
                      orows, caption=f"{label}: observed convergence order of the fixed-step methods")
         orders += [[case] + r for r in orows if r[3] == "below nominal"]
-        report.figure(case, _figure(label, cells, targets, repeats), f"{label}: error vs wall time and evaluations")
+        report.figure(case, _figure(label, cells, targets, repeats),
+                      f"{label}: error vs wall time and evaluations")
         frontier += frontier_rows(case, cells, targets)
-        refused = sorted({f"{c.name} h = {c.value:g}" for c in cells if c.status.startswith("refused")})
-        failed = sorted({f"{c.name} {c.param}: {c.status}" for c in cells if c.status.startswith("failed")})
+        refused = sorted(
+            {f"{c.name} h = {c.value:g}" for c in cells if c.status.startswith("refused")})
+        failed = sorted(
+            {f"{c.name} {c.param}: {c.status}" for c in cells if c.status.startswith("failed")})
         if refused or failed:
             summary.append(f"- `{case}`: " + "; ".join(
                 ([f"refused (unstable): {', '.join(refused)}"] if refused else []) + failed))
@@ -315,6 +323,7 @@ def run(args, log):
     if summary:
         notes += ["- Refusals and failures:"] + summary
     if orders:
-        notes.append("- Observed order below nominal: " + "; ".join(f"{r[0]} {r[1]} ({r[3]})" for r in orders))
+        notes.append("- Observed order below nominal: " + \
+                     "; ".join(f"{r[0]} {r[1]} ({r[3]})" for r in orders))
     report.text(*notes)
     return report

@@ -13,7 +13,8 @@ ORDER = 70
 
 def add_arguments(p):
     from .options import at_least
-    p.add_argument("--agents", type=at_least(2), default=1000, help="agents per case (default 1000)")
+    p.add_argument("--agents", type=at_least(2), default=1000,
+                   help="agents per case (default 1000)")
 
 
 def _scene(dim, n, t_end, **model):
@@ -57,11 +58,13 @@ def _copy_initial(dst, src):
         if dst.model.rotations.name == src.model.rotations.name:
             gd.rot[...] = gs.rot
         else:
-            gd.rot[...] = dst.model.rotations.from_matrices(src.model.rotations.to_matrices(gs.rot))
+            gd.rot[...] = dst.model.rotations.from_matrices(
+                src.model.rotations.to_matrices(gs.rot))
         if gd.v is not None and gs.v is not None:
             gd.v[:] = gs.v
         if gd.w is not None and gs.w is not None:
-            gd.w[...] = dst.model.rotations.algebra_from_skew(src.model.rotations.algebra_to_skew(gs.w))
+            gd.w[...] = dst.model.rotations.algebra_from_skew(
+                src.model.rotations.algebra_to_skew(gs.w))
     return np.asarray(0)
 
 
@@ -110,7 +113,8 @@ def run(args, log):
            "groups": [{"name": "tri", "shape": "triangle", "count": m, "centroids": {"box": [-2, 2]}},
                       {"name": "tet", "shape": "tetrahedron", "count": m, "centroids": {"box": [-2, 2]}}]}
     reduced = load_scene(two)
-    full = replace(reduced, model=replace(reduced.model, kappa_2=1e-300))   # potential on, force ~ 0
+    # potential on, force ~ 0
+    full = replace(reduced, model=replace(reduced.model, kappa_2=1e-300))
     case(f"kappa_2 = 0: no inter-group potential ({m} + {m} agents)", full, reduced, "rkmk4", 0.05,
          "rkmk4's centroid error (with a potential, centroids are integrated)")
     first = _scene(3, n, t_end)

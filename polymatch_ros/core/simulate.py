@@ -176,7 +176,7 @@ def simulate(scene: Scene, method: str | None = None, dt: float | None = None,
              tolerance: float | None = None, *, samples: Sequence[float] | None = None,
              keep_states: bool = True, progress: Callable[[float, float], None] | None = None,
              stop_when_converged: bool = False, check_stability: bool = True,
-             metrics: bool = True) -> "Trajectory":
+             metrics: bool = True) -> Trajectory:
     """Run the scene centralised; return a ``Trajectory`` with metrics at the sample times.
 
     Fixed-step runs take steps of dt (the last one clipped to t_end); sample times
