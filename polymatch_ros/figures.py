@@ -25,15 +25,15 @@ def polytope_segments(scene, state):
     for g, gs in zip(model.groups, state.groups):
         mats = model.rotations.to_matrices(gs.rot)
         scales = np.ones(len(mats)) if g.scales is None else g.scales
-        verts = (gs.x + scene.origin)[:, None, :] + scales[:, None,
-                 None] * np.einsum("nij,aj->nai", mats, g.reference)
+        body = scales[:, None, None] * np.einsum("nij,aj->nai", mats, g.reference)
+        verts = (gs.x + scene.origin)[:, None, :] + body
         segs = [np.array([v[a], v[b]]) for v in verts for a, b in g.edges]
         out.append(segs)
     return out
 
 
 def first_vertices(scene, state):
-    """Per group: (N, d) positions of every polytope's vertex 0, to show the vertex correspondence."""
+    """Per group: (N, d) positions of every polytope's vertex 0 (the vertex correspondence)."""
     model = scene.model
     out = []
     for g, gs in zip(model.groups, state.groups):
@@ -68,7 +68,8 @@ def snapshot_figure(traj, path, times=None):
             ax = fig.add_subplot(1, len(picks), k + 1)
         else:
             ax = fig.add_subplot(1, len(picks), k + 1, projection="3d")
-        for gi, (segs, first) in enumerate(zip(polytope_segments(scene, st), first_vertices(scene, st))):
+        groups = zip(polytope_segments(scene, st), first_vertices(scene, st))
+        for gi, (segs, first) in enumerate(groups):
             colour = COLOURS[gi % len(COLOURS)]
             for seg in segs:
                 ax.plot(*seg[:, :3].T, color=colour, lw=1.0, alpha=0.85)
@@ -83,8 +84,8 @@ def snapshot_figure(traj, path, times=None):
             title += f"\nmatching diameter {diam:.2e}"
         ax.set_title(title, fontsize=9)
         ax.tick_params(labelsize=7)
-    fig.suptitle(
-        f"{scene.name}: {scene.description}" if scene.description else scene.name, fontsize=10)
+    title = f"{scene.name}: {scene.description}" if scene.description else scene.name
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

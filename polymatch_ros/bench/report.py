@@ -61,7 +61,8 @@ class Report:
         return "\n".join(out).rstrip() + "\n"
 
     def write_figures(self, out_dir):
-        """Render every figure to ``out_dir``; returns the names written (none without matplotlib)."""
+        """Render every figure to ``out_dir``; return the names written (none without
+        matplotlib)."""
         if not self.figures:
             return []
         try:

@@ -107,7 +107,7 @@ def plan(scene: Scene, method: str | None = None, dt: float | None = None,
         raise PolymatchError(f"dt must be a positive number, got {step}")
     if step > scene.t_end:
         warnings.warn(f"dt = {step:g} is larger than t_end = {scene.t_end:g}: "
-                      "taking one step of t_end")
+                      "taking one step of t_end", stacklevel=2)
         step = scene.t_end
     if check:
         check_stability(meth, scene.model, step)
