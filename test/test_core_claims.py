@@ -81,8 +81,9 @@ def test_centroid_decay_rate_first_order_prop_2_1():
 
 @pytest.mark.parametrize("order", [1, 2])
 def test_centroid_mean_mode_prop_2_1(order):
-    """Summing (B-1) over i: m xbar'' = -gamma xbar' for the mean, i.e. the centre of mass moves as
-    xbar(t) = xbar(0) + (m/gamma)(1 - e^{-gamma t/m}) vbar(0) (constant for the first-order model)."""
+    """Summing (B-1) over i: m xbar'' = -gamma xbar' for the mean, i.e. the centre of mass moves
+    as xbar(t) = xbar(0) + (m/gamma)(1 - e^{-gamma t/m}) vbar(0) (constant for the first-order
+    model)."""
     m, gamma = 0.4, 1.3
     scene = make_scene(3, order, count=6, seed=34, mass=m, gamma=gamma, kappa=2.0, t_end=3.0,
                        samples={"every": 0.5}, velocities={"centroid": {"normal": 1.0}})
@@ -106,8 +107,8 @@ def test_centroid_mean_mode_prop_2_1(order):
 @pytest.mark.parametrize("dim,seed", [(2, 2), (3, 1), (3, 3), (4, 1)])
 def test_first_order_rotation_bound_prop_2_2_ii(dim, seed):
     kappa = 1.5                                           # gamma = 1 as in the proposition
-    scene = make_scene(dim, 1, count=6, seed=seed, kappa=kappa, gamma=1.0, rotations={"within": 0.3},
-                       t_end=8.0, samples={"every": 0.05})
+    scene = make_scene(dim, 1, count=6, seed=seed, kappa=kappa, gamma=1.0,
+                       rotations={"within": 0.3}, t_end=8.0, samples={"every": 0.05})
     traj = simulate(scene, "rkmk4", 0.01)
     t = np.array(traj.times)
     d = np.array([brute_rotation_diameter(rot_matrices(scene.model.rotations, st.groups[0].rot))
@@ -115,7 +116,7 @@ def test_first_order_rotation_bound_prop_2_2_ii(dim, seed):
     core = np.array([m.groups[0].rotation_diameter for m in traj.metrics])
     np.testing.assert_allclose(core, d, rtol=1e-12, atol=1e-15)
     d0 = d[0]
-    assert 0.2 < d0 < 1.0                                 # the proposition's hypothesis, not vacuous
+    assert 0.2 < d0 < 1.0                           # the proposition's hypothesis, not vacuous
     bound = d0 / ((1 - d0) * np.exp(kappa * t) + d0)
     assert np.all(d <= bound * (1 + 1e-9))
     assert d[-1] < 1e-3 * d0                              # and it really decays
@@ -208,9 +209,10 @@ def test_complete_vertex_matching_config_theorems_4_1_4_2(name, order):
 @pytest.mark.parametrize("order,dim", [(1, 3), (2, 3), (1, 4)])
 def test_complete_vertex_matching_inline_theorems_4_1_4_2(order, dim):
     """Theorem 4.2 under its own hypothesis D0 < 1, and Theorem 4.1 for tetrahedra in R^3."""
-    scene = make_scene(dim, order, count=6, seed=8, rotations={"within": 0.3} if order == 1 else "uniform",
-                       mass=0.5, velocities={"centroid": {"normal": 0.5}, "angular": {"normal": 0.5}},
-                       t_end=30.0, samples={"every": 5.0})
+    rotations = {"within": 0.3} if order == 1 else "uniform"
+    velocities = {"centroid": {"normal": 0.5}, "angular": {"normal": 0.5}}
+    scene = make_scene(dim, order, count=6, seed=8, rotations=rotations, mass=0.5,
+                       velocities=velocities, t_end=30.0, samples={"every": 5.0})
     if order == 1:
         assert brute_rotation_diameter(rot_matrices(
             scene.model.rotations, scene.initial.groups[0].rot)) < 1
@@ -221,7 +223,8 @@ def test_complete_vertex_matching_inline_theorems_4_1_4_2(order, dim):
 
 
 def test_point_set_diameter_is_exact_theorems_4_1_4_2():
-    """The diameter every claim is measured with equals the brute-force maximum (incl. blocked search)."""
+    """The diameter every claim is measured with equals the brute-force maximum (incl. blocked
+    search)."""
     rng = np.random.default_rng(9)
     for n, k in [(2, 3), (7, 2), (300, 3), (700, 9), (600, 2)]:
         pts = rng.normal(size=(n, k)) * rng.uniform(0.1, 10.0, size=k) + 1e6

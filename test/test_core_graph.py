@@ -55,7 +55,8 @@ def test_k_nearest_is_the_undirected_union_of_nearest_neighbours():
     graph = build_graph({"k_nearest": 1}, "graph", 5, centroids)
     a = graph.matrix().toarray()
     assert np.array_equal(a, a.T)
-    # nearest: 0 <-> 1, 2 <-> 3, and 4 -> 1 (4.2 away, against 4.8 to agent 2); the union is symmetric
+    # nearest: 0 <-> 1, 2 <-> 3, and 4 -> 1 (4.2 away, against 4.8 to agent 2);
+    # the union is symmetric
     expected = {(0, 1), (1, 0), (2, 3), (3, 2), (4, 1), (1, 4)}
     assert {(int(i), int(k)) for i, k in zip(*np.nonzero(a))} == expected
 
@@ -66,9 +67,10 @@ def test_random_graph_is_reproducible_and_its_extremes_are_empty_and_complete():
     assert (g1.matrix() != g2.matrix()).nnz == 0
     full = build_graph({"random": {"p": 1.0, "seed": 0}}, "graph", 5).matrix().toarray()
     assert np.array_equal(full, np.ones((5, 5)) - np.eye(5))
-    with pytest.raises(SceneError, match=r"^groups\[0\]\.graph: the graph is disconnected: components \{0\} \{1\}"):
-        check_connected(build_graph({"random": {"p": 0.0}},
-                        "groups[0].graph", 5), "groups[0].graph")
+    empty = build_graph({"random": {"p": 0.0}}, "groups[0].graph", 5)
+    with pytest.raises(SceneError, match=r"^groups\[0\]\.graph: the graph is disconnected: "
+                                         r"components \{0\} \{1\}"):
+        check_connected(empty, "groups[0].graph")
 
 
 def test_disconnected_undirected_graph_is_refused_naming_components():

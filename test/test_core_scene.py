@@ -1,4 +1,5 @@
-"""Scene loading: initial data satisfy the paper's constraints; bad scenes give one-line key-path errors."""
+"""Scene loading: initial data satisfy the paper's constraints; bad scenes give one-line
+key-path errors."""
 
 from pathlib import Path
 
@@ -77,26 +78,30 @@ def _check(path, data):
     return msg
 
 
-@pytest.mark.parametrize("path,data", MODEL_CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(MODEL_CASES)])
+@pytest.mark.parametrize("path,data", MODEL_CASES,
+                         ids=[f"{c[0]}-{i}" for i, c in enumerate(MODEL_CASES)])
 def test_scene_rejects_invalid_model_parameters_A_1_A_2(path, data):
     _check(path, data)
 
 
-@pytest.mark.parametrize("path,data", GROUP_CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(GROUP_CASES)])
+@pytest.mark.parametrize("path,data", GROUP_CASES,
+                         ids=[f"{c[0]}-{i}" for i, c in enumerate(GROUP_CASES)])
 def test_scene_rejects_invalid_polytope_groups_section_3(path, data):
     msg = _check(path, data)
     if "agents" in path:
         assert ("mirror" in msg) or ("not congruent" in msg)
 
 
-@pytest.mark.parametrize("path,data", RUN_CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(RUN_CASES)])
+@pytest.mark.parametrize("path,data", RUN_CASES,
+                         ids=[f"{c[0]}-{i}" for i, c in enumerate(RUN_CASES)])
 def test_scene_rejects_invalid_integration_settings_section_5(path, data):
     _check(path, data)
 
 
 @pytest.mark.parametrize("path", sorted(CONFIG.glob("*.yaml")), ids=lambda p: p.stem)
 def test_config_initial_data_satisfy_constraints_B_4(path):
-    """O^{i0} in SO(d), O'^{i0} O^{i0 T} skew (B-4), centroids stored as offsets from their mean."""
+    """O^{i0} in SO(d), O'^{i0} O^{i0 T} skew (B-4), centroids stored as offsets from their
+    mean."""
     scene = load_scene(path)
     rep = scene.model.rotations
     offsets = np.concatenate([gs.x for gs in scene.initial.groups])

@@ -15,9 +15,10 @@ from polymatch_ros.core.simulate import simulate
 
 def _scene(**over):
     base = {"dimension": 3, "seed": 4, "model": {"order": 1, "kappa": 1.0, "gamma": 1.0},
-            "integrator": {"method": "rkmk4", "dt": 0.05}, "time": {"t_end": 3.0, "samples": {"count": 2}},
-            "groups": [{"name": "a", "shape": "tetrahedron", "count": 6, "rotations": {"within": 0.6},
-                        "centroids": {"box": [-3, 3]}}]}
+            "integrator": {"method": "rkmk4", "dt": 0.05},
+            "time": {"t_end": 3.0, "samples": {"count": 2}},
+            "groups": [{"name": "a", "shape": "tetrahedron", "count": 6,
+                        "rotations": {"within": 0.6}, "centroids": {"box": [-3, 3]}}]}
     for key, value in over.items():
         node = base
         parts = key.split(".")
@@ -54,12 +55,14 @@ def test_reduction_congruent_drops_scale_weights_F_1():
 
 
 def test_reduction_exact_centroid_flow_prop_2_1_matches_integrated_centroids():
-    """Closed-form centroids vs centroids carried by rkmk4's stages: equal to rkmk4's O(dt^4) error."""
-    for order, extra in ((1, {}), (2, {"model.mass": 0.5, "groups.0.velocities": {"centroid": {"normal": 0.5}}})):
+    """Closed-form centroids vs centroids carried by rkmk4's stages: equal to rkmk4's O(dt^4)
+    error."""
+    second = {"model.mass": 0.5, "groups.0.velocities": {"centroid": {"normal": 0.5}}}
+    for order, extra in ((1, {}), (2, second)):
         model = {"order": order, "kappa": 1.0, "gamma": 1.0,
             **({"mass": 0.5} if order == 2 else {})}
-        exact = _scene(**{"model": dict(model)}, **{k: v for k,
-                       v in extra.items() if k != "model.mass"})
+        exact = _scene(**{"model": dict(model)},
+                       **{k: v for k, v in extra.items() if k != "model.mass"})
         full = _scene(**{"model": dict(model, centroids="integrated")},
                       **{k: v for k, v in extra.items() if k != "model.mass"})
         assert exact.model.centroids_exact and not full.model.centroids_exact
@@ -78,8 +81,10 @@ def test_reduction_no_inter_group_potential_when_kappa_2_is_0_F_2():
     """Two groups with kappa_2 = 0 are two independent single-group problems."""
     two = {"dimension": 3, "seed": 5, "model": {"order": 2, "mass": 0.3, "kappa_2": 0.0, "L": 3.0},
            "time": {"t_end": 2.0, "samples": [2.0]},
-           "groups": [{"name": "tri", "shape": "triangle", "count": 4, "centroids": {"box": [-2, 2]}},
-                      {"name": "tet", "shape": "tetrahedron", "count": 5, "centroids": {"box": [-2, 2]}}]}
+           "groups": [{"name": "tri", "shape": "triangle", "count": 4,
+                       "centroids": {"box": [-2, 2]}},
+                      {"name": "tet", "shape": "tetrahedron", "count": 5,
+                       "centroids": {"box": [-2, 2]}}]}
     both = load_scene(two)
     assert not both.model.inter_group
     a, ra = _final(both)
