@@ -100,14 +100,14 @@ def state_error(scene_a, state_a, scene_b, state_b):
     out = {"rot": 0.0, "w": 0.0, "x": 0.0, "v": 0.0}
     ra, rb = scene_a.model.rotations, scene_b.model.rotations
     for ga, gb in zip(state_a.groups, state_b.groups):
-        out["rot"] = max(out["rot"], float(
-            np.max(np.abs(rot_matrices(ra, ga.rot) - rot_matrices(rb, gb.rot)))))
+        rot_diff = rot_matrices(ra, ga.rot) - rot_matrices(rb, gb.rot)
+        out["rot"] = max(out["rot"], float(np.max(np.abs(rot_diff))))
         out["x"] = max(out["x"], float(np.max(np.abs(ga.x - gb.x))))
         if ga.v is not None and gb.v is not None:
             out["v"] = max(out["v"], float(np.max(np.abs(ga.v - gb.v))))
         if ga.w is not None and gb.w is not None:
-            out["w"] = max(out["w"], float(
-                np.max(np.abs(skew_matrices(ra, ga.w) - skew_matrices(rb, gb.w)))))
+            w_diff = skew_matrices(ra, ga.w) - skew_matrices(rb, gb.w)
+            out["w"] = max(out["w"], float(np.max(np.abs(w_diff))))
     return out
 
 

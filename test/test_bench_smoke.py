@@ -54,8 +54,8 @@ def test_family_quick(name, capsys):
 
 def test_all_writes_one_report(tmp_path, capsys):
     out_dir = tmp_path / "bench"
-    assert cli.main(["bench", "all", "--quick", "--quiet", "--only",
-                    "meanfield", "--out", str(out_dir)]) == 0
+    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield",
+                     "--out", str(out_dir)]) == 0
     text = (out_dir / "report.md").read_text(encoding="utf-8")
     assert text.startswith("# polymatch benchmark report")
     assert "mean field best ms" in text
@@ -70,8 +70,8 @@ def test_all_only_keeps_the_other_families_reports(tmp_path, capsys):
     out_dir.mkdir()
     earlier = "# Reductions from an earlier run\n\nkept figure 1.23x\n"
     (out_dir / "reductions.md").write_text(earlier, encoding="utf-8")
-    assert cli.main(["bench", "all", "--quick", "--quiet", "--only",
-                    "meanfield", "--out", str(out_dir)]) == 0
+    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield",
+                     "--out", str(out_dir)]) == 0
     text = (out_dir / "report.md").read_text(encoding="utf-8")
     assert "mean field best ms" in text                       # the family just run
     # the earlier one, one heading level down

@@ -202,8 +202,8 @@ def test_complete_vertex_matching_config_theorems_4_1_4_2(name, order):
     assert traj.metrics[0].diameter == pytest.approx(d0, rel=1e-12)
     # and the components the proofs use: centroids and rotations both reach consensus
     assert brute_diameter(traj.final.groups[0].x) < 1e-6
-    assert brute_rotation_diameter(rot_matrices(
-        scene.model.rotations, traj.final.groups[0].rot)) < 1e-6
+    final = rot_matrices(scene.model.rotations, traj.final.groups[0].rot)
+    assert brute_rotation_diameter(final) < 1e-6
 
 
 @pytest.mark.parametrize("order,dim", [(1, 3), (2, 3), (1, 4)])
@@ -214,8 +214,8 @@ def test_complete_vertex_matching_inline_theorems_4_1_4_2(order, dim):
     scene = make_scene(dim, order, count=6, seed=8, rotations=rotations, mass=0.5,
                        velocities=velocities, t_end=30.0, samples={"every": 5.0})
     if order == 1:
-        assert brute_rotation_diameter(rot_matrices(
-            scene.model.rotations, scene.initial.groups[0].rot)) < 1
+        initial = rot_matrices(scene.model.rotations, scene.initial.groups[0].rot)
+        assert brute_rotation_diameter(initial) < 1
     traj = simulate(scene, "rkmk4", 0.05)
     dend = brute_matching_diameter(scene.model, traj.final, 0)
     assert dend < 1e-6

@@ -13,7 +13,7 @@ from polymatch_ros.core.decompose import RotationNotUniqueWarning
 from polymatch_ros.core.shapes import hypercube, polygon, simplex
 
 SHAPES = {2: [polygon(5), hypercube(2)], 3: [simplex(3), hypercube(3)],
-                      4: [simplex(4), hypercube(4)]}
+          4: [simplex(4), hypercube(4)]}
 
 
 def _random_rotations(dim, count, rng):

@@ -118,8 +118,8 @@ def paper_f2_force(xs, gi, i, kappa_1, kappa_2, L):
 
 
 def _mixed_scene(order, centroids=None, dim=2):
-    shapes = ["triangle", "square", "pentagon"] if dim == 2 else [
-        "triangle", "tetrahedron", "cube"]
+    shapes = (["triangle", "square", "pentagon"] if dim == 2
+              else ["triangle", "tetrahedron", "cube"])
     counts = [3, 4, 5]
     groups = []
     for k, (shape, count) in enumerate(zip(shapes, counts)):
@@ -182,8 +182,8 @@ def test_mixed_force_coincident_centroids_zero_not_nan_F_2():
     # pair_force alone: a coincident pair contributes exactly zero, other pairs the paper's term
     x = np.array([[0.0, 0.0]])
     y = np.array([[0.0, 0.0], [2.0, 0.0]])
-    np.testing.assert_allclose(pair_force(x, y, 0.7, 1.5), [
-                               [0.7 / 2 * (2.0 - 1.5), 0.0]], atol=1e-15)
+    np.testing.assert_allclose(pair_force(x, y, 0.7, 1.5), [[0.7 / 2 * (2.0 - 1.5), 0.0]],
+                               atol=1e-15)
     np.testing.assert_array_equal(pair_force(x, y[:1], 0.7, 1.5), [[0.0, 0.0]])
     # chunked evaluation (one row at a time) gives the same numbers
     rng = np.random.default_rng(3)

@@ -46,8 +46,8 @@ GROUP_CASES = [
     ("groups[0].count", _base(groups=[_group(count=2.5)])),
     ("groups[0].rotations", _base(groups=[_group(rotations="sideways")])),
     ("groups[0].rotations.within", _base(groups=[_group(rotations={"within": -1.0})])),
-    ("groups[0].rotations.matrices[0]", _base(
-        groups=[_group(rotations={"matrices": [[[1, 0], [0, -1]]] * 3})])),
+    ("groups[0].rotations.matrices[0]",
+     _base(groups=[_group(rotations={"matrices": [[[1, 0], [0, -1]]] * 3})])),
     ("groups[1].shape", _base(groups=[_group(), _group(name="b", shape="dodecagonal-blob")])),
     ("groups[0].shape", _base(groups=[_group(shape="tetrahedron")])),
     ("groups[0].shape.vertices", _base(groups=[_group(shape={"vertices": [[0.0, 0.0]]})])),
@@ -126,8 +126,8 @@ def test_explicit_vertices_round_trip_section_3():
     rng = np.random.default_rng(4)
     angles = rng.uniform(-np.pi, np.pi, 4)
     cents = rng.normal(scale=3.0, size=(4, 2))
-    verts = [c + TRI @ np.array([[np.cos(a), -np.sin(a)], [np.sin(a),
-                                np.cos(a)]]).T for a, c in zip(angles, cents)]
+    verts = [c + TRI @ np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]).T
+             for a, c in zip(angles, cents)]
     scene = load_scene(_base(groups=[{"shape": {"vertices": TRI.tolist()},
                                       "agents": [{"vertices": v.tolist()} for v in verts]}]))
     gs = scene.initial.groups[0]

@@ -227,8 +227,8 @@ def test_extreme_stiff_mass_m_1e_8_auto_picks_etd2_prop_2_1():
 
 def test_extreme_stiff_mass_m_1e_8_auto_with_tolerance_finishes_or_refuses_promptly_prop_2_1():
     scene = _stiff_scene(2, t_end=1.0)
-    scene = replace(scene, integrator=replace(scene.integrator,
-                    method="auto", tolerance=1e-6, max_steps=300))
+    integrator = replace(scene.integrator, method="auto", tolerance=1e-6, max_steps=300)
+    scene = replace(scene, integrator=integrator)
     traj = simulate(scene, samples=[0.0], keep_states=False)
     assert traj.plan.name == "etd2"
     assert traj.final.t == pytest.approx(1.0)
@@ -608,8 +608,8 @@ def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
 def test_extreme_d0_ge_1_uniform_random_n_8_still_converges_outside_theorem_4_2(dim):
     for seed in (1, 2, 3):
         scene = make_scene(dim, 1, count=8, seed=seed, t_end=60.0, samples={"every": 10.0})
-        d0 = brute_rotation_diameter(rot_matrices(
-            scene.model.rotations, scene.initial.groups[0].rot))
+        initial = rot_matrices(scene.model.rotations, scene.initial.groups[0].rot)
+        d0 = brute_rotation_diameter(initial)
         assert d0 >= 1.0                                      # outside Theorem 4.2's D0 < 1
         traj = simulate(scene, "rkmk4", 0.1)
         assert brute_matching_diameter(scene.model, traj.final, 0) < 1e-6
@@ -778,8 +778,8 @@ def test_extreme_cli_stiff_mass_refusal_exit_2_one_line_dt_limit_prop_2_1():
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1, res.stderr
-    assert lines[0].startswith(
-        "polymatch: error: rkmk4 is unstable") and "dt < 1.39e-08" in lines[0]
+    assert lines[0].startswith("polymatch: error: rkmk4 is unstable")
+    assert "dt < 1.39e-08" in lines[0]
     assert "Traceback" not in res.stderr and res.stdout == ""
 
 
@@ -794,8 +794,8 @@ def test_extreme_cli_antipodal_exit_3_names_non_consensus_equilibrium_D0_ge_1(tm
     res = run_cli("simulate", path, "-q")
     assert res.returncode == 3
     verdict = res.stdout.strip().splitlines()[-1]
-    assert verdict.startswith(
-        "did not converge") and "equilibrium that is not consensus" in verdict
+    assert verdict.startswith("did not converge")
+    assert "equilibrium that is not consensus" in verdict
     assert res.stderr == ""
 
 
