@@ -22,8 +22,16 @@ import warnings
 
 import numpy as np
 
-from .console import (SUMMARY_HEADER, Progress, format_table, memory_size, positive_float,
-                      summary_rows, tolerance_arg, writable_output)
+from .console import (
+    SUMMARY_HEADER,
+    Progress,
+    format_table,
+    memory_size,
+    positive_float,
+    summary_rows,
+    tolerance_arg,
+    writable_output,
+)
 from .core.errors import PolymatchError
 from .core.limits import Limits
 from .core.preflight import check_run
@@ -196,11 +204,11 @@ def build_parser():
     p = sub.add_parser("scenes", help="list the shipped scenes")
     p.set_defaults(func=cmd_scenes)
 
-    for name, module in PASSTHROUGH.items():
+    for name in PASSTHROUGH:
         sub.add_parser(name, help=f"one {name} node (ROS 2); takes the same arguments as "
                                   f"`ros2 run polymatch_ros {name}`, "
                                   f"e.g. --ros-args -p scene:=FILE")
-    for name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("bench", "bench")):
+    for _name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("bench", "bench")):
         try:
             mod = __import__(f"polymatch_ros.{module}", fromlist=["add_parser"])
         except ImportError as exc:

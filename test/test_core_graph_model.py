@@ -8,11 +8,11 @@ import time
 
 import numpy as np
 import pytest
+from core_testlib import rot_matrices, skew_matrices
 from scipy import sparse
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
-from core_testlib import rot_matrices, skew_matrices
 from polymatch_ros.core import load_scene
 from polymatch_ros.core.errors import SceneError
 from polymatch_ros.core.graph import Graph

@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from input_cases import BASE, CASES, PARSE_CASES, bomb, nested, scene
 from input_fuzz import address_space_limit, contract_violation, fuzz, run_main
 

@@ -160,7 +160,7 @@ class Graph:
             cache[key] = float(rate)
         return cache[key]
 
-    def local_weights(self, rows=None, scales: np.ndarray | None = None) -> "LocalWeights":
+    def local_weights(self, rows=None, scales: np.ndarray | None = None) -> LocalWeights:
         """The coupling weights of some rows (None: all), for sums against the whole group."""
         p = self.coupling_weights
         if rows is not None:

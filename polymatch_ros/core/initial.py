@@ -93,7 +93,7 @@ def rotations(raw, path, dim, count, rng):
         if dim == 3:
             from scipy.spatial.transform import Rotation
             return Rotation.random(count, random_state=rng).as_matrix().reshape(count, 3, 3)
-        from scipy.stats import special_ortho_group   # slow to import: only when needed
+        from scipy.stats import special_ortho_group  # slow to import: only when needed
         return special_ortho_group.rvs(dim, size=count, random_state=rng).reshape(count, dim, dim)
     if isinstance(raw, str) and raw == "identity":
         return np.repeat(np.eye(dim)[None], count, axis=0)

@@ -41,7 +41,7 @@ def check_run(scene, method=None, dt=None, tolerance=None, *, distributed=False,
                                  f"use --tolerance, or pick a fixed-step method with -i")
         if spec.dt is not None:
             warnings.warn(f"integrator.dt = {spec.dt:g} is not used: the adaptive integrator "
-                          f"runs ({why})")
+                          f"runs ({why})", stacklevel=2)
         steps = 0
     else:
         if tolerance is not None:
@@ -49,7 +49,7 @@ def check_run(scene, method=None, dt=None, tolerance=None, *, distributed=False,
                                  f"-i adaptive for a tolerance")
         if spec.tolerance is not None:
             warnings.warn(f"integrator.tolerance = {spec.tolerance:g} is not used: {name} takes "
-                          f"fixed steps ({why})")
+                          f"fixed steps ({why})", stacklevel=2)
         step = dt if dt is not None else (spec.dt or DEFAULT_DT)
         where = "--dt" if dt is not None else "integrator.dt"
         try:

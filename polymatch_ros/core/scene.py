@@ -21,8 +21,17 @@ from . import graph
 from .checks import Map, describe, number, vector
 from .errors import SceneError
 from .integrators import METHODS
-from .limits import (FLOAT, MAX_DIMENSION, MAX_LENGTH, MAX_RATE, MAX_SAMPLES,
-                     MIN_RELATIVE_TOLERANCE, MIN_T_END, Budget, check_rates)
+from .limits import (
+    FLOAT,
+    MAX_DIMENSION,
+    MAX_LENGTH,
+    MAX_RATE,
+    MAX_SAMPLES,
+    MIN_RELATIVE_TOLERANCE,
+    MIN_T_END,
+    Budget,
+    check_rates,
+)
 from .model import Model, State, validate_model
 from .scene_groups import GroupContext, build_group
 from .so import group_for

@@ -198,7 +198,7 @@ def check_distinct_vertices(v, path, error=SceneError):
     size = np.max(np.linalg.norm(v - v.mean(axis=0), axis=1))
     if size == 0.0:
         raise error(f"{path}: all {len(v)} vertices coincide")
-    from scipy.spatial import cKDTree   # O(n log n): a polytope may have thousands of vertices
+    from scipy.spatial import cKDTree  # O(n log n): a polytope may have thousands of vertices
     dist, idx = cKDTree(v).query(v, k=2)
     a = int(np.argmin(dist[:, 1]))
     b = int(idx[a, 1]) if idx[a, 1] != a else int(idx[a, 0])

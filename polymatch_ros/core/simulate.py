@@ -107,7 +107,7 @@ def plan(scene: Scene, method: str | None = None, dt: float | None = None,
         raise PolymatchError(f"dt must be a positive number, got {step}")
     if step > scene.t_end:
         warnings.warn(f"dt = {step:g} is larger than t_end = {scene.t_end:g}: "
-                      "taking one step of t_end")
+                      "taking one step of t_end", stacklevel=2)
         step = scene.t_end
     if check:
         check_stability(meth, scene.model, step)
@@ -176,7 +176,7 @@ def simulate(scene: Scene, method: str | None = None, dt: float | None = None,
              tolerance: float | None = None, *, samples: Sequence[float] | None = None,
              keep_states: bool = True, progress: Callable[[float, float], None] | None = None,
              stop_when_converged: bool = False, check_stability: bool = True,
-             metrics: bool = True) -> "Trajectory":
+             metrics: bool = True) -> Trajectory:
     """Run the scene centralised; return a ``Trajectory`` with metrics at the sample times.
 
     Fixed-step runs take steps of dt (the last one clipped to t_end); sample times
