@@ -22,7 +22,8 @@ REPO = os.path.dirname(HERE)
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=10)
-    ap.add_argument("--logs", default=os.path.join(os.environ.get("TMPDIR", "/tmp"), "polymatch_ros_runs"))
+    ap.add_argument(
+        "--logs", default=os.path.join(os.environ.get("TMPDIR", "/tmp"), "polymatch_ros_runs"))
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds allowed for one run")
     ap.add_argument("selectors", nargs="*")
     args = ap.parse_args(argv)

@@ -25,7 +25,8 @@ def main():
     node = Node("rogue")
     qos = wire.qos_profiles()
     pose = node.create_publisher(PoseStamped, wire.full_name(ensemble, "pose", agent), qos["pose"])
-    stage = node.create_publisher(Float64MultiArray, wire.full_name(ensemble, "stage", agent), qos["stage"])
+    stage = node.create_publisher(Float64MultiArray, wire.full_name(
+        ensemble, "stage", agent), qos["stage"])
     end = time.monotonic() + seconds
     k = 0
     while time.monotonic() < end:
@@ -39,7 +40,8 @@ def main():
             p.pose.orientation.w = 2.0                      # quaternion far from unit norm
         pose.publish(p)
         fields = {"x": [0.0, 0.0], "rot": [math.nan if k % 2 else 0.3]}
-        msg = wire.encode_stage(Float64MultiArray(), 12345 if k % 2 == 0 else 0, agent, k, 0, 0, 0.0, fields)
+        msg = wire.encode_stage(Float64MultiArray(), 12345 if k %
+                                2 == 0 else 0, agent, k, 0, 0, 0.0, fields)
         stage.publish(msg)
         junk = Float64MultiArray()                          # no header at all
         junk.data = [1.0, 2.0]

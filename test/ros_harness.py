@@ -80,7 +80,8 @@ class Ros:
         return proc
 
     def agent(self, scene, agent, timeout=120, **params):
-        argv = node_argv("agent_node", scene, agent=agent, **params) + ["-r", f"__node:=agent_{agent}"]
+        argv = node_argv("agent_node", scene, agent=agent, **params) + \
+                         ["-r", f"__node:=agent_{agent}"]
         return self.start(argv, timeout, f"agent {agent}")
 
     def monitor(self, scene, timeout=120, **params):
@@ -125,7 +126,8 @@ class Ros:
             if keep_logs:
                 os.makedirs(keep_logs, exist_ok=True)
                 label = (proc.name or "process").replace(" ", "_")
-                shutil.copy(proc.log.name, os.path.join(keep_logs, f"{self.procs.index(proc):02d}_{label}.log"))
+                shutil.copy(proc.log.name, os.path.join(
+                    keep_logs, f"{self.procs.index(proc):02d}_{label}.log"))
             with contextlib.suppress(OSError):
                 os.unlink(proc.log.name)
         held = _mapped_shm()
@@ -144,7 +146,8 @@ def _children(pid):
 
 
 def node_argv(module, scene, **params):
-    argv = [PY, "-m", f"polymatch_ros.ros.{module}", "--ros-args", "-p", f"scene:={scene_path(scene)}"]
+    argv = [PY, "-m", f"polymatch_ros.ros.{module}",
+        "--ros-args", "-p", f"scene:={scene_path(scene)}"]
     for key, value in params.items():
         if isinstance(value, (list, tuple)):
             value = "[" + ",".join(map(str, value)) + "]"
@@ -165,5 +168,6 @@ def ros(request):
             yield world
         finally:
             keep = os.environ.get("POLYMATCH_KEEP_LOGS")
-            failed = getattr(request.node, "rep_call", None) is not None and request.node.rep_call.failed
+            failed = getattr(request.node, "rep_call",
+                             None) is not None and request.node.rep_call.failed
             world.close(os.path.join(keep, request.node.name) if keep and failed else None)

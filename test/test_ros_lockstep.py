@@ -10,12 +10,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from ros_harness import PY, needs_ros, scene_path
 
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
 from polymatch_ros.ros.wire import run_records
-
-from ros_harness import PY, needs_ros, scene_path
 
 pytestmark = needs_ros
 
@@ -41,7 +40,8 @@ def central_vertices(scene, integrator, t):
     out = []
     for g, gs in zip(model.groups, traj.final.groups):
         mats = model.rotations.to_matrices(gs.rot)
-        out.append(gs.x + scene.origin + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2))
+        out.append(gs.x + scene.origin + np.einsum("nij,aj->nai",
+                   mats, g.reference).transpose(1, 0, 2))
     return out
 
 
@@ -62,7 +62,8 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
                       "--save", str(out), "-q"], timeout=180)
     rc = ros.wait(proc, 190)
     text = ros.output(proc)
-    assert rc in (0, 3), text                      # 3: ran to t_end without converging (t_end is short)
+    # 3: ran to t_end without converging (t_end is short)
+    assert rc in (0, 3), text
     scene = load_scene(scene_path(name))
     t, got = received_vertices(scene, out)
     assert t == pytest.approx(T_END)
@@ -73,7 +74,8 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
     initial = []
     for g, gs in zip(scene.model.groups, scene.initial.groups):
         mats = scene.model.rotations.to_matrices(gs.rot)
-        initial.append(gs.x + scene.origin + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2))
+        initial.append(gs.x + scene.origin + np.einsum("nij,aj->nai",
+                       mats, g.reference).transpose(1, 0, 2))
     moved = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, initial))
     assert moved > 0.1
 
@@ -102,4 +104,5 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     recs = run_records(records.read_text().splitlines())
     assert len(recs) == 5 and all(r.finished for r in recs if r.role == "agent"), recs
     assert all(r.dropped == {} for r in recs), [r.dropped for r in recs]
-    assert t_final < load_scene(scene_path("congruent_triangles")).t_end     # stopped on convergence
+    assert t_final < load_scene(scene_path("congruent_triangles")
+                                ).t_end     # stopped on convergence

@@ -48,24 +48,28 @@ def test_realtime_converges_survives_sigkill_and_rejoin_theorem_4_2(ros):
     start = time.time() + 10.0                      # every process is up well before t = 0
     common = dict(mode="realtime", rate=RATE, time_scale=3.0, start_time=start, t_end=90.0,
                   peer_timeout=1.0)
-    ros.monitor(SCENE, timeout=RUN_BOUND + 20, mode="realtime", rate=5.0, peer_timeout=1.0, t_end=90.0)
+    ros.monitor(SCENE, timeout=RUN_BOUND + 20, mode="realtime",
+                rate=5.0, peer_timeout=1.0, t_end=90.0)
     agents = [ros.agent(SCENE, i, timeout=RUN_BOUND + 20, **common) for i in range(N)]
     diag = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/diagnostics", "--timeout", str(RUN_BOUND)],
                      timeout=RUN_BOUND + 10)
 
     # all eight run and are heard
-    assert _wait_for(ros, diag, lambda h: any(n == 8 for n, _, _ in h), 25), ros.output(diag)[-2000:]
+    assert _wait_for(ros, diag, lambda h: any(
+        n == 8 for n, _, _ in h), 25), ros.output(diag)[-2000:]
     time.sleep(max(0.0, start + 3.0 - time.time()))            # t = 9: mid-run
     ros.kill(agents[5])                                       # SIGKILL, no goodbye
     marked = len(_heard(ros.output(diag)))
     # the monitor reports one agent fewer, and the others keep converging
-    assert _wait_for(ros, diag, lambda h: any(n == 7 for n, _, _ in h[marked:]), 10), ros.output(diag)[-2000:]
+    assert _wait_for(ros, diag, lambda h: any(
+        n == 7 for n, _, _ in h[marked:]), 10), ros.output(diag)[-2000:]
     # three reports of the seven (0.6 s at the monitor's 5 Hz; longer on a loaded machine)
     assert _wait_for(ros, diag, lambda h: sum(n == 7 for n, _, _ in h[marked:]) >= 3, 30), \
         ros.output(diag)[-2000:]
     seven = [d for n, d, _ in _heard(ros.output(diag))[marked:] if n == 7]
     assert seven[-1] < seven[0], seven
-    assert all(a.poll() is None for i, a in enumerate(agents) if i != 5), "the survivors keep running"
+    assert all(a.poll() is None for i, a in enumerate(
+        agents) if i != 5), "the survivors keep running"
 
     # restart agent 5: it rejoins (from its initial state, on the ensemble's clock) and matches
     # before the run ends at t_end - however long a loaded machine takes to get there

@@ -17,24 +17,25 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from ros_harness import PY, REPO, _children, needs_ros, node_argv, scene_path
 
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
-
-from ros_harness import PY, REPO, _children, needs_ros, node_argv, scene_path
 
 pytestmark = needs_ros
 
 
 def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
-    rogue = ros.start([PY, os.path.join(REPO, "test", "rogue_publisher.py"), "polymatch", "3", "120"], timeout=130)
+    rogue = ros.start([PY, os.path.join(REPO, "test", "rogue_publisher.py"),
+                      "polymatch", "3", "120"], timeout=130)
     deadline = time.monotonic() + 30                  # the flood is on before the run starts
     while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert "rogue: flooding" in ros.output(rogue), ros.output(rogue)
     out = tmp_path / "final.npz"
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path("congruent_triangles"), "--t-end", "1.0",
-                      "--integrator", "rkmk4", "--no-compare", "--save", str(out), "--timeout", "150", "-q",
+                      "--integrator", "rkmk4", "--no-compare", "--save", str(
+                          out), "--timeout", "150", "-q",
                       "--round-timeout", "60"],          # the flood is under test, not the timeout
                      timeout=180)
     rc = ros.wait(proc, 190)
@@ -46,14 +47,16 @@ def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     traj = simulate(replace(scene, t_end=1.0), "rkmk4", 0.05, samples=[1.0], metrics=False)
     want = scene.model.rotations.to_matrices(traj.final.groups[0].rot)
     assert np.max(np.abs(data["group0_rotations"] - want)) <= 1e-12
-    assert np.max(np.abs(data["group0_centroids"] - (traj.final.groups[0].x + scene.origin))) <= 1e-12
+    assert np.max(np.abs(data["group0_centroids"] - \
+                  (traj.final.groups[0].x + scene.origin))) <= 1e-12
     # every agent of the group listens to agent 3's stages: each dropped the rogue's
     drops = re.findall(r"^agent (\d+): finished.*; dropped (\d+) messages \((.*)\)$", text, re.M)
     assert len(drops) >= 7, text
     reasons = " ".join(d[2] for d in drops)
     assert "non-finite value" in reasons and "unknown sender (run id)" in reasons
     mon = re.search(r"^monitor: .*dropped (\d+) messages \((.*)\)$", text, re.M)
-    assert mon and "quaternion far from unit norm" in mon.group(2) and "non-finite value" in mon.group(2), text
+    assert mon and "quaternion far from unit norm" in mon.group(
+        2) and "non-finite value" in mon.group(2), text
 
 
 @pytest.mark.parametrize("params,expect", [
@@ -119,11 +122,13 @@ def test_colcon_build_and_installed_executables_start(ros, tmp_path):
     ros.env["AMENT_PREFIX_PATH"] = f"{prefix}:{ros.env.get('AMENT_PREFIX_PATH', '')}"
     scene = tmp_path / "one_agent.yaml"
     scene.write_text(ONE_AGENT)
-    agent = ros.start([str(exe / "agent"), "--ros-args", "-p", f"scene:={scene}", "-p", "agent:=0"], timeout=60)
+    agent = ros.start([str(exe / "agent"), "--ros-args", "-p",
+                      f"scene:={scene}", "-p", "agent:=0"], timeout=60)
     assert ros.wait(agent, 70) == 0, ros.output(agent)
     assert "agent 0: finished at t = 2 after 20 steps" in ros.output(agent)
     # a shipped scene by name, found through the ament index of the colcon install
-    monitor = ros.start([str(exe / "monitor"), "--ros-args", "-p", "scene:=congruent_triangles"], timeout=60)
+    monitor = ros.start([str(exe / "monitor"), "--ros-args", "-p",
+                        "scene:=congruent_triangles"], timeout=60)
     time.sleep(4.0)
     assert monitor.poll() is None, ros.output(monitor)
     ros.kill(monitor, signal.SIGINT)
@@ -192,11 +197,13 @@ def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
     agents = [ros.agent(str(scene), i, timeout=90, round_timeout=2.0, discovery_timeout=20.0)
               for i in range(3)]
     victim = agents[2]
-    diag = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/diagnostics", "--timeout", "80"], timeout=90)
+    diag = ros.start([PY, "-m", "polymatch_ros.cli", "echo",
+                     "/diagnostics", "--timeout", "80"], timeout=90)
     # kill only once every agent is well into its rounds (t_end needs ~1e5 steps): a fixed sleep
     # could strike during discovery on a loaded machine, where the first round also allows
     # discovery_timeout and the error would name no lockstep round
-    assert _wait_until_all_step(ros, diag, agents, 3, t_min=0.5, timeout=40), ros.output(diag)[-2000:]
+    assert _wait_until_all_step(ros, diag, agents, 3, t_min=0.5,
+                                timeout=40), ros.output(diag)[-2000:]
     assert all(a.poll() is None for a in agents), [ros.output(a) for a in agents]
     ros.kill(victim)
     for a in agents[:2]:

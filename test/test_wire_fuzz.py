@@ -5,8 +5,8 @@ counted reason.  It never raises.  Messages are built directly (no DDS)."""
 import math
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings, strategies as st
-
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from ros_harness import needs_ros
 
 pytestmark = needs_ros
@@ -112,6 +112,7 @@ frames = st.sampled_from(["world", "world", "map", "", "World"])
 )
 def test_pose_stamped_is_accepted_valid_or_dropped(dim, pos, quat, stamp, frame):
     from geometry_msgs.msg import PoseStamped
+
     from polymatch_ros.ros import wire
 
     grp = _matrix_group(dim)
@@ -139,6 +140,7 @@ def test_pose_stamped_is_accepted_valid_or_dropped(dim, pos, quat, stamp, frame)
 )
 def test_twist_stamped_is_accepted_valid_or_dropped(dim, lin, ang, stamp, frame):
     from geometry_msgs.msg import TwistStamped
+
     from polymatch_ros.ros import wire
 
     grp = _matrix_group(dim)
@@ -179,6 +181,7 @@ def test_float64_multiarray_poses_are_accepted_valid_or_dropped(
     dim, data, ndims, valid_rotation, seed, kind
 ):
     from scipy.stats import special_ortho_group
+
     from polymatch_ros.ros import wire
 
     grp = _matrix_group(dim)
@@ -213,6 +216,7 @@ def test_float64_multiarray_poses_are_accepted_valid_or_dropped(
 )
 def test_stage_messages_are_accepted_valid_or_dropped(dim, angle, header, body, mask, well_formed):
     from std_msgs.msg import Float64MultiArray
+
     from polymatch_ros.ros import wire
 
     grp = _group(dim, angle)
@@ -239,6 +243,7 @@ def test_stage_messages_are_accepted_valid_or_dropped(dim, angle, header, body, 
 def test_a_valid_message_of_each_kind_is_accepted():
     """The decoders are not simply refusing everything: an agent's own messages pass."""
     from std_msgs.msg import Float64MultiArray
+
     from polymatch_ros.ros import wire
 
     for dim in (2, 3, 4):

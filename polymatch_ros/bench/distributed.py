@@ -115,7 +115,8 @@ def run(args, log):
     sizes = [4] if args.quick else args.agents
     rounds = 40 if args.quick else args.rounds
     repeats = 1 if args.quick else (args.repeats or 3)
-    report = Report(NAME, "Lockstep over ROS: agents vs the bare exchange (`polymatch bench distributed`)")
+    report = Report(
+        NAME, "Lockstep over ROS: agents vs the bare exchange (`polymatch bench distributed`)")
     rows, failures = [], []
     with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
         env = ros_environment(dom, base={k: v for k, v in os.environ.items()
@@ -127,7 +128,8 @@ def run(args, log):
                 fh.write(_scene_yaml(n, max(1, rounds // 4), 0.01))
             bare, agents, deployed, b_match, a_match = [], [], [], [], []
             for r in range(repeats):
-                log(f"N = {n}, repeat {r + 1}/{repeats}: bare, agents" + (", deployed" if args.deployed else ""))
+                log(f"N = {n}, repeat {r + 1}/{repeats}: bare, agents" + \
+                    (", deployed" if args.deployed else ""))
                 rates, matched = _bare(n, rounds, env, timeout)
                 bare.append(np.mean(rates) if len(rates) == n else float("nan"))
                 b_match += matched
@@ -138,7 +140,8 @@ def run(args, log):
                     per_process = _deployed_per_process(n)
                     rates, failure = _deployed(path, env, timeout, per_process)
                     procs = -(-n // per_process)
-                    deployed.append(np.mean(rates) if len(rates) == procs and not failure else float("nan"))
+                    deployed.append(np.mean(rates) if len(rates) ==
+                                    procs and not failure else float("nan"))
                     if failure:
                         failures.append(f"N = {n}, repeat {r + 1}, deployed: {failure}")
             ok = lambda xs: [x for x in xs if x == x]                      # noqa: E731  (drop failed runs)

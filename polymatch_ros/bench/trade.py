@@ -37,7 +37,8 @@ ROUNDS = 400
 
 
 def add_arguments(p):
-    p.add_argument("--t-end", type=float, default=4.0, help="simulated seconds per run (default 4)")
+    p.add_argument("--t-end", type=float, default=4.0,
+                   help="simulated seconds per run (default 4)")
 
 
 def _cli(env, argv, timeout):
@@ -108,7 +109,8 @@ def run(args, log):
         from ..core.integrators import METHODS
         for method, dt in methods:
             per_step = METHODS[method].info.rounds
-            t_run = (40 if args.quick else ROUNDS) * dt / per_step      # enough rounds for a steady rate
+            t_run = (40 if args.quick else ROUNDS) * dt / \
+                     per_step      # enough rounds for a steady rate
             log(f"lockstep {method} dt = {dt}: {t_run:g} simulated s")
             records = os.path.join(tmp, f"lockstep_{method}_{dt}.jsonl")
             _cli(env, ["run", path, "--integrator", method, "--dt", str(dt), "--t-end", str(t_run),
@@ -137,7 +139,8 @@ def run(args, log):
             ticks = [(r.steps, r.late_ticks) for r in _agent_records(records)]
             late = f"{sum(b for _, b in ticks) / max(1, sum(a for a, _ in ticks)):.0%}" if ticks else "-"
             if not os.path.exists(npz):
-                rt_rows.append([rate, scale / rate, delay, "-", "-", "run failed: " + out.stderr.strip()[-80:]])
+                rt_rows.append([rate, scale / rate, delay, "-", "-",
+                               "run failed: " + out.stderr.strip()[-80:]])
                 continue
             data = np.load(npz)
             times = data["group0_times"]
@@ -150,7 +153,8 @@ def run(args, log):
                 k = int(np.argmin(np.abs(agent_ref["times"] - t)))
                 want = agent_ref["verts"][k][i] + scene.origin
                 err = max(err, float(np.max(np.abs(got[i] - want))))
-            rt_rows.append([rate, f"{scale / rate:g}", delay, f"{delay * scale:g}", late, f"{err:.1e}"])
+            rt_rows.append([rate, f"{scale / rate:g}", delay,
+                           f"{delay * scale:g}", late, f"{err:.1e}"])
         report.table(["rate (Hz)", "dt (simulated s)", "injected delay (wall s)", "delay (simulated s)",
                       "ticks started late", "max vertex error at the agents' final stamps"], rt_rows,
                      caption=f"Realtime, 8 congruent triangles (D0 < 1), time scale {scale:g}, rkmk4 per tick, "

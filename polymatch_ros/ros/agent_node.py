@@ -15,10 +15,10 @@ the run record, discovery.
 import sys
 import time
 
-from . import wire
 from ..core.errors import ParameterError, PolymatchError
 from ..core.model import GroupState, State, System
 from ..core.simulate import plan, prepare
+from . import wire
 from .exchange import DropCounter, Layout
 from .params import AGENT, declare
 from .process import ros_main

@@ -9,8 +9,8 @@ import threading
 import time
 from collections import deque
 
-from . import wire
 from ..core.errors import PolymatchError
+from . import wire
 from .ros_env import hung_in_teardown
 
 

@@ -9,8 +9,8 @@ then the simulator's).
 import time
 from collections import defaultdict
 
-from . import wire
 from ..core.simulate import drive, step_grid
+from . import wire
 from .agent_node import AgentBase
 from .exchange import RoundTimeout, lean_node, quiet_events
 
@@ -212,7 +212,7 @@ class LockstepAgent(AgentBase):
         for k, t_next in enumerate(grid):
             stop = False
 
-            def answer(request, stage):
+            def answer(request, stage, k=k):
                 nonlocal stop
                 wait = first_wait if k <= 1 else timeout
                 ensemble, stop_seen = self.exchange.round(

@@ -24,9 +24,9 @@ import sys
 import time
 from dataclasses import replace
 
-from . import wire
 from ..core.metrics import ensemble_metrics
 from ..core.model import GroupState, State
+from . import wire
 from .exchange import DropCounter
 from .monitor_output import diagnostics, markers
 from .params import MONITOR, declare
@@ -38,6 +38,7 @@ class MonitorNode:
 
     def __init__(self, node, params):
         from rclpy.executors import SingleThreadedExecutor
+
         from ..core.scene import load_scene, resolve_scene_path
 
         self.node, self.params = node, params

@@ -10,8 +10,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from . import wire
 from ..core.simulate import drive
+from . import wire
 from .agent_node import AgentBase
 
 
@@ -211,7 +211,7 @@ class RealtimeAgent(AgentBase):
                 self.system,
                 self.state,
                 h,
-                lambda request, stage: self.peers.ensemble(request, alive),
+                lambda request, stage, alive=alive: self.peers.ensemble(request, alive),
             )
             self.state.t = t + h
             self.steps += 1

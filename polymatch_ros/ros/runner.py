@@ -14,14 +14,20 @@ import random
 import signal
 import sys
 import time
-from . import wire
-from ..console import Progress, positive_float
+
+from ..console import Progress, positive_float, writable_output
 from ..core.errors import PolymatchError
-from ..console import writable_output
 from ..core.scene import load_scene, resolve_scene_path
 from ..core.simulate import plan
-from .children import Child, _agents_per_process, partition, stop_all
-from .children import LOCALHOST_PARTICIPANTS, fewest_agents_per_process  # noqa: F401 (API)
+from . import wire
+from .children import (  # noqa: F401 (API)
+    LOCALHOST_PARTICIPANTS,
+    Child,
+    _agents_per_process,
+    fewest_agents_per_process,
+    partition,
+    stop_all,
+)
 from .ros_env import reserved_domain_id, ros_environment, teardown_watchdog
 from .summary import report, verdict
 from .watcher import Watcher

@@ -1,8 +1,8 @@
 """The runner's own small node: progress, control, the agents' final poses, the graph check."""
 
-from . import wire
 from ..core.errors import PolymatchError
 from ..core.model import GroupState, State
+from . import wire
 
 
 class Watcher:

@@ -120,8 +120,14 @@ def qos_profiles():
     """QoS used on each kind of topic (imported lazily: rclpy is only needed here)."""
     from rclpy.qos import (
         DurabilityPolicy as D,
+    )
+    from rclpy.qos import (
         HistoryPolicy as H,
+    )
+    from rclpy.qos import (
         QoSProfile,
+    )
+    from rclpy.qos import (
         ReliabilityPolicy as R,
     )
 
