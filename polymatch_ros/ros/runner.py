@@ -62,13 +62,8 @@ def cmd_run(args):
         args.agents_per_process = _agents_per_process(
             args, scene.model.n_agents, env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
         )
-        for key in (
-            "ROS_AUTOMATIC_DISCOVERY_RANGE",
-            "ROS_DOMAIN_ID",
-            "RMW_IMPLEMENTATION",
-            "FASTRTPS_DEFAULT_PROFILES_FILE",
-            "FASTDDS_BUILTIN_TRANSPORTS",
-        ):
+        for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID", "RMW_IMPLEMENTATION",
+                    "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_BUILTIN_TRANSPORTS"):
             if key in env:
                 os.environ[key] = env[key]
         return _run(args, scene, scene_path, the_plan, env, domain)
@@ -325,9 +320,8 @@ def add_parser(sub):
     )
     p.add_argument("scene", help="scene file or shipped scene name")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
-    p.add_argument(
-        "--integrator", "-i", metavar="NAME", help="fixed-step integrator (default: the scene's)"
-    )
+    p.add_argument("--integrator", "-i", metavar="NAME",
+                   help="fixed-step integrator (default: the scene's)")
     p.add_argument("--dt", type=positive_float, help="lockstep step size (default: the scene's)")
     p.add_argument("--t-end", type=positive_float, help="override time.t_end")
     p.add_argument(
@@ -339,65 +333,34 @@ def add_parser(sub):
         help="agents per process (default 1, or the fewest that keep the processes within the 32 "
         "DDS participants that LOCALHOST discovery reaches)",
     )
-    p.add_argument(
-        "--rate", type=positive_float, default=50.0, help="realtime: steps per second (default 50)"
-    )
-    p.add_argument(
-        "--time-scale",
-        type=positive_float,
-        default=1.0,
-        help="realtime: simulated seconds per wall-clock second",
-    )
-    p.add_argument(
-        "--peer-timeout",
-        type=positive_float,
-        default=1.0,
-        help="realtime: drop silent peers after S s",
-    )
-    p.add_argument(
-        "--delay",
-        type=float,
-        default=0.0,
-        help="realtime: injected transport delay (s), experiments",
-    )
-    p.add_argument(
-        "--round-timeout",
-        type=positive_float,
-        default=10.0,
-        help="lockstep: give up a round after S s",
-    )
+    p.add_argument("--rate", type=positive_float, default=50.0,
+                   help="realtime: steps per second (default 50)")
+    p.add_argument("--time-scale", type=positive_float, default=1.0,
+                   help="realtime: simulated seconds per wall-clock second")
+    p.add_argument("--peer-timeout", type=positive_float, default=1.0,
+                   help="realtime: drop silent peers after S s")
+    p.add_argument("--delay", type=float, default=0.0,
+                   help="realtime: injected transport delay (s), experiments")
+    p.add_argument("--round-timeout", type=positive_float, default=10.0,
+                   help="lockstep: give up a round after S s")
     p.add_argument(
         "--hold",
         type=float,
         default=1.0,
         help="stop once the diameter stayed under the tolerance this long (simulated s)",
     )
-    p.add_argument(
-        "--timeout",
-        type=positive_float,
-        default=600.0,
-        help="wall-clock limit for the whole run (s)",
-    )
-    p.add_argument(
-        "--ensemble", default="polymatch", help="ensemble namespace (default polymatch)"
-    )
-    p.add_argument(
-        "--no-monitor", dest="monitor", action="store_false", help="do not start the monitor"
-    )
-    p.add_argument(
-        "--no-compare",
-        dest="compare",
-        action="store_false",
-        help="lockstep: skip the comparison with the centralised simulation",
-    )
-    p.add_argument(
-        "--save", metavar="NPZ", help="save the final poses received from the agents (npz)"
-    )
+    p.add_argument("--timeout", type=positive_float, default=600.0,
+                   help="wall-clock limit for the whole run (s)")
+    p.add_argument("--ensemble", default="polymatch",
+                   help="ensemble namespace (default polymatch)")
+    p.add_argument("--no-monitor", dest="monitor", action="store_false",
+                   help="do not start the monitor")
+    p.add_argument("--no-compare", dest="compare", action="store_false",
+                   help="lockstep: skip the comparison with the centralised simulation")
+    p.add_argument("--save", metavar="NPZ",
+                   help="save the final poses received from the agents (npz)")
     p.add_argument("--quiet", "-q", action="store_true")
     p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
-    p.add_argument(
-        "--records",
-        metavar="JSONL",
-        help="write every process's run record (JSON, one a line) to this file",
-    )
+    p.add_argument("--records", metavar="JSONL",
+                   help="write every process's run record (JSON, one a line) to this file")
     p.set_defaults(func=cmd_run)
