@@ -95,7 +95,9 @@ class LockstepExchange:
 
     def _agree_stop(self, key, stop_flag):
         """On a graph a stop spreads one hop per round: min-consensus on a step far enough
-        ahead (n_agents + 1 steps) that every agent knows it before reaching it.  True from there."""
+        ahead (n_agents + 1 steps) that every agent knows it before reaching it.
+
+        True from that step on."""
         step = key[0]
         targets = [step + self.model.n_agents + 1] if stop_flag else []
         for a in self.layout.peers:
