@@ -114,3 +114,36 @@ def test_lockstep_on_a_graph_equals_the_centralised_run(ros, tmp_path, graph, di
     if graph == "{ring: 1}":            # an agent on a ring of k = 1 subscribes to 2k stages
         assert all(rec.stage_subscriptions == 2 for rec in recs)
         assert sorted(recs[3].peers) == [2, 4]
+
+
+STOP_SCENE = """\
+name: graph_stop
+dimension: 2
+seed: 4
+model: {order: 1, kappa: 8.0, gamma: 1.0}
+graph: {ring: 1}
+integrator: {method: rkmk4, dt: 0.1}
+time: {t_end: 60.0}
+convergence: {tolerance: 1.0e-3}
+groups:
+  - {name: g, shape: triangle, count: 6, centroids: {box: [-0.5, 0.5]}, rotations: {within: 0.2}}
+"""
+
+
+def test_a_stop_on_convergence_reaches_every_agent_of_a_ring_at_the_same_step(ros, tmp_path):
+    """A stop spreads one hop per round on a graph; the agents agree on the step to stop at
+    (nobody is left waiting for a neighbour that stopped) and the run still equals `simulate`."""
+    path = tmp_path / "graph_stop.yaml"
+    path.write_text(STOP_SCENE)
+    records = tmp_path / "records.jsonl"
+    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", str(path), "--timeout", "150",
+                      "--records", str(records)], timeout=180)
+    rc = ros.wait(proc, 190)
+    text = ros.output(proc)
+    assert rc == 0, text
+    assert "converged: matching diameter < 0.001" in text
+    m = re.search(r"max vertex deviation ([0-9.e+-]+)", text)
+    assert m and float(m.group(1)) <= 1e-9, text
+    agents = [r for r in run_records(records.read_text().splitlines()) if r.role == "agent"]
+    assert len(agents) == 6 and all(r.finished for r in agents), agents
+    assert len({r.steps for r in agents}) == 1 and agents[0].steps < 600   # stopped early
