@@ -65,15 +65,15 @@ def _summary(args, scene, the_plan, final, records, wall, watcher):
     if args.save:
         _save(args.save, scene, final, watcher.pose_times())
     if args.mode == "lockstep" and args.compare:
+        central = prepare(scene, the_plan, distributed=True)
         ref = simulate(
-            replace(scene, t_end=final.t),
+            replace(central, t_end=final.t),
             the_plan.name,
             the_plan.dt,
             samples=[final.t],
             keep_states=False,
             metrics=False,
         )
-        central = prepare(scene, the_plan)
         dev = vertex_deviation(
             central.model, ref.final, _as_rep(central.model, scene.model, final)
         )
