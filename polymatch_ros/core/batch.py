@@ -9,7 +9,8 @@ change: every sum over k of (A-1)/(A-2) runs over the agent's own ensemble only,
 i.e. one sparse product with the block-diagonal matrix kron(I_B, 1 1^T) (the rotation
 group's ``neighbour_fields``, the path of communication graphs).  Torque, centroid force,
 the exact centroid flow of Proposition 2.1 and every stepper are the core's own, so a
-batched run equals B separate ``simulate`` runs to round-off.
+batched run equals B separate ``simulate`` runs to round-off.  The sums are taken once per
+ensemble (a (B, B*N) sparse product with B*N entries) and handed to each row of it.
 
 ``BatchMetrics`` are the core's metrics (matching, rotation and centroid diameters of
 ``core.metrics``; the stationarity |W_i| of ``metrics.stationarity``) per ensemble.
@@ -39,20 +40,20 @@ class BatchSystem(System):
         self.n, self.ensembles = group.size, int(ensembles)
         super().__init__(replace(model, groups=(replace(group, size=self.n * self.ensembles),)))
         self.template = model
-        ones = np.ones((self.n, self.n))
         eye = scipy.sparse.identity(self.ensembles, format="csr")
-        self.blocks = scipy.sparse.kron(eye, ones, format="csr")
-        self.means = scipy.sparse.kron(eye, ones / self.n, format="csr")
+        self.sums = scipy.sparse.kron(eye, np.ones((1, self.n)), format="csr")
+        self.means = self.sums / self.n
+        self.owner = np.repeat(np.arange(self.ensembles), self.n)     # row -> its ensemble
 
     def couple(self, ensemble: Sequence, first_stage: bool = True) -> Coupling:
         """Per-row mean fields S_i and centroid means of each row's own ensemble."""
         (e,) = ensemble
-        s = self.group.neighbour_fields(e.rot, self.blocks)
+        s = self.group.take(self.group.neighbour_fields(e.rot, self.sums), self.owner)
         need_means = first_stage or not self.model.centroids_exact
         if not need_means:
             return Coupling((GroupCoupling(s, self.n),))
-        mean_v = self.means @ e.v if self.model.order == 2 else None
-        return Coupling((GroupCoupling(s, self.n, self.means @ e.x, mean_v),))
+        mean_v = (self.means @ e.v)[self.owner] if self.model.order == 2 else None
+        return Coupling((GroupCoupling(s, self.n, (self.means @ e.x)[self.owner], mean_v),))
 
     def row_rates(self, state: State) -> np.ndarray:
         """|W_i| of the first-order field (|torque|/gamma for (A-1)) per row (``stationarity``)."""
@@ -88,14 +89,17 @@ def take_ensembles(rotations, state: State, ensembles: np.ndarray, n: int) -> St
 
 
 def pair_diameters(points: np.ndarray) -> np.ndarray:
-    """max_{i,j} |p_i - p_j| per ensemble of points (B, N, k), exactly (chunked over B)."""
+    """max_{i<j} |p_i - p_j| per ensemble of points (B, N, k), exactly (chunked over B)."""
     b, n, k = points.shape
     out = np.zeros(b)
-    step = max(1, PAIR_CHUNK_ELEMENTS // max(1, n * n * k))
+    if n < 2:
+        return out
+    first, second = np.triu_indices(n, 1)
+    step = max(1, PAIR_CHUNK_ELEMENTS // max(1, len(first) * k))
     for lo in range(0, b, step):
         p = points[lo:lo + step]
-        diff = p[:, :, None, :] - p[:, None, :, :]
-        out[lo:lo + step] = np.sqrt(np.einsum("bijk,bijk->bij", diff, diff).max(axis=(1, 2)))
+        diff = p[:, first] - p[:, second]
+        out[lo:lo + step] = np.sqrt(np.einsum("bpk,bpk->bp", diff, diff).max(axis=1))
     return out
 
 
@@ -104,11 +108,11 @@ class BatchMetrics:
     """Per ensemble (arrays of length B) the core's diameters and the rotation field's size."""
 
     matching: np.ndarray
-    rotation: np.ndarray
-    centroid: np.ndarray
+    rotation: np.ndarray | None = None
+    centroid: np.ndarray | None = None
 
 
-def batch_metrics(model: Model, state: State) -> BatchMetrics:
+def batch_metrics(model: Model, state: State, matching_only: bool = False) -> BatchMetrics:
     """Matching (Thm 4.1/4.2), rotation (Prop 2.2) and centroid (Prop 2.1) diameters.
 
     ``model`` is one ensemble's (single-group) model; ``state`` stacks any number of them.
@@ -120,6 +124,8 @@ def batch_metrics(model: Model, state: State) -> BatchMetrics:
     mats = grp.to_matrices(gs.rot)
     verts = vertices(gs.x, mats, ref).reshape(b, n, len(ref), -1)
     matching = np.max([pair_diameters(verts[:, :, a]) for a in range(len(ref))], axis=0)
+    if matching_only:
+        return BatchMetrics(matching)
     rotation = pair_diameters(mats.reshape(b, n, -1))
     return BatchMetrics(matching, rotation, pair_diameters(gs.x.reshape(b, n, -1)))
 

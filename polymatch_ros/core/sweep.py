@@ -86,8 +86,13 @@ def check_batch(scenes: Sequence) -> None:
 
 
 def run_batch(scenes: Sequence, method: str | None = None, dt: float | None = None,
-              progress: Callable | None = None) -> BatchResult:
-    """Integrate every scene's ensemble in one batch (module doc); ``progress(t, diam, extra)``."""
+              progress: Callable | None = None,
+              observe: Callable | None = None) -> BatchResult:
+    """Integrate every scene's ensemble in one batch (module doc).
+
+    ``progress(t, diameter, extra)`` is called at samples; ``observe(state, live)`` too, with
+    the stacked state of the ensembles ``live`` (indices into ``scenes``) before any leaves.
+    """
     check_batch(scenes)
     plan_ = plan(scenes[0], method, dt)
     if plan_.dt is None:
@@ -102,9 +107,12 @@ def run_batch(scenes: Sequence, method: str | None = None, dt: float | None = No
     t0 = time.perf_counter()
     live = np.arange(b)
     run = plan_.method.solver(system, state, scenes[0].t_end, scenes[0].samples, plan_.dt)
+    observe = observe or (lambda st, live: None)
+    observe(state, live)
     live = rec.sample(state, live, tol)
     while len(live) and run.status == RUNNING:
         for st in run.step():
+            observe(st, live)
             kept = rec.sample(st, live, tol)
             if progress is not None:
                 worst = rec.diameters[-1][live].max()
@@ -146,7 +154,7 @@ class _Record:
 
     def sample(self, state, live, tol) -> np.ndarray:
         """Record a sample of the live ensembles; return those that have not matched."""
-        met = batch_metrics(self.model, state)
+        met = batch_metrics(self.model, state, matching_only=self.initial_rotation is not None)
         row = np.full(self.b, np.nan)
         row[live] = met.matching
         self.times.append(state.t)
