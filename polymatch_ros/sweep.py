@@ -68,6 +68,8 @@ def add_parser(sub):
     p.add_argument("--t-end", type=positive_float, help="override time.t_end")
     p.add_argument("--save", metavar="NPZ", help="save per-ensemble outcomes (npz)")
     p.add_argument("--figure", metavar="PNG", help="matched fraction against D0 (matplotlib)")
+    p.add_argument("--bins", type=_int_in(1, 50), default=4,
+                   help="D0 bins of the matched-fraction table (default 4)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_sweep)
     return p
@@ -121,6 +123,22 @@ def summary_row(label, result):
             f"{np.median(t_match):g}" if len(t_match) else "-", f"{result.wall_time:.2f}"]
 
 
+def d0_table(results, bins):
+    """(header, rows): matched / ensembles per D0 bin, one row per cell."""
+    d0 = np.concatenate([r.initial_rotation for _, _, r in results])
+    edges = np.linspace(0.0, max(float(d0.max()), 1e-12), bins + 1)
+    header = ["d", "N", "order"] + [f"D0 {lo:.2f}-{hi:.2f}" for lo, hi in zip(edges, edges[1:])]
+    rows = []
+    for label, _, r in results:
+        which = np.clip(np.searchsorted(edges, r.initial_rotation, side="right") - 1, 0,
+                        bins - 1)
+        matched = r.outcome == "matched"
+        rows.append([label["d"], label["N"], label["order"]] +
+                    [f"{int(matched[which == k].sum())}/{int((which == k).sum())}"
+                     for k in range(bins)])
+    return header, rows
+
+
 def save_outcomes(results, path):
     """Per-ensemble arrays over every cell (one row per ensemble) and per-cell diameters."""
     cols = {k: [] for k in ("cell", "seed", "d", "N", "order", "kappa", "gamma", "mass", "d0",
@@ -148,6 +166,8 @@ def cmd_sweep(args):
     figure = writable_output(args.figure, ".png") if args.figure else None
     results = run_sweep(args)
     print(format_table([summary_row(label, r) for label, _, r in results], HEADER))
+    print("matched / ensembles by initial rotation diameter D0:")
+    print(format_table(*reversed(d0_table(results, args.bins))))
     r0 = results[0][2]
     print(f"integrator {r0.method} dt = {r0.dt:g}; outcomes: matched = diameter < tolerance at "
           "a sample; antipodal / twisted = an equilibrium that is not consensus "

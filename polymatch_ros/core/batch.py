@@ -22,7 +22,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse
 
-from .metrics import vertices
 from .model import Coupling, GroupCoupling, GroupState, Model, State, System
 
 #: ensembles per chunk of the pairwise distance search (bounds its memory)
@@ -89,17 +88,22 @@ def take_ensembles(rotations, state: State, ensembles: np.ndarray, n: int) -> St
 
 
 def pair_diameters(points: np.ndarray) -> np.ndarray:
-    """max_{i<j} |p_i - p_j| per ensemble of points (B, N, k), exactly (chunked over B)."""
-    b, n, k = points.shape
+    """max_{i<j} |p_i - p_j| per ensemble of points (B, N, ..., k), exactly.
+
+    Middle axes (e.g. the vertices a of x^i_a) are maxima too: max_{a, i<j} |p_ia - p_ja|.
+    Chunked over B to bound memory.
+    """
+    b, n = points.shape[:2]
     out = np.zeros(b)
     if n < 2:
         return out
     first, second = np.triu_indices(n, 1)
-    step = max(1, PAIR_CHUNK_ELEMENTS // max(1, len(first) * k))
+    step = max(1, PAIR_CHUNK_ELEMENTS // max(1, len(first) * int(np.prod(points.shape[2:]))))
     for lo in range(0, b, step):
         p = points[lo:lo + step]
         diff = p[:, first] - p[:, second]
-        out[lo:lo + step] = np.sqrt(np.einsum("bpk,bpk->bp", diff, diff).max(axis=1))
+        sq = np.einsum("...k,...k->...", diff, diff)
+        out[lo:lo + step] = np.sqrt(sq.reshape(len(p), -1).max(axis=1))
     return out
 
 
@@ -122,8 +126,9 @@ def batch_metrics(model: Model, state: State, matching_only: bool = False) -> Ba
     b = len(gs.x) // n
     grp, ref = model.rotations, model.groups[0].reference
     mats = grp.to_matrices(gs.rot)
-    verts = vertices(gs.x, mats, ref).reshape(b, n, len(ref), -1)
-    matching = np.max([pair_diameters(verts[:, :, a]) for a in range(len(ref))], axis=0)
+    # x^i_a = xbar_i + O_i r_a, as ``metrics.vertices`` (one product instead of an einsum)
+    verts = gs.x[:, None, :] + np.swapaxes(mats @ ref.T, 1, 2)
+    matching = pair_diameters(verts.reshape(b, n, len(ref), -1))
     if matching_only:
         return BatchMetrics(matching)
     rotation = pair_diameters(mats.reshape(b, n, -1))
