@@ -9,8 +9,8 @@ are then solved one at a time by scipy's DOP853 on the flattened system of
 Error: the largest vertex error max_{i,a} |x^i_a - x^i_a,ref| over the ensembles and every
 sample up to that time, against a reference of the same batch at dt/16.  scipy's tolerance
 is the loosest of 1e-6, 3e-7, 1e-7, ... 1e-12 whose error on a calibration subset is at
-most the batch's (the same max error); the timed loop then runs at that tolerance and its own max error is
-reported.
+most the batch's (the same max error); the timed loop then runs at that tolerance and its
+own max error is reported.
 If a loop of B scipy solves is too long (--scipy-ensembles), a subset is timed and the
 ratio is per ensemble (stated in the output).
 """
