@@ -52,7 +52,7 @@ def add_parser(sub):
                        "match", description=__doc__.split("\n\n")[0])
     p.add_argument("scene", nargs="?", default="congruent_triangles",
                    help="template scene with one group (default: congruent_triangles, Fig. 1)")
-    p.add_argument("--ensembles", "-B", type=_int_in(1, 1_000_000), default=100,
+    p.add_argument("--ensembles", "-B", type=_int_in(1, 100_000), default=100,
                    help="ensembles per cell")
     p.add_argument("--seed", type=_int_in(0, 2**62), default=0, help="first seed (default 0)")
     p.add_argument("--d0", type=_list(float, 0.0, "a rotation diameter"), metavar="LO,HI",

@@ -96,6 +96,7 @@ def _cli(*args):
     ["--ensembles", "0"], ["--d0", "2,1"], ["--d0", "a,1"], ["--agents", "1"],
     ["--dimension", "2,x"], ["--kappa", "-1"], ["--integrator", "adaptive"],
     ["--integrator", "nope"], ["no_such_scene"], ["mixed_triangles_tetrahedra"],
+    ["--order", "3"], ["--order", "2", "--mass", "0"], ["-B", "100000", "--agents", "5000"],
     ["--save", "/no/such/dir/out.npz"], ["--figure", "/no/such/dir/f.png"], ["--dt", "0"],
 ])
 def test_bad_arguments_exit_2_with_one_line(args):

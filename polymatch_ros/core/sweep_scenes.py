@@ -13,10 +13,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .errors import ParameterError
+from .limits import DEFAULT_MEMORY
 from .model import GroupState, State
 from .scene import build_scene, resolve_scene_path
 from .yamlfile import parse_yaml, read_scene_file
 
+#: bytes a batch holds per state entry: stage copies, slopes, metrics and the D0 draw
+BYTES_PER_ENTRY = 8 * 64
 #: bisection steps on the spread of the rotations (D0 to ~1e-15 relative)
 BISECTION_STEPS = 60
 
@@ -79,10 +82,21 @@ def cell_data(data: dict, cell: Cell) -> dict:
     return out
 
 
-def cell_scenes(data: dict, cell: Cell, ensembles: int, seed: int, d0=None) -> list:
-    """The cell's ensembles: seeds seed .. seed + B - 1; rotations at D0 in ``d0`` = (lo, hi)."""
+def cell_scenes(data: dict, cell: Cell, ensembles: int, seed: int, d0=None,
+                memory: int = DEFAULT_MEMORY) -> list:
+    """The cell's ensembles: seeds seed .. seed + B - 1; rotations at D0 in ``d0`` = (lo, hi).
+
+    Refuses (ParameterError) a batch whose arrays would need more than ``memory`` bytes.
+    """
     base = cell_data(data, cell)
-    scenes = [build_scene(dict(base, seed=seed + b)) for b in range(ensembles)]
+    first = build_scene(dict(base, seed=seed))
+    n, d = first.model.n_agents, first.model.dim
+    need = BYTES_PER_ENTRY * ensembles * n * (d * d + 2 * d)
+    if need > memory:
+        raise ParameterError(f"{ensembles} ensembles of {n} agents in d = {d} need about "
+                             f"{need / 2**30:.3g} GiB, more than the {memory / 2**30:.3g} GiB "
+                             "limit; run fewer ensembles per cell")
+    scenes = [first] + [build_scene(dict(base, seed=seed + b)) for b in range(1, ensembles)]
     if d0 is None:
         return scenes
     lo, hi = d0
