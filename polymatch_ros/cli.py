@@ -7,6 +7,7 @@
     polymatch run SCENE          the distributed ROS 2 ensemble (one process per agent) + monitor
     polymatch agent | monitor    single ROS 2 nodes (= `ros2 run polymatch_ros agent|monitor`)
     polymatch echo TOPIC         print a topic (stand-in for `ros2 topic echo`)
+    polymatch sweep [SCENE]      many random ensembles in batches: which initial states match
     polymatch bench WHAT         benchmarks (figures for README)
 
 Errors are one line on stderr and a non-zero exit code: 2 for bad input
@@ -208,7 +209,8 @@ def build_parser():
         sub.add_parser(name, help=f"one {name} node (ROS 2); takes the same arguments as "
                                   f"`ros2 run polymatch_ros {name}`, "
                                   f"e.g. --ros-args -p scene:=FILE")
-    for _name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("bench", "bench")):
+    for _name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("bench", "bench"),
+                          ("sweep", "sweep")):
         try:
             mod = __import__(f"polymatch_ros.{module}", fromlist=["add_parser"])
         except ImportError as exc:

@@ -32,6 +32,8 @@ EXPECTED = {
                     "slowest match"],
     "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
               "injected delay"],
+    "sweep": ["| solver", "batch (rkmk4)", "scipy DOP853 loop", "max vertex error",
+              "Speed-up (scipy loop / batch"],
 }
 
 FAMILY_NAMES = [m.NAME for m in families()]

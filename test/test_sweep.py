@@ -1,0 +1,116 @@
+"""Sweeps (core.batch, core.sweep): a batch equals separate simulate runs; Theorem 4.2; CLI."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from polymatch_ros.core import simulate
+from polymatch_ros.core.batch import equilibrium_measures
+from polymatch_ros.core.sweep import classify, run_batch
+from polymatch_ros.core.sweep_scenes import Cell, cell_scenes, rotations_at_diameter, template
+
+CASES = [  # (template, cell): angles, SO(3) SoA, SO(4) matrices; both model orders
+    ("congruent_triangles", Cell(agents=5)),
+    ("congruent_triangles_second_order", Cell(agents=4)),
+    ("congruent_triangles", Cell(dim=3, agents=4, order=2, mass=0.5)),
+    ("congruent_triangles", Cell(dim=4, agents=3, kappa=2.0)),
+]
+
+
+@pytest.mark.parametrize("name,cell", CASES)
+def test_batch_equals_separate_simulate_runs(name, cell):
+    """The key claim: B ensembles in one batch = B `simulate` runs, to round-off."""
+    data = template(name)
+    data["time"] = dict(data["time"], t_end=8.0)
+    data["convergence"] = {"tolerance": 1e-2}      # some ensembles leave the batch early
+    scenes = cell_scenes(data, cell, 5, seed=3)
+    result = run_batch(scenes)
+    for b, scene in enumerate(scenes):
+        traj = simulate(scene, stop_when_converged=True)
+        grp = traj.scene.model.rotations
+        final = traj.final.groups[0]
+        assert result.final_t[b] == traj.times[-1]
+        assert (np.isnan(result.converged_at[b]) and traj.converged_at is None) or \
+            result.converged_at[b] == traj.converged_at
+        np.testing.assert_allclose(result.final_x[b], final.x, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(result.final_rot[b], grp.to_matrices(final.rot),
+                                   rtol=0, atol=1e-12)
+        t = len(traj.times)
+        np.testing.assert_allclose(result.diameters[:t, b], traj.diameters, rtol=1e-10,
+                                   atol=1e-12)
+        assert np.all(np.isnan(result.diameters[t:, b]))
+    assert np.any(~np.isnan(result.converged_at))
+
+
+def test_d0_below_one_all_match_first_order():
+    """Theorem 4.2: first order, D0 < 1: every ensemble matches (d = 2 and 3)."""
+    data = template("congruent_triangles")
+    for cell in (Cell(dim=2, agents=6), Cell(dim=3, agents=4)):
+        scenes = cell_scenes(data, cell, 40, seed=11, d0=(0.0, 0.99))
+        result = run_batch(scenes)
+        assert result.initial_rotation.max() < 1.0
+        assert result.initial_rotation.max() > 0.9
+        assert np.all(result.outcome == "matched"), result.outcome
+        assert np.all(result.final_matching < scenes[0].tolerance)
+
+
+def test_rotations_at_diameter_hit_the_target():
+    targets = np.array([0.0, 0.5, 1.0, 1.7, 2.5])
+    for d in (2, 3, 4):
+        mats = rotations_at_diameter(d, 6, targets, range(5))
+        flat = mats.reshape(5, 6, -1)
+        diam = np.linalg.norm(flat[:, :, None] - flat[:, None], axis=-1).max(axis=(1, 2))
+        np.testing.assert_allclose(diam, targets, atol=1e-9)
+        np.testing.assert_allclose(np.swapaxes(mats, -1, -2) @ mats, np.broadcast_to(
+            np.eye(d), mats.shape), atol=1e-12)
+        np.testing.assert_allclose(np.linalg.det(mats), 1.0, atol=1e-12)
+
+
+def test_antipodal_and_twisted_end_states_are_classified():
+    """Equilibria that are not consensus: a half-turn split and a splay state (S = 0)."""
+    data = template("congruent_triangles")
+    data["time"] = dict(data["time"], t_end=2.0)
+    scenes = cell_scenes(data, Cell(agents=4), 2, seed=0)
+    from polymatch_ros.core.sweep_scenes import with_rotations
+
+    def rot(a):
+        return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    scenes[0] = with_rotations(scenes[0], np.array([rot(a) for a in (0.3, 0.3, 0.3 + np.pi,
+                                                                      0.3)]))
+    scenes[1] = with_rotations(scenes[1], np.array([rot(np.pi * k / 2) for k in range(4)]))
+    result = run_batch(scenes)
+    assert list(result.outcome) == ["antipodal", "twisted"]
+    assert classify(np.array([np.nan]), np.array([1.0]), np.array([1.0]),
+                    np.array([1.0]))[0] == "too slow"
+    assert callable(equilibrium_measures)
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "polymatch_ros.cli", "sweep", *args],
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize("args", [
+    ["--ensembles", "0"], ["--d0", "2,1"], ["--d0", "a,1"], ["--agents", "1"],
+    ["--dimension", "2,x"], ["--kappa", "-1"], ["--integrator", "adaptive"],
+    ["--integrator", "nope"], ["no_such_scene"], ["mixed_triangles_tetrahedra"],
+    ["--order", "3"], ["--order", "2", "--mass", "0"], ["-B", "100000", "--agents", "5000"],
+    ["--save", "/no/such/dir/out.npz"], ["--figure", "/no/such/dir/f.png"], ["--dt", "0"],
+])
+def test_bad_arguments_exit_2_with_one_line(args):
+    proc = _cli("-B", "2", "--t-end", "1", "-q", *args)
+    assert proc.returncode == 2, (args, proc.stderr)
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("polymatch: error:"), proc.stderr
+
+
+def test_cli_sweep_saves_outcomes(tmp_path):
+    out = tmp_path / "sweep.npz"
+    proc = _cli("-B", "3", "--agents", "3,4", "--t-end", "20", "-q", "--save", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "matched" in proc.stdout
+    data = np.load(out, allow_pickle=False)
+    assert list(data["N"]) == [3, 3, 3, 4, 4, 4]
+    assert data["outcome"].shape == (6,)
