@@ -231,7 +231,13 @@ def root_interfaces():
 
 
 class Capture:
-    """tcpdump for DDS packets on some interfaces (in the root namespace or one of ours)."""
+    """tcpdump for DDS packets on some interfaces (in the root namespace or one of ours).
+
+    ``--immediate-mode`` hands every packet to tcpdump as it arrives.  Without it packets wait
+    in the kernel's ring until a block fills or a 1 s timeout passes, and a capture stopped
+    sooner writes nothing: a 1.2 s run logged "0 packets captured, 611 packets received by
+    filter".  ``matched()`` reads the kernel's count, drops included.
+    """
 
     def __init__(self, directory, interfaces, namespace=None, label="root"):
         self.directory, self.namespace = directory, namespace
@@ -245,7 +251,8 @@ class Capture:
             path = os.path.join(self.directory, f"capture_{self.label}_{name}.pcap")
             log = open(path + ".log", "w")
             proc = subprocess.Popen(prefix + ["timeout", "-k", "5", "300", "tcpdump", "-i", name,
-                                              "-n", "-U", "-Z", "root", "-w", path, DDS_FILTER],
+                                              "-n", "--immediate-mode", "-B", "16384", "-U",
+                                              "-Z", "root", "-w", path, DDS_FILTER],
                                     stdout=log, stderr=subprocess.STDOUT)
             log.close()
             self.files.append(path)
@@ -272,6 +279,21 @@ class Capture:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait(timeout=5)
+
+    def matched(self):
+        """Packets the kernel's filter matched on these interfaces (tcpdump's own count).
+
+        It counts what the kernel dropped as well, so a zero here does not depend on tcpdump
+        having kept up: the strongest form of "nothing of ours was seen here".
+        """
+        total = 0
+        for path in self.files:
+            log = _read(path + ".log")
+            received = re.search(r"(\d+) packets? received by filter", log)
+            if received is None:
+                raise RuntimeError(f"tcpdump did not report its counts: {log.strip()}")
+            total += int(received.group(1))
+        return total
 
     def packets(self):
         """The captured packets, one summary line each."""

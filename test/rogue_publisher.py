@@ -3,7 +3,8 @@
     python test/rogue_publisher.py ENSEMBLE AGENT SECONDS
 
 Sends, at ~100 Hz each: PoseStamped with NaN positions, PoseStamped with a quaternion of
-norm 2, and lockstep stage messages with NaN data, a foreign run id, or no header.  It is started by
+norm 2, and lockstep stage messages with NaN data, a foreign run id, or no header.  It is started
+by
 the test in the test's own ROS domain (loopback discovery) under `timeout`.
 """
 

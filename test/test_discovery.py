@@ -209,6 +209,7 @@ def test_server_carries_forty_participants(tmp_path):
                 assert server.stop() == 0, server.output()
     if capture is not None:
         assert capture.packets() == [], "DDS packets left the machine"
+        assert capture.matched() == 0, "DDS packets left the machine"
     print(f"\n{PUBLISHERS} participants via a discovery server: "
           f"{time.monotonic() - started:.1f} s")
 

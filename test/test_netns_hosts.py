@@ -111,6 +111,7 @@ def run_across_hosts(net, tmp_path, spec, messages=0, loss=0):
             procs.close()
             if server is not None:
                 server.stop()
+    assert root.matched() == 0, "the root namespace's interfaces saw DDS packets"
     return outputs, root.packets(), bridge.packets(), dropped
 
 

@@ -57,9 +57,28 @@ def received_vertices(scene, path):
 @pytest.mark.parametrize("name,integrator,k", CASES)
 def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator, k):
     out = tmp_path / "final.npz"
-    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path(name), "--integrator", integrator,
-                      "--t-end", str(T_END), "-k", str(k), "--timeout", "150", "--no-compare",
-                      "--save", str(out), "-q"], timeout=180)
+    proc = ros.start(
+        [
+            PY,
+            "-m",
+            "polymatch_ros.cli",
+            "run",
+            scene_path(name),
+            "--integrator",
+            integrator,
+            "--t-end",
+            str(T_END),
+            "-k",
+            str(k),
+            "--timeout",
+            "150",
+            "--no-compare",
+            "--save",
+            str(out),
+            "-q",
+        ],
+        timeout=180,
+    )
     rc = ros.wait(proc, 190)
     text = ros.output(proc)
     # 3: ran to t_end without converging (t_end is short)
@@ -74,8 +93,9 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
     initial = []
     for g, gs in zip(scene.model.groups, scene.initial.groups):
         mats = scene.model.rotations.to_matrices(gs.rot)
-        initial.append(gs.x + scene.origin + np.einsum("nij,aj->nai",
-                       mats, g.reference).transpose(1, 0, 2))
+        initial.append(
+            gs.x + scene.origin + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2)
+        )
     moved = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, initial))
     assert moved > 0.1
 
@@ -84,11 +104,37 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     """README's demo: `polymatch run` converges and stops early; a separate subscriber process
     (the launch-free stand-in for `ros2 topic echo /polymatch/diameter`) sees the diameter fall
     below the scene's tolerance; the runner reports the lockstep deviation."""
-    echo = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/polymatch/diameter", "--until-below", "1e-6",
-                      "--timeout", "200"], timeout=220)
+    echo = ros.start(
+        [
+            PY,
+            "-m",
+            "polymatch_ros.cli",
+            "echo",
+            "/polymatch/diameter",
+            "--until-below",
+            "1e-6",
+            "--timeout",
+            "200",
+        ],
+        timeout=220,
+    )
     records = tmp_path / "records.jsonl"
-    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path("congruent_triangles"),
-                      "-k", "2", "--timeout", "200", "--records", str(records)], timeout=230)
+    proc = ros.start(
+        [
+            PY,
+            "-m",
+            "polymatch_ros.cli",
+            "run",
+            scene_path("congruent_triangles"),
+            "-k",
+            "2",
+            "--timeout",
+            "200",
+            "--records",
+            str(records),
+        ],
+        timeout=230,
+    )
     rc = ros.wait(proc, 240)
     text = ros.output(proc)
     assert rc == 0, text
@@ -104,5 +150,4 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     recs = run_records(records.read_text().splitlines())
     assert len(recs) == 5 and all(r.finished for r in recs if r.role == "agent"), recs
     assert all(r.dropped == {} for r in recs), [r.dropped for r in recs]
-    assert t_final < load_scene(scene_path("congruent_triangles")
-                                ).t_end     # stopped on convergence
+    assert t_final < load_scene(scene_path("congruent_triangles")).t_end  # stopped on convergence

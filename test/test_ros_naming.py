@@ -32,7 +32,7 @@ PROBE = textwrap.dedent("""
 
 
 def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
-    first = ["/polymatch/agent_%d" % i for i in range(8)] + [
+    first = [f"/polymatch/agent_{i}" for i in range(8)] + [
         "/polymatch/monitor",
         "/polymatch/runner",
     ]

@@ -14,7 +14,8 @@ from polymatch_ros.ros.ros_env import hung_in_teardown
 HUNG = textwrap.dedent("""
     from polymatch_ros.ros.ros_env import teardown_watchdog
     from polymatch_ros.ros.wire import RunRecord
-    rec = RunRecord(role="agent", mode="lockstep", t=1.0, agents=(3,), finished=True, steps=20, rounds=20)
+    rec = RunRecord(role="agent", mode="lockstep", t=1.0, agents=(3,), finished=True, steps=20,
+    rounds=20)
     print(rec.describe(), flush=True)
     print(rec.to_json(), flush=True)
     with teardown_watchdog(0.5):

@@ -107,7 +107,7 @@ class _Chart:
             gi, kind, _, _ = self.parts[0]
             return rates[gi][self._INDEX[kind]].reshape(-1)
         out = np.empty(self.n)
-        for gi, kind, shape, sl in self.parts:
+        for gi, kind, _shape, sl in self.parts:
             out[sl] = rates[gi][self._INDEX[kind]].reshape(-1)
         return out
 
@@ -258,7 +258,7 @@ class AdaptiveSolver:
         chart, y = self.chart, self.state
         Kx = np.empty((N_STAGES + 1 + len(DOP853.C_EXTRA), chart.n))
         Kx[:N_STAGES + 1] = K
-        for s, (a, c) in enumerate(zip(DOP853.A_EXTRA, DOP853.C_EXTRA), start=N_STAGES + 1):
+        for s, (a, _c) in enumerate(zip(DOP853.A_EXTRA, DOP853.C_EXTRA), start=N_STAGES + 1):
             Kx[s] = self._fun(chart, (Kx[:s].T @ a[:s]) * h)[0]
         F = np.empty((DOP853.D.shape[0] + 3, chart.n))
         F[0] = theta

@@ -114,8 +114,17 @@ def plan(scene: Scene, method: str | None = None, dt: float | None = None,
     return Plan(meth, step, None, reason)
 
 
-def prepare(scene: Scene, plan_: Plan) -> Scene:
-    """Scene in the representation the method needs (projection baselines work on matrices)."""
+def prepare(scene: Scene, plan_: Plan, distributed: bool = False) -> Scene:
+    """Scene in the representation the method needs (projection baselines work on matrices).
+
+    ``distributed`` on a communication graph: the centroids are integrated with the stages
+    (``model.centroids: integrated``).  The exact flow of Prop 2.1 on a graph is a global
+    linear map that reads every agent's centroid at each step; integrated, every exchange
+    stays between in-neighbours (the same model; the two differ by the integrator's error).
+    """
+    m = scene.model
+    if distributed and m.centroids_exact and any(g.graph is not None for g in m.groups):
+        scene = replace(scene, model=replace(m, centroids="integrated"))
     if plan_.method.info.family == "projection" and scene.model.rotations.name == "angle":
         return with_representation(scene, "matrix")
     return scene
@@ -229,6 +238,10 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
         lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; "
                      "centroids integrated "
                      "with the method's stages (the inter-group force is nonlinear)")
+    elif distributed and m.centroids_exact and any(g.graph is not None for g in m.groups):
+        lines.append("centroids: integrated with the method's stages in a distributed run on a "
+                     "graph (the exact Laplacian flow reads every agent; stages keep the "
+                     "exchange between in-neighbours)")
     elif m.centroids_exact and any(g.graph is not None for g in m.groups):
         lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential);"
                      " on graphs mode by mode of the Laplacian (eigh once, O(N^3); O(N^2 d) "

@@ -71,7 +71,7 @@ class AgentBase:
                 f"(0..{scene.model.n_agents - 1})"
             )
         self.plan = plan(scene, p["integrator"] or None, self.step_size(p), distributed=True)
-        self.scene = scene = prepare(scene, self.plan)
+        self.scene = scene = prepare(scene, self.plan, distributed=True)
         self.model = scene.model
         self.grp = self.model.rotations
         self.layout = Layout(self.model, local, p["agents_per_process"])
@@ -166,7 +166,13 @@ class AgentBase:
             late_ticks=self.late_ticks,
             matched_after=self.matched_after,
             dropped=dict(self.drops.counts),
+            peers=tuple(self.layout.peers),
+            stage_subscriptions=self.stage_subscriptions(),
         )
+
+    def stage_subscriptions(self):
+        """Subscriptions to the peers' stage topics (lockstep only)."""
+        return 0
 
     def flush_poses(self, timeout=3.0):
         """Wait until the last poses reached every subscriber (the monitor, the runner)."""

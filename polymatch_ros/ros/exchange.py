@@ -12,6 +12,7 @@ from collections import Counter
 import numpy as np
 
 from ..core.errors import PolymatchError
+from ..core.model import System
 from . import wire
 
 
@@ -20,7 +21,10 @@ class Layout:
 
     ``local`` are global agent indices.  ``agents_per_process`` K gives the
     runner's partition (process p hosts [pK, (p+1)K)); it is used only to count
-    how many remote processes subscribe to each local stage topic.
+    how many remote processes subscribe to each local stage topic.  On a communication
+    graph (``sparse``) an agent needs only what ``System.sources`` names at any stage (its
+    in-neighbours once the centroids are integrated, ``simulate.prepare``); otherwise every
+    agent of its group, and every agent under the F-2 inter-group potential.
     """
 
     def __init__(self, model, local, agents_per_process=1):
@@ -28,34 +32,47 @@ class Layout:
         self.local = sorted(set(int(a) for a in local))
         self.k = max(1, int(agents_per_process))
         self.owner = {a: model.group_of(a) for a in range(model.n_agents)}
+        self.sparse = not model.inter_group and any(g.graph is not None for g in model.groups)
+        self._system = System(model) if self.sparse else None
+        self._subscribers = {}
         self.rows = []
         for gi, g in enumerate(model.groups):
             self.rows.append(
                 np.array([a - g.start for a in self.local if self.owner[a][0] == gi], dtype=int)
             )
         self.local_groups = [gi for gi, r in enumerate(self.rows) if len(r)]
-        needed = set()
-        for gi in self.local_groups:
-            needed.update(self.model.groups[gi].indices)
-        if model.inter_group:
-            needed.update(range(model.n_agents))
+        needed = set().union(*(self.sources(a) for a in self.local))
         self.peers = sorted(needed - set(self.local))
         self.groups_needed = sorted({self.owner[a][0] for a in needed | set(self.local)})
+
+    def sources(self, agent):
+        """Global indices of the agents whose stage messages ``agent`` needs (itself included
+        when the whole group is needed)."""
+        gi, row = self.owner[agent]
+        g = self.model.groups[gi]
+        if self.model.inter_group:
+            return set(range(self.model.n_agents))
+        if not self.sparse or g.graph is None:
+            return set(g.indices)
+        near = set()
+        for first in (True, False):
+            for rows in self._system.sources(gi, row, first).values():
+                near.update(g.start + int(r) for r in rows)
+        return near
 
     def process_of(self, agent):
         return agent // self.k
 
     def expected_subscribers(self, agent):
         """Remote processes that need ``agent``'s stage messages."""
-        gi = self.owner[agent][0]
-        me = self.process_of(agent)
-        procs = set()
-        for b in range(self.model.n_agents):
-            if self.process_of(b) == me:
-                continue
-            if self.owner[b][0] == gi or self.model.inter_group:
-                procs.add(self.process_of(b))
-        return len(procs)
+        if agent not in self._subscribers:
+            me = self.process_of(agent)
+            self._subscribers[agent] = len({
+                self.process_of(b)
+                for b in range(self.model.n_agents)
+                if self.process_of(b) != me and agent in self.sources(b)
+            })
+        return self._subscribers[agent]
 
 
 class DropCounter:

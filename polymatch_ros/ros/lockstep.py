@@ -44,6 +44,7 @@ class LockstepExchange:
         }  # reused: rclpy copies on publish
         self.inbox = defaultdict(dict)  # agent -> {(step, stage): Stage}
         self.current = (0, 0)
+        self.stop_step = None  # graph runs: the step after which every agent stops
         self.subs = [
             wire.subscription(
                 self.node,
@@ -86,8 +87,30 @@ class LockstepExchange:
     def missing_peers(self):
         return [a for a, s in zip(self.layout.peers, self.subs) if s.get_publisher_count() < 1]
 
+    def _stop_flags(self, stop_flag):
+        """Header flags: FLAG_STOP, on a graph with the agreed stop step in the bits above it."""
+        if not self.layout.sparse:
+            return wire.FLAG_STOP if stop_flag else 0
+        return 0 if self.stop_step is None else wire.FLAG_STOP | (self.stop_step << 1)
+
+    def _agree_stop(self, key, stop_flag):
+        """On a graph a stop spreads one hop per round: min-consensus on a step far enough
+        ahead (n_agents + 1 steps) that every agent knows it before reaching it.
+
+        True from that step on."""
+        step = key[0]
+        targets = [step + self.model.n_agents + 1] if stop_flag else []
+        for a in self.layout.peers:
+            flags = self.inbox[a][key].flags
+            if flags & wire.FLAG_STOP:
+                targets.append(flags >> 1)
+        if self.stop_step is not None:
+            targets.append(self.stop_step)
+        self.stop_step = min(targets, default=None)
+        return self.stop_step is not None and step >= self.stop_step
+
     def publish(self, step, stage, request, stop_flag):
-        flags = wire.FLAG_STOP if stop_flag else 0
+        flags = self._stop_flags(stop_flag)
         st = request.stage
         for gi in self.layout.local_groups:
             gs = st.groups[gi]
@@ -125,9 +148,12 @@ class LockstepExchange:
             self.executor.spin_once(timeout_sec=min(left, 0.5))
             waiting = [a for a in waiting if key not in self.inbox[a]]
         self.wait_time += time.perf_counter() - t1
-        stop = stop_flag or any(
-            self.inbox[a][key].flags & wire.FLAG_STOP for a in self.layout.peers
-        )
+        if self.layout.sparse:
+            stop = self._agree_stop(key, stop_flag)
+        else:
+            stop = stop_flag or any(
+                self.inbox[a][key].flags & wire.FLAG_STOP for a in self.layout.peers
+            )
         return self._assemble(key, request), stop
 
     def _assemble(self, key, request):
@@ -145,8 +171,10 @@ class LockstepExchange:
                 if (m := self.inbox[a].get(key)) is not None
             }
             local = (self.layout.rows[gi], request.stage.groups[gi]) if own else None
+            # on a graph only the in-neighbours' rows are present (``index`` names them)
+            full = not self.layout.sparse
             e = wire.assemble(
-                self.grp, model.dim, rows, local, with_rot=own, with_v=with_v, full=True
+                self.grp, model.dim, rows, local, with_rot=own, with_v=with_v, full=full
             )
             out.append(e)
         for a in self.layout.peers:
@@ -188,6 +216,9 @@ class LockstepAgent(AgentBase):
         pub, wait = ex.publish_time / self.rounds * 1e3, ex.wait_time / self.rounds * 1e3
         rest = max(0.0, self.round_time / self.rounds * 1e3 - pub - wait)
         return {"publish": pub, "wait": wait, "other": rest}
+
+    def stage_subscriptions(self):
+        return len(list(self.exchange.node.subscriptions))
 
     def _discover(self):
         ex = self.exchange

@@ -9,24 +9,35 @@ centralised solution, wall time, rounds/s) from the agents' final poses and run 
 ends every process it started, by PID, also on Ctrl-C and when a child dies.
 """
 
+import hashlib
 import os
 import random
 import signal
 import sys
+import tempfile
 import time
 
 from ..console import Progress, positive_float, writable_output
-from ..core.errors import PolymatchError
+from ..core.errors import ParameterError, PolymatchError
 from ..core.scene import load_scene, resolve_scene_path
 from ..core.simulate import plan
 from . import wire
 from .children import (  # noqa: F401 (API)
     LOCALHOST_PARTICIPANTS,
     Child,
+    Supervision,
     _agents_per_process,
+    describe_agents,
     fewest_agents_per_process,
+    parse_only,
     partition,
     stop_all,
+)
+from .discovery import (
+    DISCOVERY_VARIABLES,
+    discovery_environments,
+    parse_discovery_spec,
+    start_discovery_server,
 )
 from .ros_env import reserved_domain_id, ros_environment, teardown_watchdog
 from .summary import report, verdict
@@ -57,21 +68,75 @@ def cmd_run(args):
     if args.agents_per_process is not None and args.agents_per_process < 1:
         raise PolymatchError("--agents-per-process must be >= 1")
     _check_ensemble(args.ensemble)
-    with reserved_domain_id() as domain:
-        env = ros_environment(domain, mode=args.mode)
-        args.agents_per_process = _agents_per_process(
-            args, scene.model.n_agents, env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    n = scene.model.n_agents
+    args.agents = list(range(n)) if args.only is None else parse_only(args.only, n)
+    args.lead = args.monitor or len(args.agents) == n
+    spec = parse_discovery_spec(args.discovery)
+    if len(args.agents) < n and not os.environ.get("ROS_DOMAIN_ID"):
+        raise ParameterError(
+            "--only: set the same ROS_DOMAIN_ID on every host (e.g. export ROS_DOMAIN_ID=17)"
         )
-        for key in (
-            "ROS_AUTOMATIC_DISCOVERY_RANGE",
-            "ROS_DOMAIN_ID",
-            "RMW_IMPLEMENTATION",
-            "FASTRTPS_DEFAULT_PROFILES_FILE",
-            "FASTDDS_BUILTIN_TRANSPORTS",
-        ):
-            if key in env:
-                os.environ[key] = env[key]
-        return _run(args, scene, scene_path, the_plan, env, domain)
+    with reserved_domain_id() as domain, tempfile.TemporaryDirectory(
+        prefix="polymatch_run_"
+    ) as directory:
+        env = ros_environment(domain, mode=args.mode)
+        envs = None if spec.kind == "localhost" else discovery_environments(spec, directory)
+        args.agents_per_process = _agents_per_process(
+            args, len(args.agents), envs is None and _localhost(env)
+        )
+        _adopt(env if envs is None else envs.for_role("super_client", env))
+        server = _start_server(spec, envs, env, args, directory)
+        try:
+            return _run(args, scene, scene_path, the_plan, env, domain, envs)
+        finally:
+            if server is not None:
+                server.stop()
+
+
+def _localhost(env):
+    return env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+
+
+def _adopt(env):
+    """The runner's own node (the watcher) runs with the environment of its processes."""
+    for key in (
+        "ROS_AUTOMATIC_DISCOVERY_RANGE",
+        "ROS_DOMAIN_ID",
+        "RMW_IMPLEMENTATION",
+        "FASTRTPS_DEFAULT_PROFILES_FILE",
+        "FASTDDS_BUILTIN_TRANSPORTS",
+    ) + DISCOVERY_VARIABLES:
+        if key in env:
+            os.environ[key] = env[key]
+        elif key in DISCOVERY_VARIABLES:
+            os.environ.pop(key, None)
+
+
+def _start_server(spec, envs, env, args, directory):
+    """``--discovery server`` (no address): a discovery server of this run on 127.0.0.1."""
+    if envs is None or spec.kind != "server" or spec.port:
+        return None
+    return start_discovery_server(
+        envs.spec.port,
+        envs.spec.host,
+        seconds=args.timeout + 60.0,
+        env=envs.for_role("server", env),
+        log_path=os.path.join(directory, "discovery_server.log"),
+    )
+
+
+def _run_id(args, scene, scene_path, the_plan):
+    """A fresh random id; on hosts that each run some agents (--only), the same id on every
+    host: a hash of what all of them must agree on (scene file, times, method, ensemble,
+    domain)."""
+    if len(args.agents) == scene.model.n_agents:
+        return random.randrange(1, 2**31 - 1)
+    with open(scene_path, "rb") as fh:
+        shared = [fh.read()]
+    shared += [repr((scene.t_end, args.mode, the_plan.name, the_plan.dt, args.ensemble)).encode()]
+    shared += [os.environ.get("ROS_DOMAIN_ID", "").encode()]
+    digest = hashlib.sha256(b"\0".join(shared)).digest()
+    return 1 + int.from_bytes(digest[:4], "big") % (2**31 - 2)
 
 
 def _node_args(args, scene, scene_path, the_plan):
@@ -89,7 +154,7 @@ def _node_args(args, scene, scene_path, the_plan):
     ]
     agent = common + [
         "-p",
-        f"run_id:={random.randrange(1, 2**31 - 1)}",
+        f"run_id:={_run_id(args, scene, scene_path, the_plan)}",
         "-p",
         f"agents_per_process:={args.agents_per_process}",
         "-p",
@@ -123,8 +188,14 @@ def _node_args(args, scene, scene_path, the_plan):
     return monitor, agent
 
 
-def _start(args, scene, scene_path, the_plan, env):
-    """(monitor or None, agent children): every process of the ensemble, started."""
+def _start(args, scene, scene_path, the_plan, env, envs=None):
+    """(monitor or None, agent children): the processes of this host, started.
+
+    ``envs`` (DiscoveryEnvironments, None for LOCALHOST) gives the agents the client and the
+    monitor the super-client environment.
+    """
+    agent_env = env if envs is None else envs.for_role("client", env)
+    monitor_env = env if envs is None else envs.for_role("super_client", env)
     mon_args, agent_args = _node_args(args, scene, scene_path, the_plan)
     py = [sys.executable, "-m"]
     monitor = None
@@ -135,10 +206,10 @@ def _start(args, scene, scene_path, the_plan, env):
             + ["polymatch_ros.ros.monitor_node", "--ros-args"]
             + mon_args
             + ["-r", "__node:=monitor"],
-            env,
+            monitor_env,
         )
     children = []
-    for agents in partition(scene.model.n_agents, args.agents_per_process):
+    for agents in partition(args.agents, args.agents_per_process):
         name = f"agent_{agents[0]}" if len(agents) == 1 else f"agents_{agents[0]}_{agents[-1]}"
         sel = (
             ["-p", f"agent:={agents[0]}"]
@@ -153,23 +224,26 @@ def _start(args, scene, scene_path, the_plan, env):
                 + agent_args
                 + sel
                 + ["-r", f"__node:={name}"],
-                env,
+                agent_env,
             )
         )
     return monitor, children
 
 
-def _run(args, scene, scene_path, the_plan, env, domain):
+def _run(args, scene, scene_path, the_plan, env, domain, envs=None):
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    n = scene.model.n_agents
+    n, here = scene.model.n_agents, len(args.agents)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    which = f"{n} agents"
+    if here < n:
+        which = f"{here} of {n} agents ({describe_agents(args.agents)})"
     say(
-        f"polymatch run: {n} agents in {len(partition(n, args.agents_per_process))} processes, "
+        f"polymatch run: {which} in {len(partition(here, args.agents_per_process))} processes, "
         f"{args.mode}, "
         f"integrator {the_plan.name}, dt {the_plan.dt:g}, ROS_DOMAIN_ID={domain}, "
-        f"discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
+        f"discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE'] if envs is None else envs.spec}, "
         f"ensemble {wire.namespace(args.ensemble)}"
     )
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
@@ -183,8 +257,9 @@ def _run(args, scene, scene_path, the_plan, env, domain):
     code, message = 1, "not started"
     progress = Progress(scene.t_end, args.quiet)
     try:
-        watcher = Watcher(scene, args.ensemble)
-        monitor, children = _start(args, scene, scene_path, the_plan, env)
+        name = "runner" if here == n else f"runner_{args.agents[0]}"
+        watcher = Watcher(scene, args.ensemble, name)
+        monitor, children = _start(args, scene, scene_path, the_plan, env, envs)
         run = Supervision(args, scene, the_plan, watcher, children, monitor, progress)
         code, message = run.watch(interrupted, start)
     except PolymatchError as exc:
@@ -206,7 +281,8 @@ def _run(args, scene, scene_path, the_plan, env, domain):
             message,
             time.monotonic() - start,
         )
-        code = code if code != 0 or watcher.final_state() is None else verdict(scene, watcher)
+        summarised = args.lead and watcher.final_state() is not None
+        code = verdict(scene, watcher) if code == 0 and summarised else code
     finally:
         sys.stdout.flush()
         sys.stderr.flush()
@@ -218,116 +294,14 @@ def _run(args, scene, scene_path, the_plan, env, domain):
     return code
 
 
-class Supervision:
-    """The runner's loop: progress, start (realtime), stop on convergence, failures, the end."""
-
-    def __init__(self, args, scene, the_plan, watcher, children, monitor, progress):
-        self.args, self.scene, self.plan = args, scene, the_plan
-        self.watcher, self.children, self.monitor, self.progress = (
-            watcher,
-            children,
-            monitor,
-            progress,
-        )
-        self.rounds_per_step = (
-            1 if args.mode == "realtime" else max(1, the_plan.method.info.rounds)
-        )
-        self.rate_mark, self.rps = None, 0.0
-        self.below_since, self.stop_sent = None, 0.0
-        self.graph_checked = False
-
-    def failure(self):
-        """The first child that ended badly, as (code, message), or None."""
-        failed = [c for c in self.children if not c.ended_well() and c.poll() is not None]
-        if (
-            self.monitor is not None
-            and not self.monitor.ended_well()
-            and self.monitor.poll() is not None
-        ):
-            failed.append(self.monitor)
-        if not failed:
-            return None
-        c = failed[0]
-        detail = " | ".join(line for line in c.tail(3) if line.strip())
-        return 1, f"{c.name} (pid {c.pid}) exited with code {c.poll()}: {detail}"
-
-    def check_graph(self):
-        """Once every agent is up: its node and the monitor are in the ensemble's namespace."""
-        if self.graph_checked or not self.watcher.agents_up():
-            return
-        names = [c.name for c in self.children] + (["monitor"] if self.monitor is not None else [])
-        self.graph_checked = self.watcher.check_graph(names)
-
-    def start_clock(self):
-        """Realtime: once every agent is up, 'start <epoch>' for all; repeated (same epoch) each
-        second while an agent has not begun stepping - one whose control reader matched late
-        would otherwise wait forever (agents take the first 'start' only)."""
-        now = time.monotonic()
-        if self.epoch is None:
-            if self.watcher.agents_up():
-                self.epoch, self.start_sent = time.time() + 0.5, now
-                self.watcher.start(self.epoch)
-        elif now - self.start_sent > 1.0 and any(
-            r.steps == 0 and not r.finished for r in self.watcher.agents.values()
-        ):
-            self.start_sent = now
-            self.watcher.start(self.epoch)
-
-    def watch(self, interrupted, start):
-        watcher, args = self.watcher, self.args
-        self.epoch, self.start_sent = None, 0.0
-        while True:
-            watcher.spin(0.05)
-            if args.mode == "realtime":
-                self.start_clock()
-            self.check_graph()
-            if interrupted:
-                self.progress.done()
-                return 130, "interrupted: stopped every process"
-            failed = self.failure()
-            if failed:
-                self.progress.done()
-                return failed
-            if all(c.ended_well() for c in self.children):
-                drain = time.monotonic() + 3.0  # the latched final poses may still be in flight
-                while time.monotonic() < drain and not watcher.have_final():
-                    watcher.spin(0.05)
-                return 0, ""
-            if time.monotonic() > start + args.timeout:
-                self.progress.done()
-                return 1, f"timed out after {args.timeout:g} s (raise --timeout)"
-            self.show_progress()
-
-    def show_progress(self):
-        t, d = self.watcher.ensemble_time(), self.watcher.diameter
-        if t is None or d is None:
-            return
-        now = time.monotonic()
-        if self.rate_mark is None or t < self.rate_mark[1]:
-            self.rate_mark = (now, t)  # (re)start the rate where the ensemble's time is
-        elif now - self.rate_mark[0] > 1.0:
-            steps = (t - self.rate_mark[1]) / max(self.plan.dt, 1e-12)
-            self.rps = steps * self.rounds_per_step / (now - self.rate_mark[0])
-            self.rate_mark = (now, t)
-        self.progress(t, d, f"  {self.rps:7.1f} rounds/s")
-        if d < self.scene.tolerance and self.watcher.all_heard():
-            self.below_since = t if self.below_since is None else self.below_since
-            if t - self.below_since >= self.args.hold and now - self.stop_sent > 0.5:
-                self.watcher.stop()
-                self.stop_sent = now
-        else:
-            self.below_since = None
-
-
 def add_parser(sub):
     p = sub.add_parser(
         "run", help="run the distributed ROS 2 ensemble of a scene (one process per agent)"
     )
     p.add_argument("scene", help="scene file or shipped scene name")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
-    p.add_argument(
-        "--integrator", "-i", metavar="NAME", help="fixed-step integrator (default: the scene's)"
-    )
+    p.add_argument("--integrator", "-i", metavar="NAME",
+                   help="fixed-step integrator (default: the scene's)")
     p.add_argument("--dt", type=positive_float, help="lockstep step size (default: the scene's)")
     p.add_argument("--t-end", type=positive_float, help="override time.t_end")
     p.add_argument(
@@ -339,33 +313,16 @@ def add_parser(sub):
         help="agents per process (default 1, or the fewest that keep the processes within the 32 "
         "DDS participants that LOCALHOST discovery reaches)",
     )
-    p.add_argument(
-        "--rate", type=positive_float, default=50.0, help="realtime: steps per second (default 50)"
-    )
-    p.add_argument(
-        "--time-scale",
-        type=positive_float,
-        default=1.0,
-        help="realtime: simulated seconds per wall-clock second",
-    )
-    p.add_argument(
-        "--peer-timeout",
-        type=positive_float,
-        default=1.0,
-        help="realtime: drop silent peers after S s",
-    )
-    p.add_argument(
-        "--delay",
-        type=float,
-        default=0.0,
-        help="realtime: injected transport delay (s), experiments",
-    )
-    p.add_argument(
-        "--round-timeout",
-        type=positive_float,
-        default=10.0,
-        help="lockstep: give up a round after S s",
-    )
+    p.add_argument("--rate", type=positive_float, default=50.0,
+                   help="realtime: steps per second (default 50)")
+    p.add_argument("--time-scale", type=positive_float, default=1.0,
+                   help="realtime: simulated seconds per wall-clock second")
+    p.add_argument("--peer-timeout", type=positive_float, default=1.0,
+                   help="realtime: drop silent peers after S s")
+    p.add_argument("--delay", type=float, default=0.0,
+                   help="realtime: injected transport delay (s), experiments")
+    p.add_argument("--round-timeout", type=positive_float, default=10.0,
+                   help="lockstep: give up a round after S s")
     p.add_argument(
         "--hold",
         type=float,
@@ -382,7 +339,23 @@ def add_parser(sub):
         "--ensemble", default="polymatch", help="ensemble namespace (default polymatch)"
     )
     p.add_argument(
-        "--no-monitor", dest="monitor", action="store_false", help="do not start the monitor"
+        "--no-monitor",
+        dest="monitor",
+        action="store_false",
+        help="do not start the monitor (on every host but one of a run across hosts)",
+    )
+    p.add_argument(
+        "--only",
+        metavar="RANGE",
+        help="run only these agents on this host, e.g. 0-7,12 (the others run on other hosts "
+        "with the same ROS_DOMAIN_ID, --ensemble and --discovery)",
+    )
+    p.add_argument(
+        "--discovery",
+        default="localhost",
+        metavar="SPEC",
+        help="DDS discovery: localhost (default), subnet, server[:HOST:PORT] (bare: a server "
+        "of this run on 127.0.0.1), peers:ADDR,...",
     )
     p.add_argument(
         "--no-compare",
@@ -395,9 +368,6 @@ def add_parser(sub):
     )
     p.add_argument("--quiet", "-q", action="store_true")
     p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
-    p.add_argument(
-        "--records",
-        metavar="JSONL",
-        help="write every process's run record (JSON, one a line) to this file",
-    )
+    p.add_argument("--records", metavar="JSONL",
+                   help="write every process's run record (JSON, one a line) to this file")
     p.set_defaults(func=cmd_run)

@@ -18,9 +18,13 @@ def report(args, scene, the_plan, watcher, children, monitor, progress, code, me
     if args.records:
         with open(args.records, "w", encoding="utf-8") as fh:
             fh.writelines(r.to_json() + "\n" for r in records)
-    if code == 0 and final is not None:
+    lead = getattr(args, "lead", True)
+    if code == 0 and lead and final is not None:
         _final_progress(progress, scene, final, records)
         _summary(args, scene, the_plan, final, records, wall, watcher)
+    elif code == 0 and not lead:
+        progress.done()
+        _host_line(args, records, wall)
     elif message:
         progress.done()
         print(f"polymatch: error: {message}", file=sys.stderr)
@@ -31,6 +35,20 @@ def report(args, scene, the_plan, watcher, children, monitor, progress, code, me
                 f"shutdown spin); its watchdog ended it",
                 file=sys.stderr,
             )
+
+
+def _host_line(args, records, wall):
+    """A host without the monitor that ran some agents: what they did; the lead host has the
+    summary."""
+    from .children import describe_agents
+
+    agents = [r for r in records if r.role == "agent"]
+    t = max((r.t for r in agents), default=0.0)
+    rate = np.mean([r.rounds_per_second for r in agents]) if agents else 0.0
+    print(
+        f"agents {describe_agents(args.agents)} ended at t = {t:g}, wall time {wall:.2f} s, "
+        f"{rate:.1f} rounds/s per agent (mean); the host that runs the monitor has the summary"
+    )
 
 
 def _final_progress(progress, scene, final, records):
@@ -65,15 +83,15 @@ def _summary(args, scene, the_plan, final, records, wall, watcher):
     if args.save:
         _save(args.save, scene, final, watcher.pose_times())
     if args.mode == "lockstep" and args.compare:
+        central = prepare(scene, the_plan, distributed=True)
         ref = simulate(
-            replace(scene, t_end=final.t),
+            replace(central, t_end=final.t),
             the_plan.name,
             the_plan.dt,
             samples=[final.t],
             keep_states=False,
             metrics=False,
         )
-        central = prepare(scene, the_plan)
         dev = vertex_deviation(
             central.model, ref.final, _as_rep(central.model, scene.model, final)
         )

@@ -6,7 +6,8 @@ from . import wire
 
 
 class Watcher:
-    """Lives in the ensemble's namespace (``/<ensemble>/runner``).
+    """Lives in the ensemble's namespace (``/<ensemble>/runner``; ``runner_<first agent>`` on
+    a host that runs some of the agents).
 
     It hears the headline diameter and every process's run record (``status``: progress,
     agents up), publishes the control topic, and takes each agent's *final* pose from its
@@ -14,11 +15,11 @@ class Watcher:
     so supervising a run adds no load to the lockstep rounds.
     """
 
-    def __init__(self, scene, ensemble):
+    def __init__(self, scene, ensemble, name="runner"):
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
-        self.node = Node("runner", namespace=wire.namespace(ensemble))
+        self.node = Node(name, namespace=wire.namespace(ensemble))
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
         self.scene, self.model = scene, scene.model

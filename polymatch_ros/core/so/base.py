@@ -1,7 +1,6 @@
 """The interface of the batched SO(d) representations, and the polar factor they share."""
 
 from collections.abc import Sequence
-from typing import Union
 
 import numpy as np
 
@@ -9,7 +8,7 @@ import numpy as np
 Array = np.ndarray
 #: S = sum_k w_k O_k: a complex number for angles, a (d, d) matrix otherwise; on a graph one
 #: field per agent, S_i = sum_k w_ik O_k (``neighbour_fields``), in the rotations' own layout
-MeanField = Union[complex, np.ndarray]
+MeanField = complex | np.ndarray
 
 
 class RotationGroup:

@@ -29,7 +29,9 @@ class RunRecord:
     ``t`` simulated time reached; ``steps`` integrator steps and ``rounds`` stage rounds
     (lockstep; a realtime tick is one round); ``rounds_per_second`` over the run's wall time;
     ``ms_per_round`` publish/wait/other split (lockstep); ``late_ticks`` realtime ticks started
-    more than one period late; ``dropped`` counts per reason; monitor: ``diameter`` of its last
+    more than one period late; ``dropped`` counts per reason; ``peers`` the agents whose
+    messages the process needs and ``stage_subscriptions`` its stage-topic subscriptions
+    (lockstep; on a communication graph only the in-neighbours); monitor: ``diameter`` of its last
     report, ``agents_heard`` in it, ``reports`` published.
     """
 
@@ -48,6 +50,8 @@ class RunRecord:
     diameter: float = None
     agents_heard: int = 0
     reports: int = 0
+    peers: tuple = ()
+    stage_subscriptions: int = 0
 
     @property
     def dropped_total(self):
@@ -56,6 +60,7 @@ class RunRecord:
     def to_json(self):
         data = asdict(self)
         data["agents"] = list(self.agents)
+        data["peers"] = list(self.peers)
         return json.dumps({RECORD_KEY: RECORD_VERSION, **data})
 
     @classmethod
@@ -71,6 +76,8 @@ class RunRecord:
             known = {f.name for f in fields(cls)}
             rec = cls(**{k: v for k, v in data.items() if k in known})
             rec.agents = tuple(int(a) for a in rec.agents)
+            rec.peers = tuple(int(a) for a in rec.peers)
+            rec.stage_subscriptions = int(rec.stage_subscriptions)
             rec.dropped = {str(k): int(v) for k, v in dict(rec.dropped).items()}
             rec.t = float(rec.t)
             return rec if math.isfinite(rec.t) else None
