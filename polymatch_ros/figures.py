@@ -3,6 +3,7 @@
 import numpy as np
 
 from .core.errors import PolymatchError
+from .core.metrics import vertices
 
 COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf"]
 
@@ -18,29 +19,23 @@ def _pyplot():
     return plt
 
 
+def _placed_vertices(scene, state):
+    """Per group: (group, (N, n_a, d) vertices xbar_i + s_i O_i r_a in absolute coordinates)."""
+    model = scene.model
+    return [(g, vertices(gs.x + scene.origin, model.rotations.to_matrices(gs.rot), g.reference,
+                         g.scales))
+            for g, gs in zip(model.groups, state.groups)]
+
+
 def polytope_segments(scene, state):
     """Per group: list of (2, d) edge segments in absolute coordinates."""
-    model = scene.model
-    out = []
-    for g, gs in zip(model.groups, state.groups):
-        mats = model.rotations.to_matrices(gs.rot)
-        scales = np.ones(len(mats)) if g.scales is None else g.scales
-        body = scales[:, None, None] * np.einsum("nij,aj->nai", mats, g.reference)
-        verts = (gs.x + scene.origin)[:, None, :] + body
-        segs = [np.array([v[a], v[b]]) for v in verts for a, b in g.edges]
-        out.append(segs)
-    return out
+    return [[np.array([v[a], v[b]]) for v in verts for a, b in g.edges]
+            for g, verts in _placed_vertices(scene, state)]
 
 
 def first_vertices(scene, state):
     """Per group: (N, d) positions of every polytope's vertex 0 (the vertex correspondence)."""
-    model = scene.model
-    out = []
-    for g, gs in zip(model.groups, state.groups):
-        mats = model.rotations.to_matrices(gs.rot)
-        scales = np.ones(len(mats)) if g.scales is None else g.scales
-        out.append(gs.x + scene.origin + scales[:, None] * (mats @ g.reference[0]))
-    return out
+    return [verts[:, 0] for _, verts in _placed_vertices(scene, state)]
 
 
 def snapshot_figure(traj, path, times=None):

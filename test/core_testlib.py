@@ -10,6 +10,7 @@ from itertools import combinations
 import numpy as np
 from scipy.spatial.distance import pdist
 
+from polymatch_ros.bench.extremes_lib import scene_data
 from polymatch_ros.core import load_scene
 
 J2 = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -111,27 +112,8 @@ def state_error(scene_a, state_a, scene_b, state_b):
     return out
 
 
-def make_scene(dim, order=1, *, count=4, seed=1, representation="auto", kappa=1.0, gamma=1.0,
-               mass=0.5, shape=None, rotations="uniform", velocities=None, t_end=1.0,
-               samples=None, scales=None, method="rkmk4", dt=0.01, extra_groups=(), kappa_2=None,
-               L=None, centroids=None):
-    """An inline scene dict -> Scene (the YAML format of config/*.yaml)."""
-    model = {"order": order, "kappa": kappa, "gamma": gamma, "representation": representation}
-    if order == 2:
-        model["mass"] = mass
-    if kappa_2 is not None:
-        model["kappa_2"] = kappa_2
-    if L is not None:
-        model["L"] = L
-    group = {"name": "g0", "shape": shape or {"simplex": dim}, "count": count,
-             "rotations": rotations, "centroids": centroids or {"box": [-2.0, 2.0]}}
-    if scales is not None:
-        group["scales"] = scales
-    if order == 2 and velocities is not None:
-        group["velocities"] = velocities
-    time = {"t_end": t_end}
-    if samples is not None:
-        time["samples"] = samples
-    return load_scene({"dimension": dim, "seed": seed, "model": model,
-                       "integrator": {"method": method, "dt": dt}, "time": time,
-                       "groups": [group] + list(extra_groups)})
+def make_scene(dim, order=1, *, count=4, t_end=1.0, method="rkmk4", dt=0.01, **kw):
+    """An inline scene dict -> Scene (the YAML format of config/*.yaml): one group "g0"
+    (``scene_data``'s arguments) integrated by ``method`` at ``dt``."""
+    return load_scene(scene_data(dim, order, count=count, t_end=t_end, group_name="g0",
+                                 integrator={"method": method, "dt": dt}, **kw))

@@ -218,6 +218,23 @@ class NetnsHosts:
         self.run(index, ["nft", "delete", "table", "inet", LOSS_TABLE], seconds=10)
 
 
+def provided_hosts(count, tools=()):
+    """A fixture's body: ``count`` namespace hosts for one test (skipped where they or ``tools``
+    are unavailable), closed afterwards with no namespace left over."""
+    import pytest
+
+    reason = unavailable_reason(tools)
+    if reason:
+        pytest.skip(reason)
+    hosts = NetnsHosts(count)
+    try:
+        hosts.create()
+        yield hosts
+    finally:
+        hosts.close()
+        assert hosts.left_over() == []
+
+
 def _read(path):
     with open(path) as text:
         return text.read()

@@ -16,7 +16,9 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
+from proc_group import children as _children
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(REPO, "config")
@@ -55,16 +57,10 @@ class Ros:
     """A test's private ROS world: one domain id, loopback discovery, processes ended by PID."""
 
     def __init__(self, domain):
-        from polymatch_ros.ros.ros_env import ros_environment
+        from polymatch_ros.ros.ros_env import private_ros_environment
+
         self.domain = domain
-        self.env = ros_environment(
-            domain,
-            base={
-                k: v
-                for k, v in os.environ.items()
-                if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
-            },
-        )
+        self.env = private_ros_environment(domain)
         assert self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
         self.procs = []
         self.shm_before = set(glob.glob("/dev/shm/fastrtps_*"))
@@ -162,12 +158,20 @@ class Ros:
                     os.unlink(path)
 
 
-def _children(pid):
-    try:
-        with open(f"/proc/{pid}/task/{pid}/children") as fh:
-            return [int(c) for c in fh.read().split()]
-    except OSError:
-        return []
+def cli_argv(*args):
+    """``polymatch ARGS...`` as this interpreter runs it (every argument as a string)."""
+    return [PY, "-m", "polymatch_ros.cli", *map(str, args)]
+
+
+def placed_vertices(model, groups, origin):
+    """Every agent's vertices per group: origin + x_i + O_i times the reference shape."""
+    out = []
+    for g, gs in zip(model.groups, groups):
+        mats = model.rotations.to_matrices(gs.rot)
+        out.append(
+            gs.x + origin + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2)
+        )
+    return out
 
 
 def node_argv(module, scene, **params):

@@ -13,7 +13,7 @@ import os
 import time
 
 import pytest
-from netns_hosts import Capture, NetnsHosts, root_interfaces, unavailable_reason
+from netns_hosts import Capture, provided_hosts, root_interfaces, unavailable_reason
 from proc_group import Processes
 from ros_harness import needs_ros
 
@@ -31,16 +31,9 @@ def hosts_or_skip(tools=()):
 
 @pytest.fixture
 def net():
-    hosts_or_skip()
-    hosts = NetnsHosts(HOSTS)
     root_before = root_interfaces()
-    try:
-        hosts.create()
-        yield hosts
-    finally:
-        hosts.close()
-        assert hosts.left_over() == []
-        assert root_interfaces() == root_before
+    yield from provided_hosts(HOSTS)
+    assert root_interfaces() == root_before
 
 
 def test_hosts_reach_each_other_and_nothing_else(net):

@@ -15,7 +15,7 @@ import subprocess
 import sys
 
 import pytest
-from netns_hosts import Capture, NetnsHosts, root_interfaces, unavailable_reason
+from netns_hosts import Capture, provided_hosts, root_interfaces
 from proc_group import Processes
 from ros_harness import needs_ros, scene_path
 from test_ros_lockstep import central_vertices, received_vertices
@@ -116,16 +116,7 @@ def test_run_through_its_own_discovery_server_converges(ros):
 
 @pytest.fixture
 def net():
-    reason = unavailable_reason(("tcpdump",))
-    if reason:
-        pytest.skip(reason)
-    hosts = NetnsHosts(3)
-    try:
-        hosts.create()
-        yield hosts
-    finally:
-        hosts.close()
-        assert hosts.left_over() == []
+    yield from provided_hosts(3, ("tcpdump",))
 
 
 def _host_argv(only, lead, out):

@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from ros_harness import PY, needs_ros, scene_path
+from ros_harness import cli_argv, needs_ros, placed_vertices, scene_path
 
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
@@ -36,13 +36,7 @@ CASES = [
 def central_vertices(scene, integrator, t):
     sc = replace(scene, t_end=t)
     traj = simulate(sc, integrator, sc.integrator.dt, samples=[t], metrics=False)
-    model = traj.scene.model
-    out = []
-    for g, gs in zip(model.groups, traj.final.groups):
-        mats = model.rotations.to_matrices(gs.rot)
-        out.append(gs.x + scene.origin + np.einsum("nij,aj->nai",
-                   mats, g.reference).transpose(1, 0, 2))
-    return out
+    return placed_vertices(traj.scene.model, traj.final.groups, scene.origin)
 
 
 def received_vertices(scene, path):
@@ -58,25 +52,8 @@ def received_vertices(scene, path):
 def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator, k):
     out = tmp_path / "final.npz"
     proc = ros.start(
-        [
-            PY,
-            "-m",
-            "polymatch_ros.cli",
-            "run",
-            scene_path(name),
-            "--integrator",
-            integrator,
-            "--t-end",
-            str(T_END),
-            "-k",
-            str(k),
-            "--timeout",
-            "150",
-            "--no-compare",
-            "--save",
-            str(out),
-            "-q",
-        ],
+        cli_argv("run", scene_path(name), "--integrator", integrator, "--t-end", T_END, "-k", k,
+                 "--timeout", 150, "--no-compare", "--save", out, "-q"),
         timeout=180,
     )
     rc = ros.wait(proc, 190)
@@ -90,12 +67,7 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
     dev = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, want))
     assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
     # the agents really moved: the comparison is not between two copies of the initial state
-    initial = []
-    for g, gs in zip(scene.model.groups, scene.initial.groups):
-        mats = scene.model.rotations.to_matrices(gs.rot)
-        initial.append(
-            gs.x + scene.origin + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2)
-        )
+    initial = placed_vertices(scene.model, scene.initial.groups, scene.origin)
     moved = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, initial))
     assert moved > 0.1
 
@@ -105,34 +77,13 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     (the launch-free stand-in for `ros2 topic echo /polymatch/diameter`) sees the diameter fall
     below the scene's tolerance; the runner reports the lockstep deviation."""
     echo = ros.start(
-        [
-            PY,
-            "-m",
-            "polymatch_ros.cli",
-            "echo",
-            "/polymatch/diameter",
-            "--until-below",
-            "1e-6",
-            "--timeout",
-            "200",
-        ],
+        cli_argv("echo", "/polymatch/diameter", "--until-below", "1e-6", "--timeout", 200),
         timeout=220,
     )
     records = tmp_path / "records.jsonl"
     proc = ros.start(
-        [
-            PY,
-            "-m",
-            "polymatch_ros.cli",
-            "run",
-            scene_path("congruent_triangles"),
-            "-k",
-            "2",
-            "--timeout",
-            "200",
-            "--records",
-            str(records),
-        ],
+        cli_argv("run", scene_path("congruent_triangles"), "-k", 2, "--timeout", 200,
+                 "--records", records),
         timeout=230,
     )
     rc = ros.wait(proc, 240)

@@ -11,13 +11,13 @@ import os
 import re
 import signal
 import subprocess
-import textwrap
 import time
 from dataclasses import replace
 
 import numpy as np
 import pytest
-from ros_harness import PY, REPO, _children, needs_ros, node_argv, scene_path
+import yaml
+from ros_harness import PY, REPO, _children, cli_argv, needs_ros, node_argv, scene_path
 
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
@@ -34,25 +34,9 @@ def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     assert "rogue: flooding" in ros.output(rogue), ros.output(rogue)
     out = tmp_path / "final.npz"
     proc = ros.start(
-        [
-            PY,
-            "-m",
-            "polymatch_ros.cli",
-            "run",
-            scene_path("congruent_triangles"),
-            "--t-end",
-            "1.0",
-            "--integrator",
-            "rkmk4",
-            "--no-compare",
-            "--save",
-            str(out),
-            "--timeout",
-            "150",
-            "-q",
-            "--round-timeout",
-            "60",
-        ],  # the flood is under test, not the timeout
+        cli_argv("run", scene_path("congruent_triangles"), "--t-end", "1.0",
+                 "--integrator", "rkmk4", "--no-compare", "--save", out, "--timeout", 150, "-q",
+                 "--round-timeout", 60),  # the flood is under test, not the timeout
         timeout=180,
     )
     rc = ros.wait(proc, 190)
@@ -80,63 +64,45 @@ def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     ), text
 
 
-@pytest.mark.parametrize(
-    "params,expect",
-    [
-        ({"agent": 99}, "agent 99 is not in the scene"),
-        ({"mode": "fast"}, "expected lockstep or realtime"),
-        ({"dt": "abc"}, "expected a number"),
-        ({"rate": -5.0}, "out of range"),
-        ({"integrator": "rk45"}, "unknown integrator"),
-    ],
-)
-def test_bad_agent_parameter_is_one_line_and_exit_code_2(ros, params, expect):
-    proc = ros.start(node_argv("agent_node", "congruent_triangles", **params), timeout=60)
+def _refused(ros, argv):
+    """Start ``argv``: it must exit with code 2 and one line (no traceback); that line."""
+    proc = ros.start(argv, timeout=60)
     assert ros.wait(proc, 70) == 2
     text = ros.output(proc).strip()
-    assert len(text.splitlines()) == 1 and expect in text and "Traceback" not in text, text
+    assert len(text.splitlines()) == 1 and "Traceback" not in text, text
+    return text
 
 
 @pytest.mark.parametrize(
-    "params,expect",
+    "node,params,expect",
     [
-        ({"rate": -1.0}, "out of range"),
-        ({"markers": "maybe"}, "expected a boolean"),
+        ("agent_node", {"agent": 99}, "agent 99 is not in the scene"),
+        ("agent_node", {"mode": "fast"}, "expected lockstep or realtime"),
+        ("agent_node", {"dt": "abc"}, "expected a number"),
+        ("agent_node", {"rate": -5.0}, "out of range"),
+        ("agent_node", {"integrator": "rk45"}, "unknown integrator"),
+        ("monitor_node", {"rate": -1.0}, "out of range"),
+        ("monitor_node", {"markers": "maybe"}, "expected a boolean"),
     ],
 )
-def test_bad_monitor_parameter_is_one_line_and_exit_code_2(ros, params, expect):
-    proc = ros.start(node_argv("monitor_node", "congruent_triangles", **params), timeout=60)
-    assert ros.wait(proc, 70) == 2
-    text = ros.output(proc).strip()
-    assert len(text.splitlines()) == 1 and expect in text and "Traceback" not in text, text
+def test_bad_node_parameter_is_one_line_and_exit_code_2(ros, node, params, expect):
+    text = _refused(ros, node_argv(node, "congruent_triangles", **params))
+    assert expect in text, text
 
 
 def test_missing_scene_is_one_line_and_exit_code_2(ros):
-    proc = ros.start(
-        [
-            PY,
-            "-m",
-            "polymatch_ros.ros.monitor_node",
-            "--ros-args",
-            "-p",
-            "scene:=/nonexistent.yaml",
-        ],
-        timeout=60,
-    )
-    assert ros.wait(proc, 70) == 2
-    text = ros.output(proc).strip()
-    assert len(text.splitlines()) == 1 and "no such scene file" in text
+    argv = [PY, "-m", "polymatch_ros.ros.monitor_node", "--ros-args", "-p",
+            "scene:=/nonexistent.yaml"]
+    assert "no such scene file" in _refused(ros, argv)
 
 
-ONE_AGENT = textwrap.dedent("""\
-    name: one_agent
-    dimension: 3
-    model: {order: 1}
-    integrator: {method: rkmk4, dt: 0.1}
-    time: {t_end: 2.0}
-    groups:
-      - {name: solo, shape: tetrahedron, count: 1}
-    """)
+def _scene_file(path, group, shape, count, dimension, dt, t_end, **extra):
+    """A one-group first-order rkmk4 scene, written to ``path`` (YAML)."""
+    spec = {"name": path.stem, "dimension": dimension, **extra, "model": {"order": 1},
+            "integrator": {"method": "rkmk4", "dt": dt}, "time": {"t_end": t_end},
+            "groups": [{"name": group, "shape": shape, "count": count}]}
+    path.write_text(yaml.safe_dump(spec, sort_keys=False), encoding="utf-8")
+    return path
 
 
 def test_colcon_build_and_installed_executables_start(ros, tmp_path):
@@ -172,8 +138,7 @@ def test_colcon_build_and_installed_executables_start(ros, tmp_path):
     site = prefix / "lib" / "python3.11" / "site-packages"
     ros.env["PYTHONPATH"] = str(site)
     ros.env["AMENT_PREFIX_PATH"] = f"{prefix}:{ros.env.get('AMENT_PREFIX_PATH', '')}"
-    scene = tmp_path / "one_agent.yaml"
-    scene.write_text(ONE_AGENT)
+    scene = _scene_file(tmp_path / "one_agent.yaml", "solo", "tetrahedron", 1, 3, 0.1, 2.0)
     agent = ros.start(
         [str(exe / "agent"), "--ros-args", "-p", f"scene:={scene}", "-p", "agent:=0"], timeout=60
     )
@@ -213,17 +178,7 @@ def _alive(pid):
 def test_runner_ends_every_process_it_started(ros, how):
     """`polymatch run` ends all its processes by PID on Ctrl-C and when a child dies."""
     proc = ros.start(
-        [
-            PY,
-            "-m",
-            "polymatch_ros.cli",
-            "run",
-            scene_path("congruent_triangles"),
-            "--t-end",
-            "500",
-            "--timeout",
-            "120",
-        ],
+        cli_argv("run", scene_path("congruent_triangles"), "--t-end", 500, "--timeout", 120),
         timeout=150,
     )
     deadline = time.monotonic() + 60
@@ -254,28 +209,15 @@ def test_runner_ends_every_process_it_started(ros, how):
 
 def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
     """Lockstep: SIGKILL one agent mid-run; its neighbours stop with a one-line error naming it."""
-    scene = tmp_path / "three.yaml"
-    scene.write_text(
-        textwrap.dedent("""\
-        name: three
-        dimension: 2
-        seed: 3
-        model: {order: 1}
-        integrator: {method: rkmk4, dt: 0.01}
-        time: {t_end: 1000.0}
-        groups:
-          - {name: triangles, shape: triangle, count: 3}
-        """),
-        encoding="utf-8",
+    scene = _scene_file(
+        tmp_path / "three.yaml", "triangles", "triangle", 3, 2, 0.01, 1000.0, seed=3
     )
     agents = [
         ros.agent(str(scene), i, timeout=90, round_timeout=2.0, discovery_timeout=20.0)
         for i in range(3)
     ]
     victim = agents[2]
-    diag = ros.start(
-        [PY, "-m", "polymatch_ros.cli", "echo", "/diagnostics", "--timeout", "80"], timeout=90
-    )
+    diag = ros.start(cli_argv("echo", "/diagnostics", "--timeout", 80), timeout=90)
     # kill only once every agent is well into its rounds (t_end needs ~1e5 steps): a fixed sleep
     # could strike during discovery on a loaded machine, where the first round also allows
     # discovery_timeout and the error would name no lockstep round

@@ -92,6 +92,19 @@ def _check_received(grp, dim, rotation):
     return check
 
 
+def _stamp_and_decode(msg, decoder, dim, stamp, frame, rotation):
+    """Stamp a geometry_msgs *Stamped message, decode it with ``wire.<decoder>`` (SO(d) as
+    matrices, frame "world") and check it is accepted valid or dropped with a counted reason."""
+    from polymatch_ros.ros import wire
+
+    grp = _matrix_group(dim)
+    msg.header.frame_id = frame
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
+    decode = getattr(wire, decoder)
+    _accepted_or_counted(decode(msg, grp, dim, "world", T_MAX), Counter(),
+                         _check_received(grp, dim, rotation))
+
+
 stamps = st.tuples(
     st.integers(0, 2**31 - 1) | st.sampled_from([0, 1, 29, 30, 31, 10**9]),
     st.integers(0, 2**32 - 1) | st.sampled_from([0, 999_999_999, 10**9]),
@@ -113,21 +126,11 @@ frames = st.sampled_from(["world", "world", "map", "", "World"])
 def test_pose_stamped_is_accepted_valid_or_dropped(dim, pos, quat, stamp, frame):
     from geometry_msgs.msg import PoseStamped
 
-    from polymatch_ros.ros import wire
-
-    grp = _matrix_group(dim)
     msg = PoseStamped()
-    msg.header.frame_id = frame
-    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp[0], min(stamp[1], 2**32 - 1)
     p, o = msg.pose.position, msg.pose.orientation
     p.x, p.y, p.z = pos
     o.x, o.y, o.z, o.w = quat
-    counter = Counter()
-    _accepted_or_counted(
-        wire.decode_pose_msg(msg, grp, dim, "world", T_MAX),
-        counter,
-        _check_received(grp, dim, rotation=True),
-    )
+    _stamp_and_decode(msg, "decode_pose_msg", dim, stamp, frame, rotation=True)
 
 
 @SETTINGS
@@ -141,20 +144,10 @@ def test_pose_stamped_is_accepted_valid_or_dropped(dim, pos, quat, stamp, frame)
 def test_twist_stamped_is_accepted_valid_or_dropped(dim, lin, ang, stamp, frame):
     from geometry_msgs.msg import TwistStamped
 
-    from polymatch_ros.ros import wire
-
-    grp = _matrix_group(dim)
     msg = TwistStamped()
-    msg.header.frame_id = frame
-    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
     msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = lin
     msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z = ang
-    counter = Counter()
-    _accepted_or_counted(
-        wire.decode_twist_msg(msg, grp, dim, "world", T_MAX),
-        counter,
-        _check_received(grp, dim, rotation=False),
-    )
+    _stamp_and_decode(msg, "decode_twist_msg", dim, stamp, frame, rotation=False)
 
 
 def _array(data, dims):

@@ -175,7 +175,7 @@ def run(args, log):
     import numpy as np
     from domain_coordinator import domain_id
 
-    from ..ros.ros_env import ros_environment
+    from ..ros.ros_env import private_ros_environment
     from .report import Report
 
     sizes = [4] if args.quick else args.agents
@@ -186,14 +186,7 @@ def run(args, log):
     )
     rows, failures = [], []
     with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
-        env = ros_environment(
-            dom,
-            base={
-                k: v
-                for k, v in os.environ.items()
-                if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
-            },
-        )
+        env = private_ros_environment(dom)
         for n in sizes:
             timeout = 60 + int(n * rounds / 10)
             path = os.path.join(workdir, f"bench_{n}.yaml")

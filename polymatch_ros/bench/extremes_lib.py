@@ -45,18 +45,19 @@ class Outcome:
     rows: tuple = field(default=())
 
 
-def scene(dim, order=1, *, count=6, seed=1, kappa=1.0, gamma=1.0, mass=0.5, shape=None,
-          rotations="uniform", centroids=None, velocities=None, t_end=10.0, samples=None,
-          scales=None,
-          representation="auto", max_steps=None):
-    """One group of ``count`` polytopes (regular d-simplices unless ``shape``).
+def scene_data(dim, order=1, *, count=6, seed=1, kappa=1.0, gamma=1.0, mass=0.5, shape=None,
+               rotations="uniform", centroids=None, velocities=None, t_end=10.0, samples=None,
+               scales=None, representation="auto", kappa_2=None, L=None, integrator=None,
+               group_name="g", extra_groups=()):
+    """The scene dict (the YAML format of config/*.yaml) of one group of ``count`` polytopes
+    (regular d-simplices unless ``shape``), followed by ``extra_groups``.
 
-    The model is (A-1), (A-2) or (F-1) as the arguments select."""
-    from ..core import load_scene
+    The model is (A-1), (A-2), (F-1) or, with ``kappa_2``/``L``, (F-2) as the arguments select."""
     model = {"order": order, "kappa": kappa, "gamma": gamma, "representation": representation}
     if order == 2:
         model["mass"] = mass
-    group = {"name": "g", "shape": shape or {"simplex": dim}, "count": count,
+    model.update({k: v for k, v in (("kappa_2", kappa_2), ("L", L)) if v is not None})
+    group = {"name": group_name, "shape": shape or {"simplex": dim}, "count": count,
              "rotations": rotations,
              "centroids": centroids or {"box": [-2.0, 2.0]}}
     if scales is not None:
@@ -66,10 +67,18 @@ def scene(dim, order=1, *, count=6, seed=1, kappa=1.0, gamma=1.0, mass=0.5, shap
     time = {"t_end": t_end}
     if samples is not None:
         time["samples"] = samples
-    data = {"dimension": dim, "seed": seed, "model": model, "time": time, "groups": [group]}
-    if max_steps is not None:
-        data["integrator"] = {"max_steps": max_steps}
-    return load_scene(data)
+    data = {"dimension": dim, "seed": seed, "model": model, "time": time,
+            "groups": [group, *extra_groups]}
+    if integrator is not None:
+        data["integrator"] = integrator
+    return data
+
+
+def scene(dim, order=1, *, max_steps=None, **kw):
+    """One group of polytopes (``scene_data``'s arguments) -> Scene, with ``max_steps``."""
+    from ..core import load_scene
+    integrator = None if max_steps is None else {"max_steps": max_steps}
+    return load_scene(scene_data(dim, order, integrator=integrator, **kw))
 
 
 def stiff_mass_scene(order, count, mass=1e-8, **kw):

@@ -26,16 +26,14 @@ ORDER = 50
 
 
 def add_arguments(p):
-    from .options import at_least, float_list
-    p.add_argument("--steps", type=at_least(10), default=100_000,
-                   help="fixed steps per run (default 100000)")
-    p.add_argument("--dt", type=at_least(1e-300, float), default=0.05,
-                   help="fixed step (default 0.05)")
-    p.add_argument("--n", type=at_least(2), default=4, help="agents (default 4)")
-    p.add_argument("--dim", type=at_least(2), default=3, help="dimension (default 3)")
+    from .options import add_number, float_list
+    add_number(p, "--steps", 10, 100_000, "fixed steps per run")
+    add_number(p, "--dt", 1e-300, 0.05, "fixed step", float)
+    add_number(p, "--n", 2, 4, "agents")
+    add_number(p, "--dim", 2, 3, "dimension")
     p.add_argument("--tolerances", type=float_list(1e-300), default=[1e-6, 1e-9],
                    help="rtol = atol of scipy RK45/DOP853 and ours adaptive (default 1e-6,1e-9)")
-    p.add_argument("--seed", type=at_least(0), default=1, help="scene seed (default 1)")
+    add_number(p, "--seed", 0, 1, "scene seed")
 
 
 def _scene(order, n, dim, t_end, seed):

@@ -26,14 +26,13 @@ TARGET_SPEEDUP = 1000.0
 
 
 def add_arguments(p):
-    from .options import at_least, int_list
+    from .options import add_number, int_list
     p.add_argument("--sizes", type=int_list(2), default=[1000, 10_000, 100_000],
                    help="N values (default 1000,10000,100000)")
-    p.add_argument("--dim", type=at_least(2), default=3, help="dimension (default 3)")
-    p.add_argument("--sample", type=at_least(1), default=200,
-                   help="agents the naive sum is timed on (default 200)")
-    p.add_argument("--full-naive-max", type=at_least(0), default=2000,
-                   help="also run the naive sum over ALL agents when N <= this (default 2000)")
+    add_number(p, "--dim", 2, 3, "dimension")
+    add_number(p, "--sample", 1, 200, "agents the naive sum is timed on")
+    add_number(p, "--full-naive-max", 0, 2000,
+               "also run the naive sum over ALL agents when N <= this")
 
 
 def naive_rates(mats, idx, scale):

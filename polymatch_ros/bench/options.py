@@ -40,3 +40,9 @@ def at_least(minimum, convert=int):
             raise argparse.ArgumentTypeError(f"must be >= {minimum:g}, got {value}")
         return value
     return parse
+
+
+def add_number(parser, flag, minimum, default, what, convert=int):
+    """Option ``flag``: one number >= minimum (``at_least``); help ``what (default D)``."""
+    parser.add_argument(flag, type=at_least(minimum, convert), default=default,
+                        help=f"{what} (default {default})")

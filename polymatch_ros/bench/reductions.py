@@ -13,9 +13,8 @@ ORDER = 70
 
 
 def add_arguments(p):
-    from .options import at_least
-    p.add_argument("--agents", type=at_least(2), default=1000,
-                   help="agents per case (default 1000)")
+    from .options import add_number
+    add_number(p, "--agents", 2, 1000, "agents per case")
 
 
 def _scene(dim, n, t_end, **model):

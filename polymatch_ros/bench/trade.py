@@ -103,7 +103,7 @@ def run(args, log):
     from domain_coordinator import domain_id
 
     from ..core.scene import load_scene
-    from ..ros.ros_env import ros_environment
+    from ..ros.ros_env import private_ros_environment
     from .report import Report
 
     report = Report(NAME, "Speed against accuracy over the ROS node set (`polymatch bench trade`)")
@@ -120,14 +120,7 @@ def run(args, log):
             fh.write(SCENE_YAML)
         scene = replace(load_scene(path), t_end=t_end)
         ref = _reference(scene, np.linspace(0.0, t_end, 41))
-        env = ros_environment(
-            dom,
-            base={
-                k: v
-                for k, v in os.environ.items()
-                if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
-            },
-        )
+        env = private_ros_environment(dom)
         from ..core.integrators import METHODS
 
         for method, dt in methods:

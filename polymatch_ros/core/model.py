@@ -326,6 +326,10 @@ class System:
         """True when the group has local rows to advance (an agent holds rows of some groups)."""
         return gs is not None and self.group.count(gs.rot) > 0
 
+    def per_active_group(self, groups: Sequence, fn) -> list:
+        """[fn(gi, gs) per group], None for a group without local rows (``is_active``)."""
+        return [fn(gi, gs) if self.is_active(gs) else None for gi, gs in enumerate(groups)]
+
     def rates(self, stage: State, coupling: Coupling) -> list[tuple | None]:
         """Stage derivatives (k_rot, k_x, k_v, k_w) per local group; k_rot in so(d) (spatial).
 
@@ -333,16 +337,12 @@ class System:
         Centroid entries are None when centroids are solved exactly.
         """
         m = self.model
-        out = []
-        for gi, gs in enumerate(stage.groups):
-            if not self.is_active(gs):
-                out.append(None)
-                continue
+
+        def group_rates(gi, gs):
             rate = self.rotation_rate(gi, gs.rot, coupling)
             if m.order == 1:
                 if m.centroids_exact:
-                    out.append((rate, None, None, None))
-                    continue
+                    return rate, None, None, None
                 k_rot, k_w = rate, None
             else:
                 k_rot, k_w = gs.w, (rate - m.gamma * gs.w) / m.mass
@@ -353,8 +353,8 @@ class System:
                     k_x = force / m.gamma
                 else:
                     k_x, k_v = gs.v, (force - m.gamma * gs.v) / m.mass
-            out.append((k_rot, k_x, k_v, k_w))
-        return out
+            return k_rot, k_x, k_v, k_w
+        return self.per_active_group(stage.groups, group_rates)
 
     def in_chart(self, rates: list, thetas: Sequence | None) -> list:
         """Rates in the psi-chart centred at the step start: k_rot -> dpsi^{-1}_Theta(k_rot)."""

@@ -36,20 +36,12 @@ def check_run(scene, method=None, dt=None, tolerance=None, *, distributed=False,
     name, why = resolve_method(scene, method, tolerance, distributed)
     spec = scene.integrator
     if name == "adaptive":
-        if dt is not None:
-            raise ParameterError(f"--dt: the adaptive integrator chooses its own steps ({why}); "
-                                 f"use --tolerance, or pick a fixed-step method with -i")
-        if spec.dt is not None:
-            warnings.warn(f"integrator.dt = {spec.dt:g} is not used: the adaptive integrator "
-                          f"runs ({why})", stacklevel=2)
+        _refuse_unused("dt", dt, spec.dt, f"the adaptive integrator chooses its own steps ({why})",
+                       "use --tolerance, or pick a fixed-step method with -i")
         steps = 0
     else:
-        if tolerance is not None:
-            raise ParameterError(f"--tolerance: {name} takes fixed steps ({why}); use --dt, or "
-                                 f"-i adaptive for a tolerance")
-        if spec.tolerance is not None:
-            warnings.warn(f"integrator.tolerance = {spec.tolerance:g} is not used: {name} takes "
-                          f"fixed steps ({why})", stacklevel=2)
+        _refuse_unused("tolerance", tolerance, spec.tolerance, f"{name} takes fixed steps ({why})",
+                       "use --dt, or -i adaptive for a tolerance")
         step = dt if dt is not None else (spec.dt or DEFAULT_DT)
         where = "--dt" if dt is not None else "integrator.dt"
         try:
@@ -60,6 +52,15 @@ def check_run(scene, method=None, dt=None, tolerance=None, *, distributed=False,
             raise ParameterError(str(exc)) from None
     _check_memory(scene, steps, kept_samples, limits)
     return steps
+
+
+def _refuse_unused(option, given, in_scene, reason, instead):
+    """Refuse ``--option`` given on the command line, warn about the scene's
+    ``integrator.option``: the resolved integrator would not use either (``reason``)."""
+    if given is not None:
+        raise ParameterError(f"--{option}: {reason}; {instead}")
+    if in_scene is not None:
+        warnings.warn(f"integrator.{option} = {in_scene:g} is not used: {reason}", stacklevel=3)
 
 
 def _check_memory(scene, steps, kept_samples, limits):

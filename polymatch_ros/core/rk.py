@@ -14,7 +14,7 @@ import numpy as np
 
 from .model import Coupling, GroupState, State, System
 from .so.base import Array
-from .solver import Method, MethodInfo, Stepper, lincomb
+from .solver import Method, MethodInfo, Stepper, advance_active, lincomb
 
 
 def rk_stability(a: Sequence, b: Sequence, z) -> np.ndarray:
@@ -58,12 +58,8 @@ class ExplicitRK(Method):
                 final: bool) -> tuple[State, list]:
         """(y + h sum row_j k_j, per-group rotation increments) — a stage or the step's end."""
         model = system.model
-        groups, thetas = [], []
-        for gi, gs in enumerate(y.groups):
-            if not system.is_active(gs):
-                groups.append(gs)
-                thetas.append(None)
-                continue
+
+        def combine_group(gi, gs):
             kk = [k[gi] for k in ks]
             rot, theta = self.move_rotation(system, gs.rot, h, row, [k[0] for k in kk], final)
             x, v, w = gs.x, gs.v, gs.w
@@ -73,9 +69,9 @@ class ExplicitRK(Method):
                     v = lincomb(gs.v, h, row, [k[2] for k in kk])
             if model.order == 2:
                 w = lincomb(gs.w, h, row, [k[3] for k in kk])
-            groups.append(GroupState(x, rot, v, w))
-            thetas.append(theta)
-        return State(y.t, tuple(groups)), thetas
+            return GroupState(x, rot, v, w), theta
+        groups, thetas = advance_active(system, y.groups, combine_group)
+        return State(y.t, groups), thetas
 
     def move_rotation(self, system: System, rot: Array, h: float, row: Sequence[float],
                       slopes: list, final: bool) -> tuple[Array, Array | None]:

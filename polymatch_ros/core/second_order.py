@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from .model import Coupling, GroupState, State, System
-from .solver import Method, MethodInfo, Stepper
+from .solver import Method, MethodInfo, Stepper, advance_active
 
 #: |z| below which phi_k(z) is summed as a series (expm1-based formulas cancel there)
 PHI_SERIES_RADIUS = 1.0
@@ -70,15 +70,12 @@ class ExponentialLie(Method):
     def _forces(self, system, stage, coupling):
         """Per group (N(O) of the rotations, centroid force / m or None), None when inactive."""
         m = system.model
-        out = []
-        for gi, gs in enumerate(stage.groups):
-            if not system.is_active(gs):
-                out.append(None)
-                continue
+
+        def forces(gi, gs):
             n_rot = system.rotation_rate(gi, gs.rot, coupling) / m.mass
             n_x = None if m.centroids_exact else system.centroid_force(gi, gs.x, coupling) / m.mass
-            out.append((n_rot, n_x))
-        return out
+            return n_rot, n_x
+        return system.per_active_group(stage.groups, forces)
 
     @staticmethod
     def _predict(system, y, h, phis, f1):
@@ -163,12 +160,8 @@ class LieVerlet(Method):
     def _kick_drift(system, y, h, damp, c0, centroids):
         """Damp and kick by h/2 from the step start, drift by h: (mid state, half-step v)."""
         m = system.model
-        mid, half_v = [], []
-        for gi, gs in enumerate(y.groups):
-            if not system.is_active(gs):
-                mid.append(gs)
-                half_v.append(None)
-                continue
+
+        def kick_drift(gi, gs):
             w = damp * gs.w + (0.5 * h / m.mass) * system.rotation_rate(gi, gs.rot, c0)
             rot = system.group.retract(h * w, gs.rot)
             if centroids is not None:
@@ -177,9 +170,9 @@ class LieVerlet(Method):
             else:
                 hv = damp * gs.v + (0.5 * h / m.mass) * system.centroid_force(gi, gs.x, c0)
                 x, v = gs.x + h * hv, hv
-            mid.append(GroupState(x, rot, v, w))
-            half_v.append(hv)
-        return State(y.t + h, tuple(mid)), half_v
+            return GroupState(x, rot, v, w), hv
+        mid, half_v = advance_active(system, y.groups, kick_drift)
+        return State(y.t + h, mid), half_v
 
     def stages(self, system: System, y: State, h: float, coupling: Coupling,
                centroids: list | None) -> Stepper:
@@ -187,17 +180,15 @@ class LieVerlet(Method):
         damp = math.exp(-m.gamma * h / (2.0 * m.mass))
         mid, half_v = self._kick_drift(system, y, h, damp, coupling, centroids)
         c1 = yield from system.evaluate(mid, first_stage=True)
-        out = []
-        for gi, (gs, hv) in enumerate(zip(mid.groups, half_v)):
-            if not system.is_active(gs):
-                out.append(gs)
-                continue
+
+        def kick_damp(gi, gs):
             w = damp * (gs.w + (0.5 * h / m.mass) * system.rotation_rate(gi, gs.rot, c1))
             v = gs.v
-            if hv is not None:
-                v = damp * (hv + (0.5 * h / m.mass) * system.centroid_force(gi, gs.x, c1))
-            out.append(GroupState(gs.x, gs.rot, v, w))
-        return State(y.t + h, tuple(out), coupling=c1)
+            if half_v[gi] is not None:
+                v = damp * (half_v[gi] + (0.5 * h / m.mass) * system.centroid_force(gi, gs.x, c1))
+            return GroupState(gs.x, gs.rot, v, w), None
+        end, _ = advance_active(system, mid.groups, kick_damp)
+        return State(y.t + h, end, coupling=c1)
 
     def spectral_radius(self, h: float, a: np.ndarray) -> float:
         a = np.atleast_2d(np.asarray(a, dtype=float))

@@ -139,8 +139,18 @@ def exact_centroids(system: System, y: State, coupling: Coupling, h: float) -> l
 
     Inactive groups (no local rows) are None.
     """
-    return [system.exact_centroids(gi, gs, coupling, h) if system.is_active(gs) else None
-            for gi, gs in enumerate(y.groups)]
+    return system.per_active_group(
+        y.groups, lambda gi, gs: system.exact_centroids(gi, gs, coupling, h))
+
+
+def advance_active(system: System, groups: Sequence, fn) -> tuple[tuple, list]:
+    """(new group states, per-group extras) from fn(gi, gs) -> (new state, extra).
+
+    A group without local rows (``System.is_active``) is kept as it is, its extra None.
+    """
+    done = system.per_active_group(groups, fn)
+    states = tuple(gs if r is None else r[0] for gs, r in zip(groups, done))
+    return states, [None if r is None else r[1] for r in done]
 
 
 def with_centroids(groups: Sequence, centroids: list | None) -> tuple:

@@ -21,7 +21,7 @@ from ..core.simulate import plan, prepare
 from . import wire
 from .exchange import DropCounter, Layout
 from .params import AGENT, declare
-from .process import ros_main
+from .process import NodeApp, ros_main
 
 
 def local_state(scene, layout):
@@ -39,7 +39,7 @@ def local_state(scene, layout):
     return State(0.0, tuple(groups))
 
 
-class AgentBase:
+class AgentBase(NodeApp):
     """Scene, state and publishing of the agents one process hosts; ``run()`` -> exit code.
 
     Subclasses set ``mode`` and define ``step_size()`` and ``loop()``.
@@ -251,16 +251,8 @@ class AgentBase:
         self.flush_poses()
         return 0
 
-    def report(self):
-        """The final lines: one for people, then the run record (JSON) for programs."""
-        if self.finished:
-            rec = self.record()
-            print(rec.describe(), flush=True)
-            print(rec.to_json(), flush=True)
-
-    def destroy(self):
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
+    def final_record(self):
+        return self.record() if self.finished else None
 
 
 def make_agent(argv=None):

@@ -30,10 +30,10 @@ from . import wire
 from .exchange import DropCounter
 from .monitor_output import diagnostics, markers
 from .params import MONITOR, declare
-from .process import ros_main
+from .process import NodeApp, ros_main
 
 
-class MonitorNode:
+class MonitorNode(NodeApp):
     interrupted_exit = 0  # the monitor runs until it is stopped: Ctrl-C is its normal end
 
     def __init__(self, node, params):
@@ -69,9 +69,9 @@ class MonitorNode:
         node, dim = self.node, self.model.dim
         mode = self.params["mode"]
         for a in range(self.n):
-            wire.subscription(node, "pose", self._pose_cb(a), dim, a, mode=mode)
+            wire.subscription(node, "pose", self._receiver(a, "pose"), dim, a, mode=mode)
             if self.model.order == 2:
-                wire.subscription(node, "twist", self._twist_cb(a), dim, a, mode=mode)
+                wire.subscription(node, "twist", self._receiver(a, "twist"), dim, a, mode=mode)
         self.pub = {
             key: wire.publisher(node, key)
             for key in ("diameter", "diameter_centroid", "diameter_rotation")
@@ -80,9 +80,9 @@ class MonitorNode:
         self.status_pub = wire.publisher(node, "status")
         self.marker_pub = wire.publisher(node, "markers") if self.params["markers"] else None
 
-    def _decode(self, agent, decoder, msg):
-        got, reason = decoder(
-            msg, self.grp, self.model.dim, self.params["frame_id"], self.scene.t_end
+    def _decode(self, agent, kind, msg):
+        got, reason = wire.decode_motion(
+            kind, msg, self.grp, self.model.dim, self.params["frame_id"], self.scene.t_end
         )
         if got is None:
             self.drops(f"agent {agent}", reason)
@@ -100,27 +100,24 @@ class MonitorNode:
             self.drops(f"agent {agent}", "stale pose (a stamp from the past)")
         return False
 
-    def _pose_cb(self, agent):
+    def _receiver(self, agent, kind):
+        """The callback of one agent's pose or twist topic: the latest of each agent, and in
+        lockstep the pending report of its stamp (a pose as a Row, a twist as (v, W))."""
+        pose = kind == "pose"
+        latest, pending = (self.latest, self.pending) if pose else (self.velocity, self.pending_v)
+
         def receive(msg):
-            got = self._decode(agent, wire.decode_pose_msg, msg)
+            got = self._decode(agent, kind, msg)
             if got is None:
                 return
-            row = wire.Row(got.vec - self.scene.origin, got.rot)
-            self.latest[agent] = (got.key, row, time.monotonic())
-            if self.lockstep and self._fresh(agent, got.key, self.pending):
-                self.pending.setdefault(got.key, {})[agent] = row
-                self._report_complete()
-
-        return receive
-
-    def _twist_cb(self, agent):
-        def receive(msg):
-            got = self._decode(agent, wire.decode_twist_msg, msg)
-            if got is None:
-                return
-            self.velocity[agent] = (got.key, got.vec, got.rot)
-            if self.lockstep and self._fresh(agent, got.key, self.pending_v):
-                self.pending_v.setdefault(got.key, {})[agent] = (got.vec, got.rot)
+            if pose:
+                value = wire.Row(got.vec - self.scene.origin, got.rot)
+                latest[agent] = (got.key, value, time.monotonic())
+            else:
+                value = (got.vec, got.rot)
+                latest[agent] = (got.key, *value)
+            if self.lockstep and self._fresh(agent, got.key, pending):
+                pending.setdefault(got.key, {})[agent] = value
                 self._report_complete()
 
         return receive
@@ -201,16 +198,12 @@ class MonitorNode:
         while True:
             self.executor.spin_once(timeout_sec=0.5)
 
-    def report(self):
-        if self.last is not None:
-            rec = self.record()
-            rec.finished = True
-            print(rec.describe(), flush=True)
-            print(rec.to_json(), flush=True)
-
-    def destroy(self):
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
+    def final_record(self):
+        if self.last is None:
+            return None
+        rec = self.record()
+        rec.finished = True
+        return rec
 
 
 def make_monitor(argv=None):

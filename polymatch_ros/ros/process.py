@@ -12,6 +12,25 @@ from ..core.errors import PolymatchError
 from .ros_env import teardown_watchdog
 
 
+class NodeApp:
+    """What ``ros_main`` runs for an agent or the monitor: ``self.node`` spun by
+    ``self.executor``; its final lines are its run record (``final_record``), if any."""
+
+    def final_record(self):
+        """The RunRecord to print when the process ends, or None."""
+        return None
+
+    def report(self):
+        """The final lines: one for people, then the run record (JSON) for programs."""
+        rec = self.final_record()
+        if rec is not None:
+            print(rec.describe(), flush=True)
+            print(rec.to_json(), flush=True)
+
+    def destroy(self):
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+
 def ros_main(factory, label, argv=None):
     """Run ``factory(argv).run()``; return the exit code.
 

@@ -37,11 +37,13 @@ class PeerTable:
         want_v = self.model.order == 2 and self.model.centroids_exact
         for a in layout.peers:
             self.subs.append(
-                wire.subscription(node, "pose", self._pose_cb(a), dim, a, mode="realtime")
+                wire.subscription(node, "pose", self._receiver(a, "pose"), dim, a, mode="realtime")
             )
             if want_v and self.layout.owner[a][0] in layout.local_groups:
                 self.subs.append(
-                    wire.subscription(node, "twist", self._twist_cb(a), dim, a, mode="realtime")
+                    wire.subscription(
+                        node, "twist", self._receiver(a, "twist"), dim, a, mode="realtime"
+                    )
                 )
 
     def _entry(self, agent):
@@ -49,29 +51,19 @@ class PeerTable:
             agent, SimpleNamespace(t=-np.inf, x=None, rot=None, v=None, heard=0.0)
         )
 
-    def _pose_cb(self, agent):
+    def _receiver(self, agent, kind):
+        """The callback of one peer's pose or twist topic: decoded messages wait in ``pending``
+        (a pose as (t, offset x, rotation), a twist as its centroid velocity)."""
+
         def receive(msg):
-            got, reason = wire.decode_pose_msg(
-                msg, self.grp, self.model.dim, self.frame_id, self.t_max
+            got, reason = wire.decode_motion(
+                kind, msg, self.grp, self.model.dim, self.frame_id, self.t_max
             )
             if got is None:
                 self.drops(f"agent {agent}", reason)
                 return
-            self.pending[agent].append(
-                (time.monotonic(), "pose", (got.t, got.vec - self.origin, got.rot))
-            )
-
-        return receive
-
-    def _twist_cb(self, agent):
-        def receive(msg):
-            got, reason = wire.decode_twist_msg(
-                msg, self.grp, self.model.dim, self.frame_id, self.t_max
-            )
-            if got is None:
-                self.drops(f"agent {agent}", reason)
-                return
-            self.pending[agent].append((time.monotonic(), "twist", got.vec))
+            value = (got.t, got.vec - self.origin, got.rot) if kind == "pose" else got.vec
+            self.pending[agent].append((time.monotonic(), kind, value))
 
         return receive
 

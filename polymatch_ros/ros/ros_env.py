@@ -43,6 +43,14 @@ def ros_environment(domain_id=None, base=None, mode="lockstep"):
     return env
 
 
+def private_ros_environment(domain_id, mode="lockstep"):
+    """``ros_environment`` of a domain reserved for one run (a benchmark, a test): the user's
+    own ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE do not carry over."""
+    user = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+    base = {k: v for k, v in os.environ.items() if k not in user}
+    return ros_environment(domain_id, base=base, mode=mode)
+
+
 @contextlib.contextmanager
 def reserved_domain_id():
     """The user's ROS_DOMAIN_ID if set, else one reserved for as long as the context lasts."""

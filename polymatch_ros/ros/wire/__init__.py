@@ -12,27 +12,32 @@ from .codec import (
     ROTATION_TOL,
     STAGE_FORMAT,
     STAMP_SLACK,
-    Received,
     Stage,
-    array_to_state,
-    decode_pose_msg,
     decode_stage,
-    decode_twist_msg,
     encode_stage,
     orthogonality,
-    pose_fields,
-    pose_message,
-    pose_to_state,
     rot_from_values,
     rot_size,
     rot_values,
     stamp_of,
     time_key,
+)
+from .ensemble import Row, assemble  # noqa: F401
+from .motion import (
+    MOTIONS,
+    Received,
+    array_to_state,
+    decode_motion,
+    decode_pose_msg,
+    decode_twist_msg,
+    motion_message,
+    pose_fields,
+    pose_message,
+    pose_to_state,
     twist_fields,
     twist_message,
     twist_to_state,
 )
-from .ensemble import Row, assemble  # noqa: F401
 from .record import RECORD_KEY, RunRecord, drop_summary, run_records  # noqa: F401
 from .topics import (
     DEFAULT_ENSEMBLE,

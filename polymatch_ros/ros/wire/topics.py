@@ -116,61 +116,47 @@ def subscription(
     )
 
 
-def qos_profiles():
-    """QoS used on each kind of topic (imported lazily: rclpy is only needed here)."""
-    from rclpy.qos import (
-        DurabilityPolicy as D,
-    )
-    from rclpy.qos import (
-        HistoryPolicy as H,
-    )
-    from rclpy.qos import (
-        QoSProfile,
-    )
-    from rclpy.qos import (
-        ReliabilityPolicy as R,
-    )
+# QoS of each kind of topic: (history depth, None = keep all), reliable, latched
+QOS = {
+    # every lockstep stage must arrive.  VOLATILE: agents start only once their writers have
+    # matched every expected reader (TRANSIENT_LOCAL halves the round rate here)
+    "stage": (16, True, False),
+    # stage readers keep every sample: a flood on a peer's topic can then never evict the
+    # peer's real message before it is taken (it only blocks the flooding writer)
+    "stage_in": (None, True, False),
+    # poses: the monitor must see every lockstep pose; echo and RViz match RELIABLE/VOLATILE
+    "pose": (100, True, False),
+    # realtime peers: only the newest pose matters; a deeper queue would feed stale poses.
+    # BEST_EFFORT (as sensor data): a lost pose is replaced by the next one, whereas a
+    # RELIABLE reader holds every later pose back until the lost one is repaired (seconds
+    # on a loaded machine, where loopback UDP drops datagrams)
+    "latest": (1, False, False),
+    # headline values: a late `ros2 topic echo` still gets the last one
+    "latched": (1, True, True),
+    # run records: each writer keeps its last (latched); one reader's history holds every
+    # writer's (a topic without keys is one instance: depth is shared by all writers)
+    "status": (1, True, True),
+    "status_in": (1000, True, True),
+    # commands are not replayed to agents that join later (a restarted agent must not stop)
+    "control": (10, True, False),
+    "markers": (10, True, False),
+    "diagnostics": (10, True, False),
+}
 
-    return {
-        # every lockstep stage must arrive.  VOLATILE: agents start only once their writers
-        # have matched every expected reader (TRANSIENT_LOCAL halves the round rate here)
-        "stage": QoSProfile(
-            history=H.KEEP_LAST, depth=16, reliability=R.RELIABLE, durability=D.VOLATILE
-        ),
-        # stage readers keep every sample: a flood on a peer's topic can then never evict the
-        # peer's real message before it is taken (it only blocks the flooding writer)
-        "stage_in": QoSProfile(history=H.KEEP_ALL, reliability=R.RELIABLE, durability=D.VOLATILE),
-        # poses: the monitor must see every lockstep pose; echo and RViz match RELIABLE/VOLATILE
-        "pose": QoSProfile(
-            history=H.KEEP_LAST, depth=100, reliability=R.RELIABLE, durability=D.VOLATILE
-        ),
-        # realtime peers: only the newest pose matters; a deeper queue would feed stale poses.
-        # BEST_EFFORT (as sensor data): a lost pose is replaced by the next one, whereas a
-        # RELIABLE reader holds every later pose back until the lost one is repaired (seconds
-        # on a loaded machine, where loopback UDP drops datagrams)
-        "latest": QoSProfile(
-            history=H.KEEP_LAST, depth=1, reliability=R.BEST_EFFORT, durability=D.VOLATILE
-        ),
-        # headline values: a late `ros2 topic echo` still gets the last one
-        "latched": QoSProfile(
-            history=H.KEEP_LAST, depth=1, reliability=R.RELIABLE, durability=D.TRANSIENT_LOCAL
-        ),
-        # run records: each writer keeps its last (latched); one reader's history holds every
-        # writer's (a topic without keys is one instance: depth is shared by all writers)
-        "status": QoSProfile(
-            history=H.KEEP_LAST, depth=1, reliability=R.RELIABLE, durability=D.TRANSIENT_LOCAL
-        ),
-        "status_in": QoSProfile(
-            history=H.KEEP_LAST, depth=1000, reliability=R.RELIABLE, durability=D.TRANSIENT_LOCAL
-        ),
-        # commands are not replayed to agents that join later (a restarted agent must not stop)
-        "control": QoSProfile(
-            history=H.KEEP_LAST, depth=10, reliability=R.RELIABLE, durability=D.VOLATILE
-        ),
-        "markers": QoSProfile(
-            history=H.KEEP_LAST, depth=10, reliability=R.RELIABLE, durability=D.VOLATILE
-        ),
-        "diagnostics": QoSProfile(
-            history=H.KEEP_LAST, depth=10, reliability=R.RELIABLE, durability=D.VOLATILE
-        ),
-    }
+
+def qos_profiles():
+    """The rclpy QoSProfile of each entry of ``QOS`` (imported lazily: rclpy is only needed
+    here)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    def profile(depth, reliable, latched):
+        history = {"history": HistoryPolicy.KEEP_ALL}
+        if depth is not None:
+            history = {"history": HistoryPolicy.KEEP_LAST, "depth": depth}
+        return QoSProfile(
+            **history,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+        )
+
+    return {kind: profile(*spec) for kind, spec in QOS.items()}

@@ -1,0 +1,260 @@
+"""Pose and velocity messages (formats: see ``codec``), built and decoded from one table.
+
+d <= 3 they are geometry_msgs PoseStamped / TwistStamped, d >= 4 Float64MultiArray; a decoder
+checks the contents before the stamp (a corrupt message is named as such) and returns
+``(Received, None)`` or ``(None, reason)``, never raises.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .codec import ROTATION_TOL, _bad_numbers, _bad_stamp, orthogonality, stamp_of, time_key
+
+
+def pose_fields(grp, x, g):
+    """(position xyz, quaternion xyzw) of one agent for a PoseStamped (d <= 3)."""
+    pos = np.zeros(3)
+    pos[: len(x)] = x
+    if grp.dim == 2:
+        if grp.name == "angle":
+            theta = float(g[0])
+        else:
+            mat = grp.to_matrices(g)[0]
+            theta = math.atan2(mat[1, 0], mat[0, 0])
+        quat = np.array([0.0, 0.0, math.sin(theta / 2), math.cos(theta / 2)])
+    else:
+        from scipy.spatial.transform import Rotation
+
+        quat = Rotation.from_matrix(grp.to_matrices(g)[0]).as_quat()
+    return pos, quat
+
+
+def twist_fields(grp, v, w_row):
+    """(linear xyz, angular xyz) of one agent's velocities for a TwistStamped (d <= 3)."""
+    lin = np.zeros(3)
+    lin[: len(v)] = v
+    skew = grp.algebra_to_skew(w_row)[0]
+    ang = (
+        np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
+        if grp.dim == 3
+        else np.array([0.0, 0.0, skew[1, 0]])
+    )
+    return lin, ang
+
+
+def _array_message(t, vec, mat, labels):
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+    msg = Float64MultiArray()
+    d = len(vec)
+    msg.layout.dim = [
+        MultiArrayDimension(label=labels[0], size=1, stride=1),
+        MultiArrayDimension(label=labels[1], size=d, stride=d),
+        MultiArrayDimension(label=labels[2], size=d * d, stride=d * d),
+    ]
+    msg.data = [float(t)] + [float(v) for v in vec] + [float(v) for v in np.asarray(mat).ravel()]
+    return msg
+
+
+def _stamped(cls, t, frame_id):
+    msg = cls()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp_of(t)
+    msg.header.frame_id = frame_id
+    return msg
+
+
+def _numbers(vector, rotation):
+    """A geometry message's two parts as float arrays, and the reason they are unusable."""
+    vec = np.asarray(vector, dtype=float)
+    rot = np.asarray(rotation, dtype=float)
+    return vec, rot, _bad_numbers(np.concatenate([vec, rot]))
+
+
+def _out_of_plane(vec, rot):
+    """A 2-D message's parts outside the plane: z of the vector, x and y of the rotation."""
+    return max(abs(vec[2]), abs(rot[0]), abs(rot[1])) > ROTATION_TOL
+
+
+def pose_to_state(grp, dim, position, quat):
+    """PoseStamped contents -> ((x, one-row rotation), None) or (None, reason)."""
+    p, q, reason = _numbers(position, quat)
+    if reason:
+        return None, reason
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > ROTATION_TOL:
+        return None, "quaternion far from unit norm"
+    if dim == 2:
+        if _out_of_plane(p, q):
+            return None, "not a planar pose"
+        theta = 2.0 * math.atan2(q[2], q[3])
+        mat = np.array([[[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]]])
+        return (
+            p[:2].copy(),
+            grp.from_matrices(mat) if grp.name != "angle" else np.array([theta]),
+        ), None
+    from scipy.spatial.transform import Rotation
+
+    mat = Rotation.from_quat(q / norm).as_matrix()[None]
+    return (p[:3].copy(), grp.from_matrices(mat)), None
+
+
+def twist_to_state(grp, dim, linear, angular):
+    """TwistStamped contents -> ((v, one-row algebra element), None) or (None, reason)."""
+    lin, ang, reason = _numbers(linear, angular)
+    if reason:
+        return None, reason
+    if dim == 2:
+        if _out_of_plane(lin, ang):
+            return None, "not a planar velocity"
+        skew = np.array([[[0.0, -ang[2]], [ang[2], 0.0]]])
+        return (lin[:2].copy(), grp.algebra_from_skew(skew)), None
+    x, y, z = ang
+    skew = np.array([[[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]])
+    return (lin[:3].copy(), grp.algebra_from_skew(skew)), None
+
+
+def array_to_state(msg, dim, rot_check=True):
+    """Float64MultiArray pose/twist -> ((t, vector, matrix), None) or (None, reason)."""
+    data = np.asarray(msg.data, dtype=float)
+    if len(data) != 1 + dim + dim * dim or len(msg.layout.dim) != 3 or msg.layout.data_offset != 0:
+        return None, "malformed layout"
+    reason = _bad_numbers(data)
+    if reason:
+        return None, reason
+    mat = data[1 + dim :].reshape(dim, dim)
+    if rot_check:
+        if orthogonality(mat) > ROTATION_TOL or np.linalg.det(mat) < 0:
+            return None, "rotation not in SO(d)"
+    elif np.max(np.abs(mat + mat.T)) > ROTATION_TOL * max(1.0, np.max(np.abs(mat))):
+        return None, "angular velocity not skew"
+    return (float(data[0]), data[1 : 1 + dim].copy(), mat), None
+
+
+@dataclass
+class Received:
+    """A decoded pose or twist: stamp (s and integer ns key), vector, rotation or algebra row."""
+
+    t: float
+    key: int
+    vec: np.ndarray
+    rot: np.ndarray
+
+
+def _header_time(msg, frame_id, t_max):
+    if frame_id is not None and msg.header.frame_id != frame_id:
+        return None, f"unknown frame {msg.header.frame_id!r}"
+    sec, nsec = msg.header.stamp.sec, msg.header.stamp.nanosec
+    if nsec >= 1_000_000_000:
+        return None, "malformed header"
+    reason = _bad_stamp(sec + 1e-9 * nsec, t_max)
+    return (None, reason) if reason else ((sec + 1e-9 * nsec, time_key(sec, nsec)), None)
+
+
+def _array_time(t, t_max):
+    reason = _bad_stamp(t, t_max)
+    return (None, reason) if reason else ((t, int(round(t * 1e9))), None)
+
+
+@dataclass(frozen=True)
+class _Motion:
+    """How one kind of motion message carries an agent's state.
+
+    d <= 3: the geometry message ``cls``, whose field ``body`` holds the parts ``parts`` with
+    the components ``axes``; ``fields`` turns (vector, group row) into the parts' values and
+    ``to_state`` turns them back.  d >= 4: a Float64MultiArray with dims ``labels``, its matrix
+    from ``to_matrix`` and back through ``from_matrix``; ``rotation`` says whether the matrix is
+    a rotation (checked in SO(d)) or an angular velocity (checked skew).
+    """
+
+    cls: str
+    body: str
+    parts: tuple
+    axes: tuple
+    fields: object
+    to_state: object
+    labels: tuple
+    to_matrix: object
+    from_matrix: object
+    rotation: bool
+
+
+MOTIONS = {
+    "pose": _Motion(
+        "PoseStamped", "pose", ("position", "orientation"), ("xyz", "xyzw"),
+        pose_fields, pose_to_state, ("t", "centroid", "rotation_row_major"),
+        lambda grp, one: grp.to_matrices(one)[0], lambda grp, mat: grp.from_matrices(mat),
+        rotation=True,
+    ),
+    "twist": _Motion(
+        "TwistStamped", "twist", ("linear", "angular"), ("xyz", "xyz"),
+        twist_fields, twist_to_state, ("t", "velocity", "angular_row_major"),
+        lambda grp, w: grp.algebra_to_skew(w)[0], lambda grp, skew: grp.algebra_from_skew(skew),
+        rotation=False,
+    ),
+}
+
+
+def motion_message(kind, grp, t, vec, one, frame_id):
+    """One agent's pose or velocity message at simulated time t (type by dimension: see the
+    module doc)."""
+    spec = MOTIONS[kind]
+    if grp.dim >= 4:
+        return _array_message(t, vec, spec.to_matrix(grp, one), spec.labels)
+    from geometry_msgs import msg as geometry
+
+    msg = _stamped(getattr(geometry, spec.cls), t, frame_id)
+    body = getattr(msg, spec.body)
+    for part, axes, values in zip(spec.parts, spec.axes, spec.fields(grp, vec, one)):
+        for axis, value in zip(axes, values):
+            setattr(getattr(body, part), axis, float(value))
+    return msg
+
+
+def pose_message(grp, t, x, one, frame_id):
+    """One agent's pose message (centroid, rotation O_i)."""
+    return motion_message("pose", grp, t, x, one, frame_id)
+
+
+def twist_message(grp, t, v, w_one, frame_id):
+    """One agent's velocity message (centroid velocity, spatial angular velocity W_i)."""
+    return motion_message("twist", grp, t, v, w_one, frame_id)
+
+
+def decode_motion(kind, msg, grp, dim, frame_id=None, t_max=None):
+    """A pose or twist message -> (Received, None) or (None, reason).
+
+    ``frame_id`` (d <= 3): a message in any other frame is refused; ``t_max``: stamps must lie
+    in [0, t_max].
+    """
+    spec = MOTIONS[kind]
+    if dim <= 3:
+        body = getattr(msg, spec.body)
+        parts = [
+            tuple(getattr(getattr(body, part), axis) for axis in axes)
+            for part, axes in zip(spec.parts, spec.axes)
+        ]
+        val, reason = spec.to_state(grp, dim, *parts)
+        if val is None:                 # the contents first: a corrupt message is named as such
+            return None, reason
+        stamp, reason = _header_time(msg, frame_id, t_max)
+        return (None, reason) if stamp is None else (Received(*stamp, val[0], val[1]), None)
+    res, reason = array_to_state(msg, dim, rot_check=spec.rotation)
+    if res is None:
+        return None, reason
+    t, vec, mat = res
+    stamp, reason = _array_time(t, t_max)
+    if stamp is None:
+        return None, reason
+    return Received(*stamp, vec, spec.from_matrix(grp, mat[None])), None
+
+
+def decode_pose_msg(msg, grp, dim, frame_id=None, t_max=None):
+    """PoseStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) or (None, reason)."""
+    return decode_motion("pose", msg, grp, dim, frame_id, t_max)
+
+
+def decode_twist_msg(msg, grp, dim, frame_id=None, t_max=None):
+    """TwistStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) | (None, reason)."""
+    return decode_motion("twist", msg, grp, dim, frame_id, t_max)
