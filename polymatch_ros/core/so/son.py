@@ -5,6 +5,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from .base import Array, MeanField, RotationGroup, polar_newton_schulz
+from .cayley import cayley4, cayley_series, dcay_inv4
 
 
 class SOn(RotationGroup):
@@ -12,7 +13,9 @@ class SOn(RotationGroup):
 
     cay(W) = (I - W/2)^{-1} (I + W/2),   dcay^{-1}_W(A) = (I - W/2) A (I + W/2).
     Both are exact and need no matrix exponential, which is what makes a
-    4th-order Munthe-Kaas step affordable for d >= 4.
+    4th-order Munthe-Kaas step affordable for d >= 4.  Neither needs a per-matrix
+    LAPACK call either (``cayley``): closed forms through so(4) = so(3) + so(3) for
+    d = 4, batched matrix products for the others.
     """
 
     name = "matrix"
@@ -77,14 +80,20 @@ class SOn(RotationGroup):
             c, s = np.cos(xi[:, 1, 0]), np.sin(xi[:, 1, 0])
             rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
             return rot @ g
-        half = 0.5 * xi
-        return np.linalg.solve(self._eye - half, (self._eye + half) @ g)
+        if self.dim == 4:
+            return cayley4(xi) @ g
+        return cayley_series(xi, g)
 
     def dpsi_inv(self, xi: Array, a: Array) -> Array:
         if self.dim == 2:
             return a
-        half = 0.5 * xi
-        return (self._eye - half) @ a @ (self._eye + half)
+        if self.dim == 4:
+            return dcay_inv4(xi, a)
+        t = (0.5 * xi) @ a                      # (I - H) A (I + H) = A + (HA)^T - HA - (HA) H
+        out = a + np.swapaxes(t, 1, 2)
+        out -= t
+        out -= t @ (0.5 * xi)
+        return out
 
     def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
         return g.sum(axis=0) if weights is None else np.tensordot(weights, g, axes=(0, 0))
