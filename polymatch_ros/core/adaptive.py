@@ -104,7 +104,7 @@ class _Chart:
         grp = self.system.group
         groups = list(self.y.groups)
         thetas = [None] * len(groups)
-        if len(self.parts) == 1:                      # one group, rotations only (first order)
+        if self.single_part:                          # one group, rotations only (first order)
             gi, _, shape, _ = self.parts[0]
             gs = groups[gi]
             thetas[gi] = theta = vec.reshape(shape)
@@ -127,9 +127,8 @@ class _Chart:
     _INDEX = {"rot": 0, "x": 1, "v": 2, "w": 3}
 
     def pack(self, rates):
-        if len(self.parts) == 1:                      # one group, rotations only: no copy needed
-            gi, kind, _, _ = self.parts[0]
-            return rates[gi][self._INDEX[kind]].reshape(-1)
+        if self.single_part:                          # one group, rotations only: no copy needed
+            return rates[self.parts[0][0]][0].reshape(-1)
         out = np.empty(self.n)
         for gi, kind, shape, sl in self.parts:
             out[sl] = rates[gi][self._INDEX[kind]].reshape(-1)
@@ -332,12 +331,24 @@ class AdaptiveSolver:
                     for t, val in zip(times, vals)]
         gi, _, shape, _ = chart.parts[0]           # one group, rotations only: no chart states
         gs, grp, groups = y.groups[gi], system.group, list(y.groups)
+        dts = [t - y.t for t in times]
+        cents = self._first_order_centroids(gi, gs, dts) if system.model.order == 1 else \
+            [system.exact_centroids(gi, gs, self.coupling, dt) for dt in dts]
         out = []
-        for t, val in zip(times, vals):
-            x, v = system.exact_centroids(gi, gs, self.coupling, t - y.t)
+        for t, val, (x, v) in zip(times, vals, cents):
             groups[gi] = GroupState(x, grp.retract(val.reshape(shape), gs.rot), v, gs.w)
             out.append(State(t, tuple(groups)))
         return out
+
+    def _first_order_centroids(self, gi, gs, dts):
+        """``CentroidFlow.advance`` of (A-2)'s centroids for every dt at once (Prop. 2.1, m = 0).
+
+        x(dt) = mean + p(dt) (x - mean) with the flow's own propagator p(dt).
+        """
+        flow, mean_x = self.system.flows[gi], self.coupling.groups[gi].mean_x
+        decay = np.array([flow.propagator(dt)[1] for dt in dts])[:, None, None]
+        xs = mean_x + decay * (gs.x - mean_x)
+        return [(x, None) for x in xs]
 
     def _with_exact_centroids(self, st, dt, t):
         """``st`` at time t with decoupled centroids on their exact flow over dt (Prop. 2.1)."""

@@ -20,17 +20,18 @@ and the inverse differential at W of A = (c, e) is, in the same coordinates,
     e - b x e + (b.e) b/2 + (|a|^2 - |b|^2) e/4 + (a.c) b/2.
 
 d >= 5: with M = -W^2/4 (symmetric, 0 <= M <= |W|_F^2/8), (I - W/2)^{-1} =
-(I + W/2)(I + M)^{-1} and (I + M)^{-1} = prod_j (I + (-M)^(2^j)) to round-off once
+(I + W/2)(I + M)^{-1} and (I + M)^{-1} = prod_{j<k} (I + (-M)^(2^j)) to round-off once
 |M|^(2^k) < 2^-60.  A rotation whose |W|_F^2/8 exceeds SERIES_LIMIT is solved by LAPACK
-instead; the choice and the number of factors depend on that row alone.
+instead (a choice made by that row alone); k follows the largest |W| of the others, so a
+row's result depends on the rest of the batch only below round-off.
 """
 
 import numpy as np
 
 #: rows with |W|_F^2 / 8 (a bound of |M|_2) above this are solved by LAPACK
 SERIES_LIMIT = 1.0 / 16.0
-#: factors of the product: SERIES_LIMIT^(2^SERIES_FACTORS) < 2^-60
-SERIES_FACTORS = 4
+#: the product's remainder |M|^(2^k) must fall below this
+SERIES_ROUNDOFF = 2.0 ** -60
 
 
 def _quaternion_tables():
@@ -107,7 +108,7 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
     """cay(W) G for (N, d, d) skew W and matrices G, by batched products (d >= 5).
 
     Rows beyond SERIES_LIMIT are solved by LAPACK; the others by the product form of
-    (I + M)^{-1} with SERIES_FACTORS factors (module docstring).
+    (I + M)^{-1} with as many factors as the largest of them needs (module docstring).
     """
     bound = np.einsum("nij,nij->n", w, w) / 8.0
     far = bound > SERIES_LIMIT
@@ -120,9 +121,12 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
         if np.any(near):
             out[near] = cayley_series(w[near], g[near])
         return out
+    factors, largest = 1, float(np.max(bound, initial=0.0))
+    while largest ** (2 ** factors) >= SERIES_ROUNDOFF:     # at most 4: largest <= 1/16
+        factors += 1
     neg_m = 0.25 * (w @ w)                              # -M = W^2 / 4
     y = g + neg_m @ g
-    for _ in range(SERIES_FACTORS - 1):
+    for _ in range(factors - 1):
         neg_m = neg_m @ neg_m
         y += neg_m @ y
     y += 0.5 * (w @ y)                                  # (I + W/2) (I + M)^{-1} G
