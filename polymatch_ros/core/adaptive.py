@@ -334,9 +334,10 @@ class AdaptiveSolver:
         dts = [t - y.t for t in times]
         cents = self._first_order_centroids(gi, gs, dts) if system.model.order == 1 else \
             [system.exact_centroids(gi, gs, self.coupling, dt) for dt in dts]
+        rots = grp.retract_each(vals.reshape((len(vals),) + shape), gs.rot)
         out = []
-        for t, val, (x, v) in zip(times, vals, cents):
-            groups[gi] = GroupState(x, grp.retract(val.reshape(shape), gs.rot), v, gs.w)
+        for t, rot, (x, v) in zip(times, rots, cents):
+            groups[gi] = GroupState(x, rot, v, gs.w)
             out.append(State(t, tuple(groups)))
         return out
 

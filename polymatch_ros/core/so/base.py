@@ -85,6 +85,10 @@ class RotationGroup:
         """psi(xi) O for each rotation; psi is exp or Cayley."""
         raise NotImplementedError
 
+    def retract_each(self, xis: np.ndarray, g: Array) -> list[Array]:
+        """[psi(xi) O for xi in xis]: xis stacks algebra arrays along a leading axis."""
+        return [self.retract(xi, g) for xi in xis]
+
     def dpsi_inv(self, xi: Array, a: Array) -> Array:
         """Inverse right-trivialised differential of psi at xi, applied to a."""
         raise NotImplementedError

@@ -73,6 +73,9 @@ class SO2(RotationGroup):
     def retract(self, xi: Array, g: Array) -> Array:
         return g + xi
 
+    def retract_each(self, xis: np.ndarray, g: Array) -> list[Array]:
+        return list(g + xis)
+
     def dpsi_inv(self, xi: Array, a: Array) -> Array:
         return a
 
