@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from polymatch_ros.core.so import SOn
-from polymatch_ros.core.so.cayley import SERIES_LIMIT, cayley4, cayley_series, dcay_inv4
+from polymatch_ros.core.so.cayley import SERIES_LIMIT, cayley_series
+from polymatch_ros.core.so.so4 import cayley4, dcay_inv4, pair_matrices, quaternion_pairs
 
 
 def _skew(rng, n, d, scale):
@@ -76,3 +77,16 @@ def test_son_maps_are_the_cayley_map_and_its_inverse_differential(dim):
     np.testing.assert_allclose(grp.retract(w, g), _cayley_by_solve(w, g), rtol=0, atol=1e-14)
     np.testing.assert_allclose(grp.dpsi_inv(w, a), (eye - 0.5 * w) @ a @ (eye + 0.5 * w),
                                rtol=0, atol=1e-14)
+
+
+def test_so4_rotations_are_unit_quaternion_pairs_and_retractions_stay_in_so4():
+    rng = np.random.default_rng(5)
+    g = _rotations(rng, 200, 4)
+    p, q = quaternion_pairs(g)
+    np.testing.assert_allclose(np.linalg.norm(p, axis=0), 1.0, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(pair_matrices(p, q), g, rtol=0, atol=1e-14)
+    grp, rot = SOn(4), g
+    for _ in range(200):                       # repeated retractions: no drift off SO(4)
+        rot = grp.retract(_skew(rng, 200, 4, 0.3), rot)
+    assert np.max(np.abs(np.swapaxes(rot, 1, 2) @ rot - np.eye(4))) < 1e-14
+    assert np.all(np.linalg.det(rot) > 0)

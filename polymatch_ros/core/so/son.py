@@ -5,7 +5,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from .base import Array, MeanField, RotationGroup, polar_newton_schulz
-from .cayley import cayley4, cayley_series, dcay_inv4
+from .cayley import cayley_series
+from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs
 
 
 class SOn(RotationGroup):
@@ -14,8 +15,8 @@ class SOn(RotationGroup):
     cay(W) = (I - W/2)^{-1} (I + W/2),   dcay^{-1}_W(A) = (I - W/2) A (I + W/2).
     Both are exact and need no matrix exponential, which is what makes a
     4th-order Munthe-Kaas step affordable for d >= 4.  Neither needs a per-matrix
-    LAPACK call either (``cayley``): closed forms through so(4) = so(3) + so(3) for
-    d = 4, batched matrix products for the others.
+    LAPACK call either: for d = 4 closed forms through so(4) = so(3) + so(3) and unit
+    quaternion pairs (``so4``), for the others batched matrix products (``cayley``).
     """
 
     name = "matrix"
@@ -81,8 +82,18 @@ class SOn(RotationGroup):
             rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
             return rot @ g
         if self.dim == 4:
-            return cayley4(xi) @ g
+            return cayley4_retract(xi, self._quaternion_pairs(g))
         return cayley_series(xi, g)
+
+    _pairs = (None, None)
+
+    def _quaternion_pairs(self, g):
+        """O = L(p) R(q) for d = 4, kept while the stages of a step retract around one O."""
+        cached, pairs = self._pairs
+        if cached is not g:
+            pairs = quaternion_pairs(g)
+            self._pairs = (g, pairs)
+        return pairs
 
     def dpsi_inv(self, xi: Array, a: Array) -> Array:
         if self.dim == 2:
@@ -100,7 +111,7 @@ class SOn(RotationGroup):
 
     def coupling(self, g: Array, s: MeanField) -> Array:
         d = self.dim
-        b = (g.reshape(-1, d) @ s.T).reshape(-1, d, d)  # b_i = O_i S^T
+        b = (g.reshape(-1, d) @ np.ascontiguousarray(s.T)).reshape(-1, d, d)  # b_i = O_i S^T
         return np.swapaxes(b, 1, 2) - b
 
     def tangent(self, a: Array, g: Array) -> Array:
