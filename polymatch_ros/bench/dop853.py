@@ -41,7 +41,8 @@ def add_arguments(p):
     from .options import at_least, float_list
     p.add_argument("--scene", default="congruent_triangles",
                    help="first-order, single-group congruent scene (default congruent_triangles)")
-    p.add_argument("--tolerances", type=float_list(1e-300), default=[10.0 ** -k for k in range(3, 13)],
+    p.add_argument("--tolerances", type=float_list(1e-300),
+                   default=[10.0 ** -k for k in range(3, 13)],
                    help="rtol = atol values (default 1e-3,1e-4,...,1e-12)")
     p.add_argument("--samples", type=at_least(2), default=301, help="sample times on [0, t_end] (default 301)")
     p.add_argument("--target", type=at_least(1e-300, float), default=TARGET_ERROR,
@@ -122,21 +123,23 @@ def _ratio_rows(results, ours, theirs, tols):
     rows = []
     for tol in tols:
         a, b = by[ours, tol], by[theirs, tol]
-        rows.append([f"{tol:.0e}", fmt_ms(a["wall"]), fmt_ms(b["wall"]), f"{a['wall'] / b['wall']:.2f}",
-                     f"{a['err']:.1e} / {b['err']:.1e}", fmt_ms(a["wall_end"]), fmt_ms(b["wall_end"]),
-                     f"{a['wall_end'] / b['wall_end']:.2f}", f"{a['err_own']:.1e} / {b['err_own']:.1e}"])
+        rows.append([f"{tol:.0e}", fmt_ms(a["wall"]), fmt_ms(b["wall"]),
+                     f"{a['wall'] / b['wall']:.2f}", f"{a['err']:.1e} / {b['err']:.1e}",
+                     fmt_ms(a["wall_end"]), fmt_ms(b["wall_end"]),
+                     f"{a['wall_end'] / b['wall_end']:.2f}",
+                     f"{a['err_own']:.1e} / {b['err_own']:.1e}"])
     return rows
 
 
 def _target_ratio_rows(results, ours, theirs, targets):
-    """Per error target: walls interpolated at that max error (log-log), and their ratio, A and B."""
+    """Per error target: walls interpolated at that max error (log-log) and their ratio, A, B."""
     from .timing import fmt_ms
     rows = []
     for target in targets:
         row = [f"{target:.0e}"]
         for wall_key, err_key in (("wall", "err"), ("wall_end", "err_own")):
-            walls = [_interpolate([(r[err_key], r[wall_key]) for r in results if r["solver"] == label],
-                                  target) for label in (ours, theirs)]
+            walls = [_interpolate([(r[err_key], r[wall_key]) for r in results
+                                   if r["solver"] == label], target) for label in (ours, theirs)]
             row += [fmt_ms(w) if w else "-" for w in walls]
             row.append(f"{walls[0] / walls[1]:.2f}" if all(walls) else "-")
         rows.append(row)
@@ -263,16 +266,17 @@ def run(args, log):
     report.table(header, _target_rows(results, solvers, target, "wall", "err", "evals"),
                  caption=f"Cheapest run with max error <= {target:.0e}, A ({n_samples} outputs)")
     ours, theirs = "ours (angle)", "scipy DOP853"
-    report.table(["rtol=atol", "A: ours ms", "A: scipy ms", "A: ours/scipy", "A: max err ours / scipy",
-                  "B: ours ms", "B: scipy ms", "B: ours/scipy", "B: max err ours / scipy"],
+    report.table(["rtol=atol", "A: ours ms", "A: scipy ms", "A: ours/scipy",
+                  "A: max err ours / scipy", "B: ours ms", "B: scipy ms", "B: ours/scipy",
+                  "B: max err ours / scipy"],
                  _ratio_rows(results, ours, theirs, tols),
-                 caption=f"{ours} against {theirs} at each tolerance: best of {repeats} interleaved "
-                         "repeats (ratio < 1: ours is faster)")
+                 caption=f"{ours} against {theirs} at each tolerance: best of {repeats} "
+                         "interleaved repeats (ratio < 1: ours is faster)")
     report.table(["target max error", "A: ours ms", "A: scipy ms", "A: ours/scipy", "B: ours ms",
                   "B: scipy ms", "B: ours/scipy"],
                  _target_ratio_rows(results, ours, theirs, RATIO_TARGETS),
-                 caption=f"{ours} against {theirs} at each error target: wall interpolated at that max "
-                         "error (\"-\": the sweep does not bracket it)")
+                 caption=f"{ours} against {theirs} at each error target: wall interpolated at "
+                         "that max error (\"-\": the sweep does not bracket it)")
     report.text(
         f"- \"wall ms interpolated\": log(wall) linear in log(error) between the two sweep points around "
         f"{target:.0e} (\"-\": the sweep does not bracket the target).",

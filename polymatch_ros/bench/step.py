@@ -43,8 +43,8 @@ def add_arguments(p):
                    help="skip N x d cells whose step is predicted to take longer (default 1.5)")
     p.add_argument("--dt", type=at_least(1e-300, float), default=0.05, help="step size (does not change the cost)")
     p.add_argument("--ratio-dims", type=int_list(2), default=[3, 4, 10],
-                   help="d values timed side by side at --n for the cost ratios between dimensions "
-                        "(default 3,4,10)")
+                   help="d values timed side by side at --n for the cost ratios between "
+                        "dimensions (default 3,4,10)")
 
 
 def _stepper(meth, scene, dt):
@@ -162,7 +162,8 @@ def dimension_ratios(args, log, report):
     repeats = args.repeats or (3 if args.quick else 15)
     scenes = [timing_scene(n, d, args.grid_order) for d in dims]
     log(f"step: dimension ratios at N = {n}: d = {dims}, {repeats} interleaved repeats")
-    timings = measure_interleaved([_stepper(METHODS["rkmk4"], sc, args.dt) for sc in scenes], repeats)
+    steppers = [_stepper(METHODS["rkmk4"], sc, args.dt) for sc in scenes]
+    timings = measure_interleaved(steppers, repeats)
     rows = []
     for k, (d, sc, t) in enumerate(zip(dims, scenes, timings)):
         row = [d, representation_label(sc.model.rotations), fmt_ms(t.best), fmt_ms(t.median)]
@@ -175,11 +176,13 @@ def dimension_ratios(args, log, report):
         rows.append(row)
     report.table(["d", "representation", "best ms", "median ms", "best / previous d",
                   "median / previous d", "(d / previous d)^3"], rows,
-                 caption=f"rkmk4, one step at N = {n:,}, {'first' if args.grid_order == 1 else 'second'}"
-                         f"-order model, dimensions interleaved ({repeats} repeats each)")
-    report.text("- A step costs O(N d^3): the ratio to the previous dimension should stay near or "
-                "below (d / previous d)^3; d = 3 (closed-form SoA) to d = 4 (matrices, closed-form "
-                "Cayley through so(4) = so(3) + so(3)) is the change of representation.")
+                 caption=f"rkmk4, one step at N = {n:,}, "
+                         f"{'first' if args.grid_order == 1 else 'second'}-order model, "
+                         f"dimensions interleaved ({repeats} repeats each)")
+    report.text("- A step costs O(N d^3): the ratio to the previous dimension should stay near "
+                "or below (d / previous d)^3; d = 3 (closed-form SoA) to d = 4 (matrices, "
+                "closed-form Cayley through so(4) = so(3) + so(3)) is the change of "
+                "representation.")
     return dict(zip(dims, timings))
 
 
@@ -224,9 +227,10 @@ def grid(args, log, report):
     if skipped:
         notes.append("Skipped: " + ", ".join(f"N = {n:,}, d = {d} (~{fmt_time(p)}/step)" for n, d, p in skipped)
                      + ".")
-    notes.append("The cost is O(N d^3) per evaluation: d = 2 uses angles (SO(2) is abelian), d = 3 the "
-                 "structure-of-arrays Cayley map, d >= 4 N x d x d matrices with the Cayley map in "
-                 "closed form (d = 4) or by batched matrix products (d >= 5), no per-matrix solves.")
+    notes.append("The cost is O(N d^3) per evaluation: d = 2 uses angles (SO(2) is abelian), "
+                 "d = 3 the structure-of-arrays Cayley map, d >= 4 N x d x d matrices with the "
+                 "Cayley map in closed form (d = 4) or by batched matrix products (d >= 5), no "
+                 "per-matrix solves.")
     report.text(*notes)
     return results, sizes, dims
 

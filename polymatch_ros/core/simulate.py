@@ -238,7 +238,7 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
     rep_text = {"angle": "angles (SO(2) is abelian: the first-order model is Kuramoto, "
                          "exp is addition)",
                 "so3": f"3x3 matrices, structure-of-arrays, {rep.retraction} map in closed form",
-                "matrix": f"{m.dim}x{m.dim} matrices, Cayley map without per-matrix solves"}[rep.name]
+                "matrix": f"{m.dim}x{m.dim} matrices, Cayley map, no per-matrix solves"}[rep.name]
     lines.append(f"rotations: {rep_text}")
     p = plan(scene, method, dt, tolerance, distributed=distributed, check=False)
     info = p.method.info
