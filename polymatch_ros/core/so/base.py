@@ -114,6 +114,22 @@ class RotationGroup:
         raise NotImplementedError
 
 
+#: multiply-adds below which OpenBLAS runs a product on one thread (2^18); a threaded product
+#: of a long, thin matrix stalls whenever the machine's cores are busy
+ONE_THREAD_PRODUCT = 1 << 18
+
+
+def rows_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b for a long (n, k) a and a small (k, m) b, in row blocks each on one thread."""
+    rows = max(1, ONE_THREAD_PRODUCT // (a.shape[1] * b.shape[1]))
+    if a.shape[0] <= rows:
+        return a @ b
+    out = np.empty((a.shape[0], b.shape[1]))
+    for start in range(0, a.shape[0], rows):
+        np.matmul(a[start:start + rows], b, out=out[start:start + rows])
+    return out
+
+
 def polar_newton_schulz(mats: np.ndarray, tol: float = 1e-15, max_iter: int = 12) -> np.ndarray:
     """Polar factor of near-orthogonal (N, d, d) matrices.
 

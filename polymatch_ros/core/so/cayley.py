@@ -44,12 +44,13 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
     factors, largest = 1, float(np.max(bound, initial=0.0))
     while largest ** (2 ** factors) >= SERIES_ROUNDOFF:     # at most 4: largest <= 1/16
         factors += 1
-    neg_m = 0.25 * (w @ w)                              # -M = W^2 / 4
+    half = 0.5 * w
+    neg_m = half @ half                                 # -M = W^2 / 4
     y = g + neg_m @ g
     for _ in range(factors - 1):
         neg_m = neg_m @ neg_m
         y += neg_m @ y
-    y += 0.5 * (w @ y)                                  # (I + W/2) (I + M)^{-1} G
+    y += half @ y                                       # (I + W/2) (I + M)^{-1} G
     y *= 2.0
     y -= g
     return y

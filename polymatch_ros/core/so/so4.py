@@ -21,6 +21,8 @@ around the same O (the stages of one step).
 
 import numpy as np
 
+from .base import rows_product
+
 
 def _quaternion_tables():
     """(T, B, M): T[(alpha, beta), (i, j)] = L(e_alpha) R(e_beta); B: the so(4) basis L_c, R_c;
@@ -43,31 +45,28 @@ def _quaternion_tables():
 
 
 _T4, _B4, _MULT = _quaternion_tables()
-# C-contiguous operands only: OpenBLAS splits a product with a transposed operand over
-# threads in a way that stalls on a busy machine
 _B4T = np.ascontiguousarray(_B4.T)
 _T4T = np.ascontiguousarray(_T4.T)
 
 
 def so4_split(w: np.ndarray) -> np.ndarray:
     """(N, 4, 4) skew matrices -> (6, N): the self-dual part a (rows 0-2), anti-self-dual b."""
-    return np.ascontiguousarray((0.25 * (w.reshape(-1, 16) @ _B4T)).T)
+    return np.ascontiguousarray((0.25 * rows_product(w.reshape(-1, 16), _B4T)).T)
 
 
 def so4_join(ab: np.ndarray) -> np.ndarray:
     """(6, N) parts (a, b) -> (N, 4, 4) skew matrices W x = a x - x b."""
-    return (np.ascontiguousarray(ab.T) @ _B4).reshape(-1, 4, 4)
+    return rows_product(ab.T, _B4).reshape(-1, 4, 4)
 
 
-def _cayley_factors(w):
-    """(P, Q) as (4, N) unit quaternions with cay(W) = L(P) R(Q) (module docstring)."""
-    ab = so4_split(w)
+def _cayley_factors(ab):
+    """(P, Q) as (4, N) unit quaternions with cay(W) = L(P) R(Q); ab = so4_split(W)."""
     sq = ab * ab
     a2 = sq[0] + sq[1] + sq[2]
     b2 = sq[3] + sq[4] + sq[5]
     s = 0.25 * (a2 - b2)
-    p = np.empty((4, w.shape[0]))
-    q = np.empty((4, w.shape[0]))
+    p = np.empty((4, ab.shape[1]))
+    q = np.empty((4, ab.shape[1]))
     p[0] = 1.0 - s
     q[0] = 1.0 + s
     p[1:] = ab[:3]
@@ -80,20 +79,21 @@ def _cayley_factors(w):
 def pair_matrices(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(4, N) quaternions p, q -> the (N, 4, 4) matrices of x -> p x conj(q)."""
     outer = (p[:, None, :] * q[None, :, :]).reshape(16, -1)
-    return np.ascontiguousarray((_T4T @ outer).T).reshape(-1, 4, 4)
+    return rows_product(outer.T, _T4).reshape(-1, 4, 4)
 
 
 def cayley4(w: np.ndarray) -> np.ndarray:
     """cay(W) for (N, 4, 4) skew matrices, as L(P) R(Q) / (|P| |Q|) (see the module)."""
-    return pair_matrices(*_cayley_factors(w))
+    return pair_matrices(*_cayley_factors(so4_split(w)))
 
 
 def quaternion_pairs(o: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(N, 4, 4) rotations -> unit quaternions (p, q), each (4, N), with O = L(p) R(q).
 
-    <O, L(e_a) R(e_b)> = 4 p_a q_b: the rank-one matrix p q^T, read along its largest column.
+    <O, L(e_a) R(e_b)> = 4 p_a q_b: the rank-one matrix p q^T (``m`` below, times 4), read
+    along its largest column.
     """
-    m = np.ascontiguousarray((o.reshape(-1, 16) @ _T4T).T).reshape(4, 4, -1)   # 4 p_a q_b
+    m = np.ascontiguousarray(rows_product(o.reshape(-1, 16), _T4T).T).reshape(4, 4, -1)
     col = np.argmax(np.einsum("abn,abn->bn", m, m), axis=0)
     p = np.take_along_axis(m, col[None, None, :], axis=1)[:, 0, :]
     p *= 1.0 / np.sqrt(np.einsum("an,an->n", p, p))
@@ -107,9 +107,9 @@ def quaternion_product(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return _MULT @ (u[:, None, :] * v[None, :, :]).reshape(16, -1)
 
 
-def cayley4_retract(w: np.ndarray, pair: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """cay(W) O for O = L(p) R(q), ``pair = (p, q)``: L(P p) R(Q q) as (N, 4, 4) matrices."""
-    big_p, big_q = _cayley_factors(w)
+def cayley4_retract(ab: np.ndarray, pair: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """cay(W) O for ab = so4_split(W) and O = L(p) R(q), ``pair = (p, q)``: L(P p) R(Q q)."""
+    big_p, big_q = _cayley_factors(ab)
     return pair_matrices(quaternion_product(big_p, pair[0]), quaternion_product(big_q, pair[1]))
 
 
@@ -118,9 +118,13 @@ def _cross(u, v):
                      u[0] * v[1] - u[1] * v[0]])
 
 
-def dcay_inv4(w: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """(I - W/2) A (I + W/2) for (N, 4, 4) skew W and A, in self-dual coordinates."""
-    ab, ce = so4_split(w), so4_split(x)
+def dcay_inv4(w: np.ndarray, x: np.ndarray, ab: np.ndarray | None = None) -> np.ndarray:
+    """(I - W/2) A (I + W/2) for (N, 4, 4) skew W and A, in self-dual coordinates.
+
+    ``ab``: so4_split(W) when the caller has it already.
+    """
+    ab = so4_split(w) if ab is None else ab
+    ce = so4_split(x)
     a, b, c, e = ab[:3], ab[3:], ce[:3], ce[3:]
     a2 = np.einsum("in,in->n", a, a)
     b2 = np.einsum("in,in->n", b, b)

@@ -4,9 +4,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .base import Array, MeanField, RotationGroup, polar_newton_schulz
+from .base import Array, MeanField, RotationGroup, polar_newton_schulz, rows_product
 from .cayley import cayley_series
-from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs
+from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split
 
 
 class SOn(RotationGroup):
@@ -17,6 +17,9 @@ class SOn(RotationGroup):
     4th-order Munthe-Kaas step affordable for d >= 4.  Neither needs a per-matrix
     LAPACK call either: for d = 4 closed forms through so(4) = so(3) + so(3) and unit
     quaternion pairs (``so4``), for the others batched matrix products (``cayley``).
+    For d = 4 the pairs of O and the so(4) parts of Theta are kept by identity while the
+    stages of a step reuse them: arrays handed to ``retract`` and ``dpsi_inv`` must not be
+    modified in place afterwards (no integrator does).
     """
 
     name = "matrix"
@@ -82,10 +85,19 @@ class SOn(RotationGroup):
             rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
             return rot @ g
         if self.dim == 4:
-            return cayley4_retract(xi, self._quaternion_pairs(g))
+            return cayley4_retract(self._so4_parts(xi), self._quaternion_pairs(g))
         return cayley_series(xi, g)
 
     _pairs = (None, None)
+    _parts = (None, None)
+
+    def _so4_parts(self, xi):
+        """so4_split(Theta), kept for dpsi_inv at the same Theta (RKMK: the same stage)."""
+        cached, parts = self._parts
+        if cached is not xi:
+            parts = so4_split(xi)
+            self._parts = (xi, parts)
+        return parts
 
     def _quaternion_pairs(self, g):
         """O = L(p) R(q) for d = 4, kept while the stages of a step retract around one O."""
@@ -99,19 +111,21 @@ class SOn(RotationGroup):
         if self.dim == 2:
             return a
         if self.dim == 4:
-            return dcay_inv4(xi, a)
-        t = (0.5 * xi) @ a                      # (I - H) A (I + H) = A + (HA)^T - HA - (HA) H
-        out = a + np.swapaxes(t, 1, 2)
-        out -= t
-        out -= t @ (0.5 * xi)
-        return out
+            return dcay_inv4(xi, a, self._so4_parts(xi))
+        half = 0.5 * xi                         # (I - H) A (I + H) = B + B H,  B = A - H A
+        b = a - half @ a
+        b += b @ half
+        return b
 
     def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
-        return g.sum(axis=0) if weights is None else np.tensordot(weights, g, axes=(0, 0))
+        # a BLAS product: summing over the leading axis of (N, d, d) is several times slower
+        n = g.shape[0]
+        w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
+        return (w @ g.reshape(n, -1)).reshape(self.dim, self.dim)
 
     def coupling(self, g: Array, s: MeanField) -> Array:
         d = self.dim
-        b = (g.reshape(-1, d) @ np.ascontiguousarray(s.T)).reshape(-1, d, d)  # b_i = O_i S^T
+        b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T)).reshape(-1, d, d)  # O S^T
         return np.swapaxes(b, 1, 2) - b
 
     def tangent(self, a: Array, g: Array) -> Array:
