@@ -230,10 +230,11 @@ class AdaptiveSolver:
         F[2] = 2 * theta - h * (K[N_STAGES] + K[0])
         F[3:] = h * (DOP853.D @ K)
         x = ((times - y.t) / h)[:, None]
+        factors = (x, 1 - x)
         vals = np.zeros((len(times), chart.n))
         for i, f in enumerate(reversed(F)):
             vals += f
-            vals *= x if i % 2 == 0 else 1 - x
+            vals *= factors[i % 2]
         return self._sample_states(times.tolist(), vals)
 
     def _sample_states(self, times, vals):
