@@ -26,7 +26,7 @@ from .base import rows_product
 
 def _quaternion_tables():
     """(T, B, M): T[(alpha, beta), (i, j)] = L(e_alpha) R(e_beta); B: the so(4) basis L_c, R_c;
-    M[(alpha, beta), gamma]: the e_gamma-component of the product e_alpha e_beta."""
+    M[gamma, (alpha, beta)]: the product e_alpha e_beta has e_gamma-component M."""
     # e_alpha e_beta = sum_gamma mult[alpha, beta, gamma] e_gamma (Hamilton's table)
     mult = np.zeros((4, 4, 4))
     prod = {(0, 0): (1, 0), (1, 1): (-1, 0), (2, 2): (-1, 0), (3, 3): (-1, 0),
@@ -41,7 +41,7 @@ def _quaternion_tables():
     right = np.einsum("abg,b->bga", mult, conj)                  # R(e_b)[g, a]: x -> x conj(e_b)
     t = np.einsum("aik,bkj->abij", left, right).reshape(16, 16)
     basis = np.concatenate([left[1:], right[1:]]).reshape(6, 16)
-    return t, basis, mult.reshape(16, 4)
+    return t, basis, np.ascontiguousarray(mult.reshape(16, 4).T)
 
 
 _T4, _B4, _MULT = _quaternion_tables()
@@ -104,7 +104,7 @@ def quaternion_pairs(o: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def quaternion_product(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Hamilton products u v of (4, N) quaternion arrays (one outer product, one small product)."""
-    return rows_product((u[:, None, :] * v[None, :, :]).reshape(16, -1).T, _MULT).T
+    return _MULT @ (u[:, None, :] * v[None, :, :]).reshape(16, -1)
 
 
 def cayley4_retract(ab: np.ndarray, pair: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
