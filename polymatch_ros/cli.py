@@ -5,13 +5,14 @@
     polymatch integrators        the registry: order, evaluations and exchange rounds per step
     polymatch scenes             the scenes shipped in config/
     polymatch run SCENE          the distributed ROS 2 ensemble (one process per agent) + monitor
-    polymatch agent | monitor    single ROS 2 nodes (same as `ros2 run polymatch_ros agent|monitor`)
+    polymatch agent | monitor    single ROS 2 nodes (= `ros2 run polymatch_ros agent|monitor`)
     polymatch echo TOPIC         print a topic (stand-in for `ros2 topic echo`)
     polymatch bench WHAT         benchmarks (figures for README)
 
 Errors are one line on stderr and a non-zero exit code: 2 for bad input
-(scene, parameters), 3 for a run that did not converge although the scene
-expects it, 1 for anything else.
+(scene, parameters, command line), 3 for a run that did not converge although
+the scene expects it, 1 for anything else.  POLYMATCH_DEBUG=1 shows the
+traceback of an unexpected error instead of its one line.
 """
 
 import argparse
@@ -21,42 +22,77 @@ import warnings
 
 import numpy as np
 
-from .console import SUMMARY_HEADER, Progress, format_table, positive_float, summary_rows
+from .console import (
+    SUMMARY_HEADER,
+    Progress,
+    format_table,
+    memory_size,
+    positive_float,
+    summary_rows,
+    tolerance_arg,
+    writable_output,
+)
 from .core.errors import PolymatchError
+from .core.limits import Limits
+from .core.preflight import check_run
 from .core.scene import load_scene, shipped_config_dirs
 from .core.simulate import convergence_verdict
 
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``polymatch: error: ...; see ...--help``), exit code 2.
+
+    Subparsers inherit the class (``add_subparsers`` uses the parent's), so every
+    subcommand, including those other modules add, reports parse errors the same way.
+    """
+
+    def error(self, message):
+        hint = f"see `{self.prog} --help`"
+        self.exit(2, f"polymatch: error: {message.splitlines()[0]} ({hint})\n")
+
+
+def _limits(args):
+    return Limits(memory=args.memory_limit) if getattr(args, "memory_limit", None) else None
+
 def cmd_simulate(args):
     from .core.simulate import explain, simulate
-    scene = load_scene(args.scene, {"time.t_end": args.t_end})
+    save = writable_output(args.save, ".npz") if args.save else None
+    figure = writable_output(args.figure, ".png") if args.figure else None
+    scene = load_scene(args.scene, {"time.t_end": args.t_end}, limits=_limits(args))
+    samples = None
+    if figure:
+        samples = np.unique(np.concatenate([scene.samples,
+                                            [t for t in scene.snapshots if t <= scene.t_end]]))
+    kept = len(scene.samples if samples is None else samples) if (save or figure) else 0
+    check_run(scene, args.integrator, args.dt, args.tolerance, kept_samples=kept,
+              limits=_limits(args))
     if args.explain:
         print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
         return 0
-    samples = None
-    if args.figure:
-        samples = np.unique(np.concatenate([scene.samples, [t for t in scene.snapshots if t <= scene.t_end]]))
     progress = Progress(scene.t_end, args.quiet)
     traj = simulate(scene, args.integrator, args.dt, args.tolerance, samples=samples,
-                    keep_states=bool(args.save or args.figure), progress=progress,
+                    keep_states=bool(save or figure), progress=progress,
                     stop_when_converged=args.stop_when_converged)
     progress.done()
     p = traj.plan
     print(f"scene {scene.name}: {scene.model.n_agents} agents, d = {scene.dim}, "
-          f"integrator {p.name}" + (f" dt = {p.dt:g}" if p.dt else f" tolerance = {p.tolerance:g}"))
+          f"integrator {p.name}"
+          + (f" dt = {p.dt:g}" if p.dt else f" tolerance = {p.tolerance:g}"))
     print(format_table(summary_rows(traj.scene, traj.metrics[-1]), SUMMARY_HEADER))
     print(f"t = {traj.times[-1]:g}, steps {traj.steps}, right-hand sides {traj.rhs_evals}, "
           f"wall time {traj.wall_time:.3f} s")
     if traj.metrics[-1].group_separation is not None:
         print(f"distance between group centres: {traj.metrics[-1].group_separation:.4g} "
               f"(L = {scene.model.L:g})")
-    if args.save:
-        save_npz(traj, args.save)
-        print(f"trajectory saved to {args.save}")
-    if args.figure:
+    if save:
+        save_npz(traj, save)
+        print(f"trajectory saved to {save}")
+    if figure:
         from .figures import snapshot_figure
-        snapshot_figure(traj, args.figure)
-        print(f"snapshots saved to {args.figure}")
-    code, msg = convergence_verdict(scene, traj.metrics[-1].diameter, traj.converged_at, traj.stationarity)
+        snapshot_figure(traj, figure)
+        print(f"snapshots saved to {figure}")
+    code, msg = convergence_verdict(scene, traj.metrics[-1].diameter, traj.converged_at,
+                                    traj.stationarity, metrics=traj.metrics[-1])
     print(msg)
     return code
 
@@ -74,16 +110,21 @@ def save_npz(traj, path):
         if g.scales is not None:
             data[key + "scales"] = g.scales
         data[key + "centroids"] = np.array([st.groups[gi].x + scene.origin for st in traj.states])
-        data[key + "rotations"] = np.array([model.rotations.to_matrices(st.groups[gi].rot) for st in traj.states])
-        for name in ("centroid_diameter", "rotation_diameter", "matching_diameter", "energy", "orthogonality"):
+        data[key + "rotations"] = np.array([model.rotations.to_matrices(st.groups[gi].rot)
+                                            for st in traj.states])
+        for name in ("centroid_diameter", "rotation_diameter", "matching_diameter", "energy",
+                     "orthogonality"):
             data[key + name] = np.array([getattr(m.groups[gi], name) for m in traj.metrics])
     np.savez_compressed(path, **data)
 
 
 def cmd_explain(args):
     from .core.simulate import explain
-    scene = load_scene(args.scene)
-    print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed)))
+    scene = load_scene(args.scene, limits=_limits(args))
+    check_run(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed,
+              limits=_limits(args))
+    print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance,
+                            distributed=args.distributed)))
     return 0
 
 
@@ -94,8 +135,10 @@ def cmd_integrators(args):
     for m in list(METHODS.values()) + [AdaptiveLie]:
         i = m.info
         models = "/".join({1: "1st", 2: "2nd"}[k] for k in i.models)
-        rows.append([i.name, i.order, i.stages, i.rounds if i.rounds else "-", i.family, models, i.summary])
-    print(format_table(rows, ["name", "order", "evals/step", "rounds/step", "family", "models", "what"]))
+        rows.append([i.name, i.order, i.stages, i.rounds if i.rounds else "-", i.family, models,
+                     i.summary])
+    print(format_table(rows, ["name", "order", "evals/step", "rounds/step", "family", "models",
+                              "what"]))
     return 0
 
 
@@ -122,13 +165,17 @@ def cmd_scenes(args):
 
 
 def add_integrator_options(p):
-    p.add_argument("--integrator", "-i", metavar="NAME", help="integrator (see `polymatch integrators`)")
-    p.add_argument("--dt", type=positive_float, help="fixed step size")
-    p.add_argument("--tolerance", type=positive_float, help="tolerance for the adaptive integrator")
+    p.add_argument("--integrator", "-i", metavar="NAME",
+                   help="integrator (see `polymatch integrators`)")
+    p.add_argument("--dt", type=positive_float, help="fixed step size (fixed-step methods only)")
+    p.add_argument("--tolerance", type=tolerance_arg,
+                   help="relative tolerance in [1e-14, 1) (the adaptive integrator only)")
+    p.add_argument("--memory-limit", type=memory_size, metavar="SIZE",
+                   help="refuse scenes estimated to need more memory (default 2G), e.g. 8G")
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="polymatch", description=__doc__.split("\n\n")[0])
+    parser = Parser(prog="polymatch", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
@@ -138,12 +185,15 @@ def build_parser():
     p.add_argument("--t-end", type=positive_float, help="override time.t_end")
     p.add_argument("--save", metavar="NPZ", help="save the trajectory (npz)")
     p.add_argument("--figure", metavar="PNG", help="render the snapshot figure (needs matplotlib)")
-    p.add_argument("--explain", action="store_true", help="say which model and integrator, then exit")
-    p.add_argument("--stop-when-converged", action="store_true", help="stop at the first sample under tolerance")
+    p.add_argument("--explain", action="store_true",
+                   help="say which model and integrator, then exit")
+    p.add_argument("--stop-when-converged", action="store_true",
+                   help="stop at the first sample under tolerance")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_simulate)
 
-    p = sub.add_parser("explain", help="which model, representation and integrator a scene uses, and why")
+    p = sub.add_parser("explain",
+                       help="which model, representation and integrator a scene uses, and why")
     p.add_argument("scene")
     add_integrator_options(p)
     p.add_argument("--distributed", action="store_true", help="as the ROS node set would run it")
@@ -154,10 +204,11 @@ def build_parser():
     p = sub.add_parser("scenes", help="list the shipped scenes")
     p.set_defaults(func=cmd_scenes)
 
-    for name, module in PASSTHROUGH.items():
+    for name in PASSTHROUGH:
         sub.add_parser(name, help=f"one {name} node (ROS 2); takes the same arguments as "
-                                  f"`ros2 run polymatch_ros {name}`, e.g. --ros-args -p scene:=FILE")
-    for name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("bench", "bench")):
+                                  f"`ros2 run polymatch_ros {name}`, "
+                                  f"e.g. --ros-args -p scene:=FILE")
+    for _name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("bench", "bench")):
         try:
             mod = __import__(f"polymatch_ros.{module}", fromlist=["add_parser"])
         except ImportError as exc:
@@ -178,15 +229,34 @@ def main(argv=None):
         return mod.main([f"polymatch {argv[0]}"] + argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
-    warnings.showwarning = lambda msg, *a, **k: print(f"polymatch: warning: {msg}", file=sys.stderr)
+    warnings.showwarning = _one_line_warning
     try:
         return args.func(args)
     except PolymatchError as exc:
-        print(f"polymatch: error: {exc}", file=sys.stderr)
+        print(f"polymatch: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
         print("polymatch: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print("polymatch: error: out of memory; lower the scene's sizes or --memory-limit",
+              file=sys.stderr)
+        return 1
+    except Exception as exc:  # noqa: BLE001 -- the contract: one line, never a traceback
+        if os.environ.get("POLYMATCH_DEBUG"):
+            raise
+        print(f"polymatch: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              f"(POLYMATCH_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc):
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 400 else text[:397] + "..."
+
+
+def _one_line_warning(message, *args, **kwargs):
+    print(f"polymatch: warning: {_one_line(message)}", file=sys.stderr)
 
 
 if __name__ == "__main__":

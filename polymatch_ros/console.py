@@ -2,7 +2,11 @@
 
 import argparse
 import math
+import os
 import sys
+
+from .core.errors import ParameterError
+from .core.limits import MIN_RELATIVE_TOLERANCE, parse_size
 
 
 def positive_float(text):
@@ -13,6 +17,49 @@ def positive_float(text):
     if not (value > 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
     return value
+
+
+def tolerance_arg(text):
+    """A relative tolerance in [MIN_RELATIVE_TOLERANCE, 1), as the scene's integrator.tolerance."""
+    value = positive_float(text)
+    if not value < 1:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
+    if value < MIN_RELATIVE_TOLERANCE:
+        raise argparse.ArgumentTypeError(f"{text} is below {MIN_RELATIVE_TOLERANCE:g}, which "
+                                         f"double precision cannot attain")
+    return value
+
+
+def memory_size(text):
+    """--memory-limit: 512M, 8G, 1.5GiB or bytes."""
+    try:
+        return parse_size(text)
+    except ParameterError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def writable_output(path, suffix):
+    """The file an output option will write (``suffix`` appended when missing), checked now.
+
+    ``np.savez`` and matplotlib append their suffix to a bare name, so the path returned is
+    the one actually written.  Raises ParameterError (exit 2) when its directory does not
+    exist or is not writable, or the path is a directory, so a long run never ends in a
+    failed write.
+    """
+    out = os.fspath(path)
+    if not out or out.endswith(os.sep):
+        raise ParameterError(f"{out!r}: expected a file name ending in {suffix}")
+    if os.path.splitext(out)[1].lower() != suffix:
+        out += suffix
+    folder = os.path.dirname(os.path.abspath(out))
+    if not os.path.isdir(folder):
+        raise ParameterError(f"{out}: the directory {folder} does not exist")
+    if os.path.isdir(out):
+        raise ParameterError(f"{out}: is a directory")
+    target = out if os.path.exists(out) else folder
+    if not os.access(target, os.W_OK):
+        raise ParameterError(f"{out}: not writable (permission denied on {target})")
+    return out
 
 
 def format_table(rows, header):
@@ -65,4 +112,5 @@ def summary_rows(scene, metrics):
     return rows
 
 
-SUMMARY_HEADER = ["group", "N", "centroid diam", "rotation diam", "matching diam", "energy", "orth. defect"]
+SUMMARY_HEADER = ["group", "N", "centroid diam", "rotation diam", "matching diam", "energy",
+                  "orth. defect"]

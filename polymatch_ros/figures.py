@@ -13,7 +13,8 @@ def _pyplot():
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        raise PolymatchError("figures need matplotlib: pip install 'polymatch_ros[plot]'") from None
+        raise PolymatchError(
+            "figures need matplotlib: pip install 'polymatch_ros[plot]'") from None
     return plt
 
 
@@ -24,14 +25,15 @@ def polytope_segments(scene, state):
     for g, gs in zip(model.groups, state.groups):
         mats = model.rotations.to_matrices(gs.rot)
         scales = np.ones(len(mats)) if g.scales is None else g.scales
-        verts = (gs.x + scene.origin)[:, None, :] + scales[:, None, None] * np.einsum("nij,aj->nai", mats, g.reference)
+        body = scales[:, None, None] * np.einsum("nij,aj->nai", mats, g.reference)
+        verts = (gs.x + scene.origin)[:, None, :] + body
         segs = [np.array([v[a], v[b]]) for v in verts for a, b in g.edges]
         out.append(segs)
     return out
 
 
 def first_vertices(scene, state):
-    """Per group: (N, d) positions of every polytope's vertex 0, to show the vertex correspondence."""
+    """Per group: (N, d) positions of every polytope's vertex 0 (the vertex correspondence)."""
     model = scene.model
     out = []
     for g, gs in zip(model.groups, state.groups):
@@ -53,7 +55,8 @@ def snapshot_figure(traj, path, times=None):
         if abs(have[k] - t) <= 1e-6 * max(1.0, t) + 1e-9 and traj.states:
             picks.append((t, traj.states[k], traj.metrics[k].diameter if traj.metrics else None))
     if not picks:
-        raise PolymatchError("no stored states at the snapshot times; simulate with those sample times")
+        raise PolymatchError(
+            "no stored states at the snapshot times; simulate with those sample times")
     dim = scene.dim
     fig = plt.figure(figsize=(3.2 * len(picks), 3.4))
     all_pts = np.concatenate([np.concatenate(s).reshape(-1, dim)
@@ -65,11 +68,13 @@ def snapshot_figure(traj, path, times=None):
             ax = fig.add_subplot(1, len(picks), k + 1)
         else:
             ax = fig.add_subplot(1, len(picks), k + 1, projection="3d")
-        for gi, (segs, first) in enumerate(zip(polytope_segments(scene, st), first_vertices(scene, st))):
+        groups = zip(polytope_segments(scene, st), first_vertices(scene, st))
+        for gi, (segs, first) in enumerate(groups):
             colour = COLOURS[gi % len(COLOURS)]
             for seg in segs:
                 ax.plot(*seg[:, :3].T, color=colour, lw=1.0, alpha=0.85)
-            ax.plot(*first[:, :3].T, "o", color=colour, ms=2.5)     # vertex a = 0: matched vertex for vertex
+            # vertex a = 0: matched vertex for vertex
+            ax.plot(*first[:, :3].T, "o", color=colour, ms=2.5)
         for a in range(min(dim, 3)):
             getattr(ax, "set_" + "xyz"[a] + "lim")(centre[a] - half, centre[a] + half)
         if dim == 2:
@@ -79,7 +84,8 @@ def snapshot_figure(traj, path, times=None):
             title += f"\nmatching diameter {diam:.2e}"
         ax.set_title(title, fontsize=9)
         ax.tick_params(labelsize=7)
-    fig.suptitle(f"{scene.name}: {scene.description}" if scene.description else scene.name, fontsize=10)
+    title = f"{scene.name}: {scene.description}" if scene.description else scene.name
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

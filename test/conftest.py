@@ -1,8 +1,7 @@
 """Shared fixtures: ``ros`` gives a test its own loopback-only ROS world (see ros_harness.py)."""
 
-from ros_harness import ros  # noqa: F401
-
 import pytest
+from ros_harness import ros  # noqa: F401
 
 
 @pytest.hookimpl(wrapper=True, tryfirst=True)

@@ -59,8 +59,8 @@ def brute_diameter(points):
 
 def brute_rotation_diameter(mats):
     """max_{i,j} |O_i - O_j|_F over explicit pairs."""
-    return max((float(np.linalg.norm(mats[i] - mats[j])) for i, j in combinations(range(len(mats)), 2)),
-               default=0.0)
+    pairs = combinations(range(len(mats)), 2)
+    return max((float(np.linalg.norm(mats[i] - mats[j])) for i, j in pairs), default=0.0)
 
 
 def vertices(model, state, gi):
@@ -82,7 +82,8 @@ def brute_matching_diameter(model, state, gi):
 
 
 def rotation_energy(model, gs):
-    """E = (m/N) sum |O_i'|^2 + kappa/(2N^2) sum_{i,k} |O_i - O_k|^2 with O_i' = W_i O_i (Prop. 2.2 i)."""
+    """E = (m/N) sum |O_i'|^2 + kappa/(2N^2) sum_{i,k} |O_i - O_k|^2 with O_i' = W_i O_i
+    (Prop. 2.2 i)."""
     rep = model.rotations
     mats = rot_matrices(rep, gs.rot)
     n = len(mats)
@@ -99,18 +100,21 @@ def state_error(scene_a, state_a, scene_b, state_b):
     out = {"rot": 0.0, "w": 0.0, "x": 0.0, "v": 0.0}
     ra, rb = scene_a.model.rotations, scene_b.model.rotations
     for ga, gb in zip(state_a.groups, state_b.groups):
-        out["rot"] = max(out["rot"], float(np.max(np.abs(rot_matrices(ra, ga.rot) - rot_matrices(rb, gb.rot)))))
+        rot_diff = rot_matrices(ra, ga.rot) - rot_matrices(rb, gb.rot)
+        out["rot"] = max(out["rot"], float(np.max(np.abs(rot_diff))))
         out["x"] = max(out["x"], float(np.max(np.abs(ga.x - gb.x))))
         if ga.v is not None and gb.v is not None:
             out["v"] = max(out["v"], float(np.max(np.abs(ga.v - gb.v))))
         if ga.w is not None and gb.w is not None:
-            out["w"] = max(out["w"], float(np.max(np.abs(skew_matrices(ra, ga.w) - skew_matrices(rb, gb.w)))))
+            w_diff = skew_matrices(ra, ga.w) - skew_matrices(rb, gb.w)
+            out["w"] = max(out["w"], float(np.max(np.abs(w_diff))))
     return out
 
 
-def make_scene(dim, order=1, *, count=4, seed=1, representation="auto", kappa=1.0, gamma=1.0, mass=0.5,
-               shape=None, rotations="uniform", velocities=None, t_end=1.0, samples=None, scales=None,
-               method="rkmk4", dt=0.01, extra_groups=(), kappa_2=None, L=None, centroids=None):
+def make_scene(dim, order=1, *, count=4, seed=1, representation="auto", kappa=1.0, gamma=1.0,
+               mass=0.5, shape=None, rotations="uniform", velocities=None, t_end=1.0,
+               samples=None, scales=None, method="rkmk4", dt=0.01, extra_groups=(), kappa_2=None,
+               L=None, centroids=None):
     """An inline scene dict -> Scene (the YAML format of config/*.yaml)."""
     model = {"order": order, "kappa": kappa, "gamma": gamma, "representation": representation}
     if order == 2:
@@ -119,8 +123,8 @@ def make_scene(dim, order=1, *, count=4, seed=1, representation="auto", kappa=1.
         model["kappa_2"] = kappa_2
     if L is not None:
         model["L"] = L
-    group = {"name": "g0", "shape": shape or {"simplex": dim}, "count": count, "rotations": rotations,
-             "centroids": centroids or {"box": [-2.0, 2.0]}}
+    group = {"name": "g0", "shape": shape or {"simplex": dim}, "count": count,
+             "rotations": rotations, "centroids": centroids or {"box": [-2.0, 2.0]}}
     if scales is not None:
         group["scales"] = scales
     if order == 2 and velocities is not None:

@@ -22,7 +22,8 @@ REPO = os.path.dirname(HERE)
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=10)
-    ap.add_argument("--logs", default=os.path.join(os.environ.get("TMPDIR", "/tmp"), "polymatch_ros_runs"))
+    ap.add_argument(
+        "--logs", default=os.path.join(os.environ.get("TMPDIR", "/tmp"), "polymatch_ros_runs"))
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds allowed for one run")
     ap.add_argument("selectors", nargs="*")
     args = ap.parse_args(argv)
@@ -32,15 +33,24 @@ def main(argv=None):
         env = dict(os.environ, POLYMATCH_KEEP_LOGS=os.path.join(args.logs, f"run_{k}"))
         t0, proc = time.monotonic(), None
         try:
-            proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *selectors],
-                                  cwd=REPO, env=env, capture_output=True, text=True, timeout=args.timeout)
+            proc = subprocess.run(
+                [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *selectors],
+                cwd=REPO,
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=args.timeout,
+            )
             tail = (proc.stdout.strip().splitlines() or ["(no output)"])[-1]
             ok = proc.returncode == 0
         except subprocess.TimeoutExpired:
             tail, ok = f"timed out after {args.timeout:g} s", False
         passed, failed = passed + ok, failed + (not ok)
-        print(f"run {k}/{args.runs}: {'green' if ok else 'RED'} in {time.monotonic() - t0:.0f} s: {tail}",
-              flush=True)
+        print(
+            f"run {k}/{args.runs}: {'green' if ok else 'RED'} in {time.monotonic() - t0:.0f} s: "
+            f"{tail}",
+            flush=True,
+        )
         if not ok:
             os.makedirs(args.logs, exist_ok=True)
             with open(os.path.join(args.logs, f"run_{k}.txt"), "w") as fh:

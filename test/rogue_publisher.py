@@ -3,7 +3,8 @@
     python test/rogue_publisher.py ENSEMBLE AGENT SECONDS
 
 Sends, at ~100 Hz each: PoseStamped with NaN positions, PoseStamped with a quaternion of
-norm 2, and lockstep stage messages with NaN data, a foreign run id, or no header.  It is started by
+norm 2, and lockstep stage messages with NaN data, a foreign run id, or no header.  It is started
+by
 the test in the test's own ROS domain (loopback discovery) under `timeout`.
 """
 
@@ -24,8 +25,9 @@ def main():
     rclpy.init()
     node = Node("rogue")
     qos = wire.qos_profiles()
-    pose = node.create_publisher(PoseStamped, wire.agent_topic(ensemble, agent, "pose"), qos["pose"])
-    stage = node.create_publisher(Float64MultiArray, wire.agent_topic(ensemble, agent, "stage"), qos["stage"])
+    pose = node.create_publisher(PoseStamped, wire.full_name(ensemble, "pose", agent), qos["pose"])
+    stage = node.create_publisher(Float64MultiArray, wire.full_name(
+        ensemble, "stage", agent), qos["stage"])
     end = time.monotonic() + seconds
     k = 0
     while time.monotonic() < end:
@@ -39,7 +41,8 @@ def main():
             p.pose.orientation.w = 2.0                      # quaternion far from unit norm
         pose.publish(p)
         fields = {"x": [0.0, 0.0], "rot": [math.nan if k % 2 else 0.3]}
-        msg = wire.encode_stage(Float64MultiArray(), 12345 if k % 2 == 0 else 0, agent, k, 0, 0, 0.0, fields)
+        msg = wire.encode_stage(Float64MultiArray(), 12345 if k %
+                                2 == 0 else 0, agent, k, 0, 0, 0.0, fields)
         stage.publish(msg)
         junk = Float64MultiArray()                          # no header at all
         junk.data = [1.0, 2.0]

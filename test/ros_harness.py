@@ -57,8 +57,14 @@ class Ros:
     def __init__(self, domain):
         from polymatch_ros.ros.ros_env import ros_environment
         self.domain = domain
-        self.env = ros_environment(domain, base={k: v for k, v in os.environ.items()
-                                                 if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
+        self.env = ros_environment(
+            domain,
+            base={
+                k: v
+                for k, v in os.environ.items()
+                if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+            },
+        )
         assert self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
         self.procs = []
         self.shm_before = set(glob.glob("/dev/shm/fastrtps_*"))
@@ -66,24 +72,44 @@ class Ros:
     def realtime(self):
         """From now on start processes with the environment of a realtime ensemble (transports)."""
         from polymatch_ros.ros.ros_env import ros_environment
+
         self.env = ros_environment(self.domain, base=self.env, mode="realtime")
         return self
 
     def start(self, argv, timeout, name=""):
         """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file."""
-        log = open(os.path.join(os.environ.get("TMPDIR", "/tmp"),
-                                f"polymatch_test_{os.getpid()}_{len(self.procs)}.log"), "w+")
-        proc = subprocess.Popen(["timeout", "-k", "5", str(timeout)] + list(argv), env=self.env,
-                                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, cwd=REPO)
+        log = open(
+            os.path.join(
+                os.environ.get("TMPDIR", "/tmp"),
+                f"polymatch_test_{os.getpid()}_{len(self.procs)}.log",
+            ),
+            "w+",
+        )
+        proc = subprocess.Popen(
+            ["timeout", "-k", "5", str(timeout)] + list(argv),
+            env=self.env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            cwd=REPO,
+        )
         proc.log, proc.name = log, name
         self.procs.append(proc)
         return proc
 
     def agent(self, scene, agent, timeout=120, **params):
-        return self.start(node_argv("agent_node", scene, agent=agent, **params), timeout, f"agent {agent}")
+        argv = node_argv("agent_node", scene, agent=agent, **params) + [
+            "-r",
+            f"__node:=agent_{agent}",
+        ]
+        return self.start(argv, timeout, f"agent {agent}")
 
     def monitor(self, scene, timeout=120, **params):
-        return self.start(node_argv("monitor_node", scene, **params), timeout, "monitor")
+        return self.start(
+            node_argv("monitor_node", scene, **params) + ["-r", "__node:=monitor"],
+            timeout,
+            "monitor",
+        )
 
     @staticmethod
     def output(proc):
@@ -109,7 +135,7 @@ class Ros:
                 os.kill(proc.pid, sig)
 
     def close(self, keep_logs=None):
-        """End every process by PID; with ``keep_logs`` (a directory) keep each one's output there."""
+        """End every process by PID; with ``keep_logs`` (a directory) keep each one's output."""
         for proc in self.procs:
             if proc.poll() is None:
                 self.kill(proc, signal.SIGINT)
@@ -123,7 +149,10 @@ class Ros:
             if keep_logs:
                 os.makedirs(keep_logs, exist_ok=True)
                 label = (proc.name or "process").replace(" ", "_")
-                shutil.copy(proc.log.name, os.path.join(keep_logs, f"{self.procs.index(proc):02d}_{label}.log"))
+                shutil.copy(
+                    proc.log.name,
+                    os.path.join(keep_logs, f"{self.procs.index(proc):02d}_{label}.log"),
+                )
             with contextlib.suppress(OSError):
                 os.unlink(proc.log.name)
         held = _mapped_shm()
@@ -142,7 +171,14 @@ def _children(pid):
 
 
 def node_argv(module, scene, **params):
-    argv = [PY, "-m", f"polymatch_ros.ros.{module}", "--ros-args", "-p", f"scene:={scene_path(scene)}"]
+    argv = [
+        PY,
+        "-m",
+        f"polymatch_ros.ros.{module}",
+        "--ros-args",
+        "-p",
+        f"scene:={scene_path(scene)}",
+    ]
     for key, value in params.items():
         if isinstance(value, (list, tuple)):
             value = "[" + ",".join(map(str, value)) + "]"
@@ -154,14 +190,19 @@ def node_argv(module, scene, **params):
 
 @pytest.fixture
 def ros(request):
-    """A private ROS world; with POLYMATCH_KEEP_LOGS=DIR the processes' output of a failed test is kept
+    """A private ROS world; with POLYMATCH_KEEP_LOGS=DIR the processes' output of a failed test
+    is kept
     in DIR/<test name>/ (what test/repeat_ros_tests.py uses to look into a failure)."""
     from domain_coordinator import domain_id
+
     with domain_id() as dom:
         world = Ros(dom)
         try:
             yield world
         finally:
             keep = os.environ.get("POLYMATCH_KEEP_LOGS")
-            failed = getattr(request.node, "rep_call", None) is not None and request.node.rep_call.failed
+            failed = (
+                getattr(request.node, "rep_call", None) is not None
+                and request.node.rep_call.failed
+            )
             world.close(os.path.join(keep, request.node.name) if keep and failed else None)

@@ -15,29 +15,33 @@ EXPECTED = {
     "step": ["| model", "| method", "best ms", "median ms", "rkmk4", "lie_euler", "rk4_proj",
              "so3 (exp/Rodrigues, SoA)", "matrix (Cayley", "| d: representation", "N = 1,000",
              "best / previous d", "dimensions interleaved"],
-    "meanfield": ["mean field best ms", "naive µs/agent (sample)", "naive total, scaled", "speed-up",
-                  "max abs diff"],
+    "meanfield": ["mean field best ms", "naive µs/agent (sample)", "naive total, scaled",
+                  "speed-up", "max abs diff"],
     "dop853": ["| solver", "rtol=atol", "A: max err", "B: max err (own steps)", "orth. defect",
-               "ours (angle)", "ours (matrix, Cayley)", "scipy DOP853", "Cheapest run with max error",
-               "A: ours/scipy", "B: ours/scipy", "target max error"],
-    "precision": ["| method", "h or tol", "max error", "rhs evals", "orth. defect", "rkmk4", "lie_verlet",
-                  "adaptive (ours)", "RK45", "DOP853", "observed order", "Frontier", "cheapest (best wall)"],
-    "longhorizon": ["rel. energy drift up to", "growth p", "orth. defect up to", "lie_verlet", "refused (unstable)",
-                    "RK45", "DOP853", "adaptive (ours)"],
-    "extremes": ["| extreme", "| expectation", "what happened", "pass/fail", "wall s", "m = 1e-8", "gamma = 0",
-                 "kappa = 1e4", "centroids ~1e9", "one agent", "expectations over"],
-    "reductions": ["| reduction", "full / reduced", "angles (Kuramoto) vs 2x2 matrices", "exact flow (Prop. 2.1)",
-                   "O(m/gamma) modelling error"],
-    "distributed": ["| processes", "bare rounds/s best / median", "agents / bare (medians)", "slowest match"],
-    "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)", "injected delay"],
+               "ours (angle)", "ours (matrix, Cayley)", "scipy DOP853",
+               "Cheapest run with max error", "A: ours/scipy", "B: ours/scipy",
+               "target max error"],
+    "precision": ["| method", "h or tol", "max error", "rhs evals", "orth. defect", "rkmk4",
+                  "lie_verlet", "adaptive (ours)", "RK45", "DOP853", "observed order", "Frontier",
+                  "cheapest (best wall)"],
+    "longhorizon": ["rel. energy drift up to", "growth p", "orth. defect up to", "lie_verlet",
+                    "refused (unstable)", "RK45", "DOP853", "adaptive (ours)"],
+    "extremes": ["| extreme", "| expectation", "what happened", "pass/fail", "wall s", "m = 1e-8",
+                 "gamma = 0", "kappa = 1e4", "centroids ~1e9", "one agent", "expectations over"],
+    "reductions": ["| reduction", "full / reduced", "angles (Kuramoto) vs 2x2 matrices",
+                   "exact flow (Prop. 2.1)", "O(m/gamma) modelling error"],
+    "distributed": ["| processes", "bare rounds/s best / median", "agents / bare (medians)",
+                    "slowest match"],
+    "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
+              "injected delay"],
 }
 
 FAMILY_NAMES = [m.NAME for m in families()]
 
 
 def test_shipped_families_are_registered():
-    assert {"step", "meanfield", "dop853", "precision", "longhorizon", "extremes", "reductions", "distributed",
-            "trade"} <= set(FAMILY_NAMES)
+    assert {"step", "meanfield", "dop853", "precision", "longhorizon", "extremes", "reductions",
+            "distributed", "trade"} <= set(FAMILY_NAMES)
 
 
 @pytest.mark.parametrize("name", FAMILY_NAMES)
@@ -52,7 +56,8 @@ def test_family_quick(name, capsys):
 
 def test_all_writes_one_report(tmp_path, capsys):
     out_dir = tmp_path / "bench"
-    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield", "--out", str(out_dir)]) == 0
+    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield",
+                     "--out", str(out_dir)]) == 0
     text = (out_dir / "report.md").read_text(encoding="utf-8")
     assert text.startswith("# polymatch benchmark report")
     assert "mean field best ms" in text
@@ -65,12 +70,14 @@ def test_all_writes_one_report(tmp_path, capsys):
 def test_all_only_keeps_the_other_families_reports(tmp_path, capsys):
     out_dir = tmp_path / "bench"
     out_dir.mkdir()
-    (out_dir / "reductions.md").write_text("# Reductions from an earlier run\n\nkept figure 1.23x\n",
-                                           encoding="utf-8")
-    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield", "--out", str(out_dir)]) == 0
+    earlier = "# Reductions from an earlier run\n\nkept figure 1.23x\n"
+    (out_dir / "reductions.md").write_text(earlier, encoding="utf-8")
+    assert cli.main(["bench", "all", "--quick", "--quiet", "--only", "meanfield",
+                     "--out", str(out_dir)]) == 0
     text = (out_dir / "report.md").read_text(encoding="utf-8")
     assert "mean field best ms" in text                       # the family just run
-    assert "## Reductions from an earlier run" in text         # the earlier one, one heading level down
+    # the earlier one, one heading level down
+    assert "## Reductions from an earlier run" in text
     assert "kept figure 1.23x" in text
     assert "[reductions](reductions.md)" in text
     assert "[step](step.md)" not in text                      # never run here: not listed

@@ -1,13 +1,11 @@
 """The adaptive DOP853-Lie run: its step cap and its dense output against independent formulas."""
 
 import numpy as np
+from core_testlib import make_scene
 
-from polymatch_ros.core import simulate
+from polymatch_ros.core import simulate, stability
 from polymatch_ros.core.adaptive import CAP_FRACTION, AdaptiveLie
 from polymatch_ros.core.rk import rk_stability
-from polymatch_ros.core import stability
-
-from core_testlib import make_scene
 
 
 def test_step_cap_is_the_stability_boundary_of_the_dop853_tableau():

@@ -11,12 +11,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from core_testlib import (
+    brute_diameter,
+    brute_matching_diameter,
+    brute_rotation_diameter,
+    make_scene,
+    rot_matrices,
+    rotation_energy,
+    skew_matrices,
+)
 from scipy.integrate import simpson
 
 from polymatch_ros.core import METHODS, System, drive, load_scene, point_set_diameter, simulate
-
-from core_testlib import (brute_diameter, brute_matching_diameter, brute_rotation_diameter, make_scene,
-                          rot_matrices, rotation_energy, skew_matrices)
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
 
@@ -66,7 +72,8 @@ def test_centroid_decay_rate_underdamped_envelope_prop_2_1():
 
 def test_centroid_decay_rate_first_order_prop_2_1():
     gamma, kappa = 2.0, 1.5
-    scene = make_scene(3, 1, count=6, seed=33, gamma=gamma, kappa=kappa, t_end=8.0, samples=[1.0, 8.0])
+    scene = make_scene(3, 1, count=6, seed=33, gamma=gamma,
+                       kappa=kappa, t_end=8.0, samples=[1.0, 8.0])
     t, d = _centroid_diameters(simulate(scene, "lie_euler", 0.05))
     measured = (np.log(d[-1]) - np.log(d[1])) / (t[-1] - t[1])
     assert measured == pytest.approx(-kappa / gamma, rel=0.01)
@@ -74,8 +81,9 @@ def test_centroid_decay_rate_first_order_prop_2_1():
 
 @pytest.mark.parametrize("order", [1, 2])
 def test_centroid_mean_mode_prop_2_1(order):
-    """Summing (B-1) over i: m xbar'' = -gamma xbar' for the mean, i.e. the centre of mass moves as
-    xbar(t) = xbar(0) + (m/gamma)(1 - e^{-gamma t/m}) vbar(0) (constant for the first-order model)."""
+    """Summing (B-1) over i: m xbar'' = -gamma xbar' for the mean, i.e. the centre of mass moves
+    as xbar(t) = xbar(0) + (m/gamma)(1 - e^{-gamma t/m}) vbar(0) (constant for the first-order
+    model)."""
     m, gamma = 0.4, 1.3
     scene = make_scene(3, order, count=6, seed=34, mass=m, gamma=gamma, kappa=2.0, t_end=3.0,
                        samples={"every": 0.5}, velocities={"centroid": {"normal": 1.0}})
@@ -99,8 +107,8 @@ def test_centroid_mean_mode_prop_2_1(order):
 @pytest.mark.parametrize("dim,seed", [(2, 2), (3, 1), (3, 3), (4, 1)])
 def test_first_order_rotation_bound_prop_2_2_ii(dim, seed):
     kappa = 1.5                                           # gamma = 1 as in the proposition
-    scene = make_scene(dim, 1, count=6, seed=seed, kappa=kappa, gamma=1.0, rotations={"within": 0.3},
-                       t_end=8.0, samples={"every": 0.05})
+    scene = make_scene(dim, 1, count=6, seed=seed, kappa=kappa, gamma=1.0,
+                       rotations={"within": 0.3}, t_end=8.0, samples={"every": 0.05})
     traj = simulate(scene, "rkmk4", 0.01)
     t = np.array(traj.times)
     d = np.array([brute_rotation_diameter(rot_matrices(scene.model.rotations, st.groups[0].rot))
@@ -108,7 +116,7 @@ def test_first_order_rotation_bound_prop_2_2_ii(dim, seed):
     core = np.array([m.groups[0].rotation_diameter for m in traj.metrics])
     np.testing.assert_allclose(core, d, rtol=1e-12, atol=1e-15)
     d0 = d[0]
-    assert 0.2 < d0 < 1.0                                 # the proposition's hypothesis, not vacuous
+    assert 0.2 < d0 < 1.0                           # the proposition's hypothesis, not vacuous
     bound = d0 / ((1 - d0) * np.exp(kappa * t) + d0)
     assert np.all(d <= bound * (1 + 1e-9))
     assert d[-1] < 1e-3 * d0                              # and it really decays
@@ -162,7 +170,8 @@ def test_energy_conserved_without_drift_gamma_0_lie_verlet_prop_2_2_i():
     dev1, early1 = _energy_run("lie_verlet", 0.05)
     dev2, early2 = _energy_run("lie_verlet", 0.025)
     assert dev1 < 1e-3
-    assert dev1 / dev2 > 2.5                               # O(dt^2) oscillation (O(dt) would give 2)
+    # O(dt^2) oscillation (O(dt) would give 2)
+    assert dev1 / dev2 > 2.5
     assert dev1 < 3 * early1 and dev2 < 3 * early2         # bounded: no growth over 8x the time
     # the criterion does detect drift: a non-symplectic 2nd-order method fails it
     dev_h, early_h = _energy_run("lie_heun", 0.05)
@@ -193,17 +202,20 @@ def test_complete_vertex_matching_config_theorems_4_1_4_2(name, order):
     assert traj.metrics[0].diameter == pytest.approx(d0, rel=1e-12)
     # and the components the proofs use: centroids and rotations both reach consensus
     assert brute_diameter(traj.final.groups[0].x) < 1e-6
-    assert brute_rotation_diameter(rot_matrices(scene.model.rotations, traj.final.groups[0].rot)) < 1e-6
+    final = rot_matrices(scene.model.rotations, traj.final.groups[0].rot)
+    assert brute_rotation_diameter(final) < 1e-6
 
 
 @pytest.mark.parametrize("order,dim", [(1, 3), (2, 3), (1, 4)])
 def test_complete_vertex_matching_inline_theorems_4_1_4_2(order, dim):
     """Theorem 4.2 under its own hypothesis D0 < 1, and Theorem 4.1 for tetrahedra in R^3."""
-    scene = make_scene(dim, order, count=6, seed=8, rotations={"within": 0.3} if order == 1 else "uniform",
-                       mass=0.5, velocities={"centroid": {"normal": 0.5}, "angular": {"normal": 0.5}},
-                       t_end=30.0, samples={"every": 5.0})
+    rotations = {"within": 0.3} if order == 1 else "uniform"
+    velocities = {"centroid": {"normal": 0.5}, "angular": {"normal": 0.5}}
+    scene = make_scene(dim, order, count=6, seed=8, rotations=rotations, mass=0.5,
+                       velocities=velocities, t_end=30.0, samples={"every": 5.0})
     if order == 1:
-        assert brute_rotation_diameter(rot_matrices(scene.model.rotations, scene.initial.groups[0].rot)) < 1
+        initial = rot_matrices(scene.model.rotations, scene.initial.groups[0].rot)
+        assert brute_rotation_diameter(initial) < 1
     traj = simulate(scene, "rkmk4", 0.05)
     dend = brute_matching_diameter(scene.model, traj.final, 0)
     assert dend < 1e-6
@@ -211,7 +223,8 @@ def test_complete_vertex_matching_inline_theorems_4_1_4_2(order, dim):
 
 
 def test_point_set_diameter_is_exact_theorems_4_1_4_2():
-    """The diameter every claim is measured with equals the brute-force maximum (incl. blocked search)."""
+    """The diameter every claim is measured with equals the brute-force maximum (incl. blocked
+    search)."""
     rng = np.random.default_rng(9)
     for n, k in [(2, 3), (7, 2), (300, 3), (700, 9), (600, 2)]:
         pts = rng.normal(size=(n, k)) * rng.uniform(0.1, 10.0, size=k) + 1e6

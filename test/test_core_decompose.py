@@ -12,7 +12,8 @@ from polymatch_ros.core import SceneError, ShapeError, decompose
 from polymatch_ros.core.decompose import RotationNotUniqueWarning
 from polymatch_ros.core.shapes import hypercube, polygon, simplex
 
-SHAPES = {2: [polygon(5), hypercube(2)], 3: [simplex(3), hypercube(3)], 4: [simplex(4), hypercube(4)]}
+SHAPES = {2: [polygon(5), hypercube(2)], 3: [simplex(3), hypercube(3)],
+          4: [simplex(4), hypercube(4)]}
 
 
 def _random_rotations(dim, count, rng):
@@ -65,14 +66,17 @@ def _bad_inputs():
     inf[3, 2] = -np.inf
     return [
         ("mirror", tri, [tri + 1.0, mirror + 2.0], ShapeError, ["polytope 1", "mirror"]),
-        ("mirror-3d", tet, [tet * np.array([1.0, 1.0, -1.0])], ShapeError, ["polytope 0", "mirror"]),
-        ("not-congruent", tri, [tri, tri * np.array([1.0, 1.3])], ShapeError, ["polytope 1", "not congruent"]),
+        ("mirror-3d", tet, [tet * np.array([1.0, 1.0, -1.0])],
+         ShapeError, ["polytope 0", "mirror"]),
+        ("not-congruent", tri, [tri, tri * np.array([1.0, 1.3])],
+         ShapeError, ["polytope 1", "not congruent"]),
         ("not-similar", tri, [tri * np.array([1.0, 1.3])], ShapeError, ["not similar"]),
         ("too-few-vertices", tri, [tri[:2]], ShapeError, ["polytope 0", "2 vertices", "3"]),
         ("coincident", tri, [coincident], SceneError, ["polytope 0", "coincide"]),
         ("nan", tri, [nan], ShapeError, ["polytope 0", "non-finite"]),
         ("inf", tet, [tet, inf], ShapeError, ["polytope 1", "non-finite"]),
-        ("wrong-dimension", tri, [np.hstack([tri, np.zeros((3, 1))])], ShapeError, ["3 coordinates", "dimension 2"]),
+        ("wrong-dimension", tri, [np.hstack([tri, np.zeros((3, 1))])],
+         ShapeError, ["3 coordinates", "dimension 2"]),
     ]
 
 
@@ -128,7 +132,8 @@ def test_rotation_not_unique_least_angle_segment_in_r3_lemma_3_2():
         assert np.trace(oi) == pytest.approx(1.0 + 2.0 * u[0], abs=1e-12)
         # and no member of the fitting family O R_e1(phi) has a larger trace
         for phi in np.linspace(-np.pi, np.pi, 721):
-            rx = np.array([[1, 0, 0], [0, np.cos(phi), -np.sin(phi)], [0, np.sin(phi), np.cos(phi)]])
+            rx = np.array([[1, 0, 0], [0, np.cos(phi), -np.sin(phi)],
+                          [0, np.sin(phi), np.cos(phi)]])
             assert np.trace(oi @ rx) <= np.trace(oi) + 1e-12
 
 

@@ -25,7 +25,8 @@ def test_complete_graph_is_the_mean_field_of_a2():
     mean_field = s @ np.swapaxes(rots, 1, 2) - rots @ s.T
     assert graph.complete and graph.weights is None
     assert np.max(np.abs(_torques(graph, rots) - mean_field)) < 1e-14
-    naive = np.array([sum(rots[k] @ rots[i].T - rots[i] @ rots[k].T for k in range(7)) for i in range(7)])
+    naive = np.array([sum(rots[k] @ rots[i].T - rots[i] @ rots[k].T for k in range(7))
+                     for i in range(7)])
     assert np.max(np.abs(mean_field - naive)) < 1e-13
 
 
@@ -54,7 +55,8 @@ def test_k_nearest_is_the_undirected_union_of_nearest_neighbours():
     graph = build_graph({"k_nearest": 1}, "graph", 5, centroids)
     a = graph.matrix().toarray()
     assert np.array_equal(a, a.T)
-    # nearest: 0 <-> 1, 2 <-> 3, and 4 -> 1 (4.2 away, against 4.8 to agent 2); the union is symmetric
+    # nearest: 0 <-> 1, 2 <-> 3, and 4 -> 1 (4.2 away, against 4.8 to agent 2);
+    # the union is symmetric
     expected = {(0, 1), (1, 0), (2, 3), (3, 2), (4, 1), (1, 4)}
     assert {(int(i), int(k)) for i, k in zip(*np.nonzero(a))} == expected
 
@@ -65,8 +67,10 @@ def test_random_graph_is_reproducible_and_its_extremes_are_empty_and_complete():
     assert (g1.matrix() != g2.matrix()).nnz == 0
     full = build_graph({"random": {"p": 1.0, "seed": 0}}, "graph", 5).matrix().toarray()
     assert np.array_equal(full, np.ones((5, 5)) - np.eye(5))
-    with pytest.raises(SceneError, match=r"^groups\[0\]\.graph: the graph is disconnected: components \{0\} \{1\}"):
-        check_connected(build_graph({"random": {"p": 0.0}}, "groups[0].graph", 5), "groups[0].graph")
+    empty = build_graph({"random": {"p": 0.0}}, "groups[0].graph", 5)
+    with pytest.raises(SceneError, match=r"^groups\[0\]\.graph: the graph is disconnected: "
+                                         r"components \{0\} \{1\}"):
+        check_connected(empty, "groups[0].graph")
 
 
 def test_disconnected_undirected_graph_is_refused_naming_components():
@@ -98,7 +102,8 @@ def test_weights_scale_the_sums():
     ({"random": {"p": 1.5}}, r"graph\.random\.p: must be <= 1"),
     ({"edges": [[0, 0]]}, r"graph\.edges\[0\]: an agent is not its own neighbour"),
     ({"edges": [[0, 7]]}, r"graph\.edges\[0\]: agent indices must be < the group's 5 agents"),
-    ({"edges": [[0, 1]], "weights": [1, 2]}, r"graph\.weights: expected one positive weight per edge"),
+    ({"edges": [[0, 1]], "weights": [1, 2]},
+     r"graph\.weights: expected one positive weight per edge"),
     ({"edges": [[0, 1]], "weights": [-1]}, r"graph\.weights\[0\]: must be > 0"),
     ({"ring": 1, "directed": True}, r"graph: weights and directed go with edges"),
 ])

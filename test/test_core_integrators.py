@@ -1,17 +1,23 @@
-"""Integrators: Lemma 2.1 (orthogonality), observed orders, representation reductions, stability."""
+"""Integrators: Lemma 2.1 (orthogonality), observed orders, representation reductions,
+stability."""
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
+from core_testlib import defect, make_scene, rot_matrices, skew_matrices, state_error
 
-from polymatch_ros.core import (METHODS, PolymatchError, StabilityError, System, simulate,
-                                with_representation)
+from polymatch_ros.core import (
+    METHODS,
+    PolymatchError,
+    StabilityError,
+    System,
+    simulate,
+    with_representation,
+)
 from polymatch_ros.core.errors import StepLimitError
 from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState
-
-from core_testlib import defect, make_scene, rot_matrices, skew_matrices, state_error
 
 # ---------------------------------------------------------------------------------------------
 # Lemma 2.1: rotations stay in SO(d)
@@ -21,16 +27,18 @@ LEMMA_DIMS = [(2, "matrix"), (3, "auto"), (5, "auto")]
 
 
 def _lively_second_order(dim, rep, seed=1):
-    """Four polytopes, weak damping: the rotations are still moving after 10^4 steps of dt = 0.01."""
-    return make_scene(dim, 2, count=4, seed=seed, representation=rep, kappa=1.0, gamma=0.02, mass=1.0,
-                      velocities={"angular": {"normal": 1.0}}, t_end=100.0, samples={"every": 25.0})
+    """Four polytopes, weak damping: the rotations still move after 10^4 steps of dt = 0.01."""
+    return make_scene(dim, 2, count=4, seed=seed, representation=rep, kappa=1.0, gamma=0.02,
+                      mass=1.0, velocities={"angular": {"normal": 1.0}}, t_end=100.0,
+                      samples={"every": 25.0})
 
 
 @pytest.mark.parametrize("dim,rep", LEMMA_DIMS, ids=[f"{d}d-{r}" for d, r in LEMMA_DIMS])
 @pytest.mark.parametrize("method", LIE_METHODS)
 def test_orthogonality_preserved_10k_steps_lemma_2_1(method, dim, rep):
     scene = _lively_second_order(dim, rep)
-    assert scene.model.rotations.name in ("matrix", "so3")        # not the trivially exact angle model
+    # not the trivially exact angle model
+    assert scene.model.rotations.name in ("matrix", "so3")
     traj = simulate(scene, method, 0.01)
     assert traj.steps == 10_000
     assert traj.final.t == pytest.approx(100.0)
@@ -49,7 +57,8 @@ def test_orthogonality_preserved_10k_steps_lemma_2_1(method, dim, rep):
 
 def test_projection_baseline_keeps_so_d_while_plain_euler_drifts_lemma_2_1():
     """euler_proj's polar projection is what keeps Lemma 2.1; without it Euler leaves SO(d)."""
-    scene = make_scene(3, 1, count=4, seed=2, representation="matrix", t_end=100.0, samples={"every": 50.0})
+    scene = make_scene(3, 1, count=4, seed=2, representation="matrix",
+                       t_end=100.0, samples={"every": 50.0})
     traj = simulate(scene, "euler_proj", 0.01)
     assert traj.steps == 10_000
     for st in traj.states:
@@ -85,8 +94,8 @@ def _order_scene(kind):
         return make_scene(2, 2, seed=3, velocities=vel, scales={"uniform": [0.5, 2.0]})
     if kind in ("F-2 2d", "F-2 3d"):
         d = 2 if kind == "F-2 2d" else 3
-        second = {"name": "g1", "shape": "square" if d == 2 else "cube", "count": 3, "rotations": "uniform",
-                  "centroids": {"box": [-2.0, 2.0]}, "velocities": vel}
+        second = {"name": "g1", "shape": "square" if d == 2 else "cube", "count": 3,
+                  "rotations": "uniform", "centroids": {"box": [-2.0, 2.0]}, "velocities": vel}
         return make_scene(d, 2, seed=1, velocities=vel, kappa_2=0.5, L=2.0, extra_groups=[second])
     raise KeyError(kind)
 
@@ -96,8 +105,9 @@ for _kind in ["A-2 2d", "A-2 3d", "A-1 2d", "A-1 3d", "F-1 2d", "F-2 2d", "F-2 3
     for _name, _meth in METHODS.items():
         if (1 if _kind.startswith("A-2") else 2) in _meth.info.models:
             ORDER_CASES.append((_kind, _name))
-ORDER_CASES += [("A-1 3d so3-exp", "rkmk4"), ("A-1 3d so3-exp", "lie_heun"), ("A-1 3d so3-exp", "etd2"),
-                ("A-1 3d matrix", "rkmk4"), ("A-1 3d matrix", "lie_verlet")]
+ORDER_CASES += [("A-1 3d so3-exp", "rkmk4"), ("A-1 3d so3-exp", "lie_heun"),
+                ("A-1 3d so3-exp", "etd2"), ("A-1 3d matrix", "rkmk4"),
+                ("A-1 3d matrix", "lie_verlet")]
 
 _REFERENCES = {}
 
@@ -105,12 +115,14 @@ _REFERENCES = {}
 def _reference(kind):
     if kind not in _REFERENCES:
         scene = _order_scene(kind)
-        _REFERENCES[kind] = (scene, simulate(scene, "rkmk4", 1.0 / 512, samples=[0.0], keep_states=False,
-                                             metrics=False))
+        ref = simulate(scene, "rkmk4", 1.0 / 512, samples=[0.0], keep_states=False,
+                       metrics=False)
+        _REFERENCES[kind] = (scene, ref)
     return _REFERENCES[kind]
 
 
-@pytest.mark.parametrize("kind,method", ORDER_CASES, ids=[f"{k.replace(' ', '_')}-{m}" for k, m in ORDER_CASES])
+@pytest.mark.parametrize("kind,method", ORDER_CASES,
+                         ids=[f"{k.replace(' ', '_')}-{m}" for k, m in ORDER_CASES])
 def test_observed_order_matches_declared_on_models_A_1_A_2_F_1_F_2(kind, method):
     scene, ref = _reference(kind)
     info = METHODS[method].info
@@ -140,14 +152,15 @@ def test_observed_order_matches_declared_on_models_A_1_A_2_F_1_F_2(kind, method)
 # representation reductions
 
 
-REDUCTION_CASES = [(m, o) for m in ["lie_euler", "lie_heun", "rkmk4", "rk4_proj", "etd2", "lie_verlet"]
+REDUCTION_CASES = [(m, o)
+                   for m in ["lie_euler", "lie_heun", "rkmk4", "rk4_proj", "etd2", "lie_verlet"]
                    for o in (1, 2) if o in METHODS[m].info.models]
 
 
 @pytest.mark.parametrize("method,order", REDUCTION_CASES)
 def test_so3_cayley_reduction_equals_full_matrix_model_A_1_A_2(method, order):
-    scene = make_scene(3, order, count=5, seed=4, velocities={"angular": {"normal": 0.7}}, t_end=3.0,
-                       samples={"every": 0.5})
+    scene = make_scene(3, order, count=5, seed=4, velocities={"angular": {"normal": 0.7}},
+                       t_end=3.0, samples={"every": 0.5})
     assert scene.model.rotations.name == "so3" and scene.model.rotations.retraction == "cayley"
     full = with_representation(scene, "matrix")
     assert full.model.rotations.name == "matrix"
@@ -160,7 +173,8 @@ def test_so3_cayley_reduction_equals_full_matrix_model_A_1_A_2(method, order):
 
 
 def _angle_vs_matrix(method, dt, order=1):
-    scene = make_scene(2, order, count=5, seed=6, velocities={"angular": {"normal": 0.7}}, t_end=1.0)
+    scene = make_scene(2, order, count=5, seed=6, velocities={"angular": {"normal": 0.7}},
+                       t_end=1.0)
     assert scene.model.rotations.name == "angle"
     full = with_representation(scene, "matrix")
     a = simulate(scene, method, dt, samples=[0.0], keep_states=False, metrics=False)
@@ -168,8 +182,8 @@ def _angle_vs_matrix(method, dt, order=1):
     return max(state_error(scene, a.final, full, b.final).values())
 
 
-@pytest.mark.parametrize("method,order", [("lie_euler", 1), ("rkmk4", 1), ("rkmk4", 2), ("etd2", 2),
-                                          ("lie_verlet", 2)])
+@pytest.mark.parametrize("method,order", [("lie_euler", 1), ("rkmk4", 1), ("rkmk4", 2),
+                                          ("etd2", 2), ("lie_verlet", 2)])
 def test_angle_reduction_same_trajectory_as_matrix_model_A_1_A_2(method, order):
     """Model only what the scene requires: 2-D angles are the full 2x2 model, to round-off."""
     assert _angle_vs_matrix(method, 0.05, order) <= 1e-12
@@ -181,8 +195,8 @@ def test_angle_reduction_same_trajectory_as_matrix_model_A_1_A_2(method, order):
 
 @pytest.mark.parametrize("order", [1, 2])
 def test_adaptive_dop853_lie_accuracy_and_orthogonality_lemma_2_1(order):
-    scene = make_scene(3, order, count=5, seed=5, velocities={"angular": {"normal": 0.5},
-                                                               "centroid": {"normal": 0.3}}, t_end=5.0)
+    velocities = {"angular": {"normal": 0.5}, "centroid": {"normal": 0.3}}
+    scene = make_scene(3, order, count=5, seed=5, velocities=velocities, t_end=5.0)
     ada = simulate(scene, "adaptive", tolerance=1e-10, samples=[0.0, 2.5, 5.0])
     assert ada.final.t == pytest.approx(5.0)
     assert ada.steps > 3 and ada.rhs_evals > ada.steps
@@ -226,7 +240,8 @@ def test_adaptive_final_state_at_t_end_like_fixed_step_theorem_4_2():
     scene = make_scene(2, 1, count=4, seed=5, t_end=5.0)
     fixed = simulate(scene, "rkmk4", 0.05, samples=[0.0, 1.0], keep_states=False, metrics=False)
     assert fixed.final.t == pytest.approx(5.0)
-    ada = simulate(scene, "adaptive", tolerance=1e-10, samples=[0.0, 1.0], keep_states=False, metrics=False)
+    ada = simulate(scene, "adaptive", tolerance=1e-10,
+                   samples=[0.0, 1.0], keep_states=False, metrics=False)
     assert ada.final.t == pytest.approx(5.0)
 
 
@@ -240,7 +255,8 @@ def _stiff_pair(dt=0.01):
 
 
 def _rk_real_stability_boundary(coefs):
-    """Largest x with |R(-x)| <= 1 on the negative real axis, R(z) = sum coefs[k] z^k (bisection)."""
+    """Largest x with |R(-x)| <= 1 on the negative real axis, R(z) = sum coefs[k] z^k
+    (bisection)."""
     def ok(x):
         return abs(sum(c * (-x) ** k for k, c in enumerate(coefs))) <= 1.0
     lo, hi = 1e-6, 10.0
@@ -250,7 +266,8 @@ def _rk_real_stability_boundary(coefs):
     return lo
 
 
-@pytest.mark.parametrize("method", ["lie_euler", "lie_heun", "rkmk4", "euler_proj", "rk4_proj", "lie_verlet"])
+@pytest.mark.parametrize("method", ["lie_euler", "lie_heun", "rkmk4", "euler_proj", "rk4_proj",
+                                    "lie_verlet"])
 def test_explicit_methods_refuse_stiff_mass_A_1(method):
     second, _ = _stiff_pair()
     with pytest.raises(StabilityError) as exc:
@@ -266,7 +283,8 @@ def test_explicit_methods_refuse_stiff_mass_A_1(method):
         # damping is exact; the kick-drift-kick is stable for h < 2 / sqrt(kappa / m)
         expected = 2.0 / np.sqrt(1.5 / 1e-8)
     else:
-        coefs = {1: [1, 1], 2: [1, 1, 1 / 2], 4: [1, 1, 1 / 2, 1 / 6, 1 / 24]}[METHODS[method].info.order]
+        taylor = {1: [1, 1], 2: [1, 1, 1 / 2], 4: [1, 1, 1 / 2, 1 / 6, 1 / 24]}
+        coefs = taylor[METHODS[method].info.order]
         expected = _rk_real_stability_boundary(coefs) / fast
     assert limit == pytest.approx(expected, rel=5e-3)
 
@@ -282,7 +300,8 @@ def test_etd2_stiff_mass_tends_to_first_order_model_A_2():
         diam = float(np.max(np.abs(a.diameters - b.diameters)))
         err = state_error(second, a.final, first, b.final)
         assert diam < 1e-3 and err["rot"] < 1e-3
-        assert err["x"] < 1e-7                                   # O(m/gamma) for the exact centroid flow
+        # O(m/gamma) for the exact centroid flow
+        assert err["x"] < 1e-7
         results.append(err["rot"])
         for st in a.states:
             m = ensemble_metrics(second.model, st)

@@ -9,15 +9,14 @@ Prop. 2.1: the centroid flow is the exact solution of a linear system (expm).
 
 import numpy as np
 import pytest
+from core_testlib import make_scene, rot_matrices, skew_matrices
 from scipy.linalg import expm
 
 from polymatch_ros.core import System, load_scene
 from polymatch_ros.core.model import CentroidFlow, pair_force
 
-from core_testlib import make_scene, rot_matrices, skew_matrices
-
-REPRESENTATIONS = [(2, "angle"), (2, "matrix"), (3, "so3"), (3, "so3-exp"), (3, "matrix"), (4, "matrix"),
-                   (5, "matrix")]
+REPRESENTATIONS = [(2, "angle"), (2, "matrix"), (3, "so3"), (3, "so3-exp"), (3, "matrix"),
+                   (4, "matrix"), (5, "matrix")]
 
 
 def naive_lohe_sum(mats, weights=None):
@@ -57,15 +56,16 @@ def test_mean_field_equals_naive_lohe_sum_first_order_A_2(dim, rep):
 @pytest.mark.parametrize("dim,rep", REPRESENTATIONS, ids=[f"{r}-{d}d" for d, r in REPRESENTATIONS])
 def test_mean_field_equals_naive_torque_second_order_A_1(dim, rep):
     kappa, gamma, mass, n = 1.3, 0.7, 0.4, 6
-    scene = make_scene(dim, 2, count=n, seed=12, representation=rep, kappa=kappa, gamma=gamma, mass=mass,
+    scene = make_scene(dim, 2, count=n, seed=12, representation=rep, kappa=kappa, gamma=gamma,
+                       mass=mass,
                        velocities={"angular": {"normal": 0.8}, "centroid": {"normal": 0.5}})
     model = scene.model
     system = System(model)
     gs = scene.initial.groups[0]
     coupling = _coupling(system, scene.initial)
     torque = kappa / (2.0 * n) * naive_lohe_sum(rot_matrices(model.rotations, gs.rot))
-    np.testing.assert_allclose(skew_matrices(model.rotations, system.rotation_rate(0, gs.rot, coupling)),
-                               torque, rtol=0, atol=1e-13)
+    rate = system.rotation_rate(0, gs.rot, coupling)
+    np.testing.assert_allclose(skew_matrices(model.rotations, rate), torque, rtol=0, atol=1e-13)
     # (A-1): O' = W O and m W' = -gamma W + torque
     k_rot, k_x, k_v, k_w = system.rates(scene.initial, coupling)[0]
     w = skew_matrices(model.rotations, gs.w)
@@ -118,7 +118,8 @@ def paper_f2_force(xs, gi, i, kappa_1, kappa_2, L):
 
 
 def _mixed_scene(order, centroids=None, dim=2):
-    shapes = ["triangle", "square", "pentagon"] if dim == 2 else ["triangle", "tetrahedron", "cube"]
+    shapes = (["triangle", "square", "pentagon"] if dim == 2
+              else ["triangle", "tetrahedron", "cube"])
     counts = [3, 4, 5]
     groups = []
     for k, (shape, count) in enumerate(zip(shapes, counts)):
@@ -151,11 +152,14 @@ def test_mixed_centroid_force_matches_paper_F_2(order, dim):
             np.testing.assert_allclose(k_x, expected / model.gamma, rtol=0, atol=1e-13)
         else:
             np.testing.assert_allclose(k_x, gs.v, rtol=0, atol=0)
-            np.testing.assert_allclose(k_v, (expected - model.gamma * gs.v) / model.mass, rtol=0, atol=1e-12)
-        # rotations couple only inside the group, with the group's own N_g (F-2, third/fourth lines)
+            np.testing.assert_allclose(
+                k_v, (expected - model.gamma * gs.v) / model.mass, rtol=0, atol=1e-12)
+        # rotations couple only inside the group, with the group's own N_g
+        # (F-2, third/fourth lines)
         mats = rot_matrices(model.rotations, gs.rot)
         scale = 1.3 / (2.0 * len(mats)) if order == 2 else 1.3 / (2.0 * 1.2 * len(mats))
-        np.testing.assert_allclose(skew_matrices(model.rotations, system.rotation_rate(gi, gs.rot, coupling)),
+        rate = system.rotation_rate(gi, gs.rot, coupling)
+        np.testing.assert_allclose(skew_matrices(model.rotations, rate),
                                    scale * naive_lohe_sum(mats), rtol=0, atol=1e-13)
 
 
@@ -178,7 +182,8 @@ def test_mixed_force_coincident_centroids_zero_not_nan_F_2():
     # pair_force alone: a coincident pair contributes exactly zero, other pairs the paper's term
     x = np.array([[0.0, 0.0]])
     y = np.array([[0.0, 0.0], [2.0, 0.0]])
-    np.testing.assert_allclose(pair_force(x, y, 0.7, 1.5), [[0.7 / 2 * (2.0 - 1.5), 0.0]], atol=1e-15)
+    np.testing.assert_allclose(pair_force(x, y, 0.7, 1.5), [[0.7 / 2 * (2.0 - 1.5), 0.0]],
+                               atol=1e-15)
     np.testing.assert_array_equal(pair_force(x, y[:1], 0.7, 1.5), [[0.0, 0.0]])
     # chunked evaluation (one row at a time) gives the same numbers
     rng = np.random.default_rng(3)
@@ -223,7 +228,8 @@ def test_exact_centroid_flow_first_order_prop_2_1():
 
 @pytest.mark.parametrize("m,gamma,kappa", [(0.3, 0.8, 1.4), (2.0, 0.5, 3.0), (0.0, 1.5, 2.0)])
 def test_centroid_flow_advance_equals_full_linear_system_prop_2_1(m, gamma, kappa):
-    """advance() against expm of the full 2N x 2N system m x'' = -gamma x' + kappa/N sum (x_k - x_i)."""
+    """advance() against expm of the full 2N x 2N system
+    m x'' = -gamma x' + kappa/N sum (x_k - x_i)."""
     rng = np.random.default_rng(5)
     n, d, h = 6, 3, 0.4
     x, v = rng.normal(size=(n, d)), rng.normal(size=(n, d))
@@ -260,8 +266,8 @@ def test_exact_centroid_flow_stiff_mass_tends_to_first_order_prop_2_1(m):
     ref = _stable_closed_form(m, gamma, kappa, h)
     np.testing.assert_allclose(pk, ref, rtol=1e-12, atol=1e-300)
     # the mean mode (k = 0): x' = v, v' = -(gamma/m) v exactly
-    np.testing.assert_allclose(p0, [[1.0, m / gamma * -np.expm1(-gamma * h / m)], [0.0, np.exp(-gamma * h / m)]],
-                               rtol=1e-12, atol=1e-300)
+    mean_mode = [[1.0, m / gamma * -np.expm1(-gamma * h / m)], [0.0, np.exp(-gamma * h / m)]]
+    np.testing.assert_allclose(p0, mean_mode, rtol=1e-12, atol=1e-300)
     if m >= 1e-8:
         # expm agrees too, to its own (lower) accuracy on a stiff matrix
         np.testing.assert_allclose(pk, expm(_companion(m, gamma, kappa) * h), rtol=1e-9, atol=0)
@@ -274,6 +280,8 @@ def test_exact_centroid_flow_stiff_mass_tends_to_first_order_prop_2_1(m):
     for _ in range(100):
         x, v = flow.advance(x, v, x.mean(axis=0), v.mean(axis=0), h)
     assert np.all(np.isfinite(x)) and np.all(np.isfinite(v))
-    # after the O(m/gamma) initial layer the velocity has been absorbed: x(1) = e^{-kappa/gamma} x_slow(0)
-    x_slow0 = np.array([[1.0, -2.0], [-1.0, 2.0]]) + (m / gamma) * np.array([[3.0, 0.0], [-3.0, 0.0]])
+    # after the O(m/gamma) initial layer the velocity has been absorbed:
+    # x(1) = e^{-kappa/gamma} x_slow(0)
+    x_slow0 = (np.array([[1.0, -2.0], [-1.0, 2.0]])
+               + (m / gamma) * np.array([[3.0, 0.0], [-3.0, 0.0]]))
     np.testing.assert_allclose(x, np.exp(-kappa * 1.0 / gamma) * x_slow0, rtol=1e-6, atol=1e-12)

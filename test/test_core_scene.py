@@ -1,14 +1,14 @@
-"""Scene loading: initial data satisfy the paper's constraints; bad scenes give one-line key-path errors."""
+"""Scene loading: initial data satisfy the paper's constraints; bad scenes give one-line
+key-path errors."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
+from core_testlib import defect, rot_matrices, skew_matrices
 
 from polymatch_ros.core import SceneError, load_scene
 from polymatch_ros.core.shapes import polygon
-
-from core_testlib import defect, rot_matrices, skew_matrices
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
 TRI = polygon(3).vertices
@@ -46,7 +46,8 @@ GROUP_CASES = [
     ("groups[0].count", _base(groups=[_group(count=2.5)])),
     ("groups[0].rotations", _base(groups=[_group(rotations="sideways")])),
     ("groups[0].rotations.within", _base(groups=[_group(rotations={"within": -1.0})])),
-    ("groups[0].rotations.matrices[0]", _base(groups=[_group(rotations={"matrices": [[[1, 0], [0, -1]]] * 3})])),
+    ("groups[0].rotations.matrices[0]",
+     _base(groups=[_group(rotations={"matrices": [[[1, 0], [0, -1]]] * 3})])),
     ("groups[1].shape", _base(groups=[_group(), _group(name="b", shape="dodecagonal-blob")])),
     ("groups[0].shape", _base(groups=[_group(shape="tetrahedron")])),
     ("groups[0].shape.vertices", _base(groups=[_group(shape={"vertices": [[0.0, 0.0]]})])),
@@ -77,26 +78,30 @@ def _check(path, data):
     return msg
 
 
-@pytest.mark.parametrize("path,data", MODEL_CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(MODEL_CASES)])
+@pytest.mark.parametrize("path,data", MODEL_CASES,
+                         ids=[f"{c[0]}-{i}" for i, c in enumerate(MODEL_CASES)])
 def test_scene_rejects_invalid_model_parameters_A_1_A_2(path, data):
     _check(path, data)
 
 
-@pytest.mark.parametrize("path,data", GROUP_CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(GROUP_CASES)])
+@pytest.mark.parametrize("path,data", GROUP_CASES,
+                         ids=[f"{c[0]}-{i}" for i, c in enumerate(GROUP_CASES)])
 def test_scene_rejects_invalid_polytope_groups_section_3(path, data):
     msg = _check(path, data)
     if "agents" in path:
         assert ("mirror" in msg) or ("not congruent" in msg)
 
 
-@pytest.mark.parametrize("path,data", RUN_CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(RUN_CASES)])
+@pytest.mark.parametrize("path,data", RUN_CASES,
+                         ids=[f"{c[0]}-{i}" for i, c in enumerate(RUN_CASES)])
 def test_scene_rejects_invalid_integration_settings_section_5(path, data):
     _check(path, data)
 
 
 @pytest.mark.parametrize("path", sorted(CONFIG.glob("*.yaml")), ids=lambda p: p.stem)
 def test_config_initial_data_satisfy_constraints_B_4(path):
-    """O^{i0} in SO(d), O'^{i0} O^{i0 T} skew (B-4), centroids stored as offsets from their mean."""
+    """O^{i0} in SO(d), O'^{i0} O^{i0 T} skew (B-4), centroids stored as offsets from their
+    mean."""
     scene = load_scene(path)
     rep = scene.model.rotations
     offsets = np.concatenate([gs.x for gs in scene.initial.groups])
@@ -112,7 +117,8 @@ def test_config_initial_data_satisfy_constraints_B_4(path):
             np.testing.assert_allclose(w + np.swapaxes(w, 1, 2), 0.0, atol=0)
             assert gs.v.shape == gs.x.shape
         else:
-            assert gs.v is None and gs.w is None                                # (A-2) carries no velocities
+            # (A-2) carries no velocities
+            assert gs.v is None and gs.w is None
 
 
 def test_explicit_vertices_round_trip_section_3():
@@ -120,7 +126,8 @@ def test_explicit_vertices_round_trip_section_3():
     rng = np.random.default_rng(4)
     angles = rng.uniform(-np.pi, np.pi, 4)
     cents = rng.normal(scale=3.0, size=(4, 2))
-    verts = [c + TRI @ np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]).T for a, c in zip(angles, cents)]
+    verts = [c + TRI @ np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]).T
+             for a, c in zip(angles, cents)]
     scene = load_scene(_base(groups=[{"shape": {"vertices": TRI.tolist()},
                                       "agents": [{"vertices": v.tolist()} for v in verts]}]))
     gs = scene.initial.groups[0]

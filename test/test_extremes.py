@@ -7,21 +7,26 @@ limit) or a warning -- never NaN and never a silent wrong answer.
 
     extreme                           expectation (claim)
     m = 1e-8, dt = 0.01..0.05         explicit methods refuse "dt < ~2..2.8 m/gamma"; etd2 runs and
-                                      agrees with the first-order model (A-2) to O(m/gamma) + O(dt^2)
-    gamma = 0                         lie_verlet keeps the energy (Prop. 2.2 i) without secular drift;
-                                      methods with no stable step refuse, naming gamma = 0
-    kappa = 1e4                       refusal beyond ~2.8/kappa; accurate at a compliant dt; adaptive
-                                      accurate (its cost is bounded and reported)
+                                      agrees with the first-order model (A-2) to O(m/gamma) +
+                                      O(dt^2)
+    gamma = 0                         lie_verlet keeps the energy (Prop. 2.2 i) without secular
+                                      drift; methods with no stable step refuse, naming gamma = 0
+    kappa = 1e4                       refusal beyond ~2.8/kappa; accurate at a compliant dt;
+                                      adaptive accurate (its cost is bounded and reported)
     N = 10^4                          a few steps run; metrics finite and exact (convex-hull check)
-    d = 10                            rotations stay in SO(10) to 1e-12 (Lemma 2.1); converges (Thm 4.2)
+    d = 10                            rotations stay in SO(10) to 1e-12 (Lemma 2.1); converges
+                                      (Thm 4.2)
     t_end = 10^3 (CI), 10^4 (bench)   no drift of orthogonality; converged stays converged
-    coordinates ~ 1e9                 matching diameter equals that of the scene translated to the origin
-                                      to 1e-12 of the shape size, at all times
-    scale ratios 1e-6 .. 1e6 (F-1)    explicit methods refuse naming the scale ratios; accurate at a
-                                      compliant dt; adaptive crawls and stops with a one-line error
+    coordinates ~ 1e9                 matching diameter equals that of the scene translated to the
+                                      origin to 1e-12 of the shape size, at all times
+    scale ratios 1e-6 .. 1e6 (F-1)    explicit methods refuse naming the scale ratios; accurate at
+                                      a compliant dt; adaptive crawls and stops with a one-line
+                                      error
     antipodal / splay equilibria      reproduced: the deviation grows from round-off at exactly the
-                                      unstable rate of the linearisation; the CLI says "not consensus"
-    D0 >= 1, random, N = 8            still converges (Kuramoto/Lohe gradient flow), outside Thm 4.2
+                                      unstable rate of the linearisation; the CLI says "not
+                                      consensus"
+    D0 >= 1, random, N = 8            still converges (Kuramoto/Lohe gradient flow), outside
+                                      Thm 4.2
     coincident centroids (F-2)        finite; the defined zero force keeps them together; 1e-12 of
                                       asymmetry separates the groups to L
     nearly collinear triangle         decomposes exactly, converges
@@ -44,6 +49,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from core_testlib import (
+    brute_matching_diameter,
+    brute_rotation_diameter,
+    defect,
+    make_scene,
+    rot_matrices,
+    rotation_energy,
+    state_error,
+    vertices,
+)
 from scipy.spatial import ConvexHull
 from scipy.spatial.distance import pdist
 
@@ -53,18 +68,17 @@ from polymatch_ros.bench.extremes_lib import EQUILIBRIA, QUICK
 from polymatch_ros.bench.extremes_lib import finite as all_finite
 from polymatch_ros.core import METHODS, PolymatchError, StabilityError, load_scene, simulate
 
-from core_testlib import (brute_matching_diameter, brute_rotation_diameter, defect, make_scene, rot_matrices,
-                          rotation_energy, state_error, vertices)
-
 ROOT = Path(__file__).resolve().parent.parent
 EXTREMES = lib.EXTREMES_DIR
 POLYMATCH = Path(sys.executable).with_name("polymatch")
 
 EXPLICIT = ["lie_euler", "lie_heun", "rkmk4", "euler_proj", "rk4_proj"]
-#: Butcher tableaux (A, b) of the explicit Runge-Kutta methods, by order (independent of the package)
+#: Butcher tableaux (A, b) of the explicit Runge-Kutta methods, by order
+#: (independent of the package)
 TABLEAUX = {1: ([[0.0]], [1.0]),
             2: ([[0.0, 0.0], [1.0, 0.0]], [0.5, 0.5]),
-            4: ([[0, 0, 0, 0], [0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 1.0, 0]], [1 / 6, 1 / 3, 1 / 3, 1 / 6])}
+            4: ([[0, 0, 0, 0], [0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 1.0, 0]],
+                [1 / 6, 1 / 3, 1 / 3, 1 / 6])}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -72,8 +86,8 @@ TABLEAUX = {1: ([[0.0]], [1.0]),
 
 
 def tableau_limit(a, b, eigenvalues, hi=100.0):
-    """Largest h with |R(h lambda)| <= 1 for every eigenvalue, R(z) = 1 + z b^T (I - z A)^{-1} 1 from
-    the Butcher tableau (the bench's oracle uses the truncated exponential series instead)."""
+    """Largest h with |R(h lambda)| <= 1 for every eigenvalue, R(z) = 1 + z b^T (I - z A)^{-1} 1
+    from the Butcher tableau (the bench's oracle uses the truncated exponential series instead)."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     ones, eye = np.ones(len(b)), np.eye(len(b))
 
@@ -130,11 +144,11 @@ def chunked_max_distance(points, rows=1000):
 
 
 def run_cli(*args, timeout=120):
-    """`polymatch ARGS` as a user runs it (the venv's console script; `python -m` if it is missing)."""
+    """`polymatch ARGS` as a user runs it (the venv's console script; `python -m` if missing)."""
     cmd = [str(POLYMATCH)] if POLYMATCH.exists() else [sys.executable, "-m", "polymatch_ros.cli"]
     env = dict(os.environ, PYTHONWARNINGS="default")
-    return subprocess.run(cmd + [str(a) for a in args], capture_output=True, text=True, timeout=timeout,
-                          cwd=ROOT, env=env)
+    return subprocess.run(cmd + [str(a) for a in args], capture_output=True, text=True,
+                          timeout=timeout, cwd=ROOT, env=env)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -143,7 +157,8 @@ def run_cli(*args, timeout=120):
 QUICK_CASES = [c for c in CASES if c.quick]
 
 
-@pytest.mark.parametrize("case", QUICK_CASES, ids=[f"{c.key}:{c.title(QUICK)}" for c in QUICK_CASES])
+@pytest.mark.parametrize("case", QUICK_CASES,
+                         ids=[f"{c.key}:{c.title(QUICK)}" for c in QUICK_CASES])
 def test_extreme_table_expectation_holds_fast_variant(case):
     out = case.run(QUICK)
     assert out.ok, f"{case.title(QUICK)}: expected {case.expectation}; {out.happened}"
@@ -212,7 +227,8 @@ def test_extreme_stiff_mass_m_1e_8_auto_picks_etd2_prop_2_1():
 
 def test_extreme_stiff_mass_m_1e_8_auto_with_tolerance_finishes_or_refuses_promptly_prop_2_1():
     scene = _stiff_scene(2, t_end=1.0)
-    scene = replace(scene, integrator=replace(scene.integrator, method="auto", tolerance=1e-6, max_steps=300))
+    integrator = replace(scene.integrator, method="auto", tolerance=1e-6, max_steps=300)
+    scene = replace(scene, integrator=integrator)
     traj = simulate(scene, samples=[0.0], keep_states=False)
     assert traj.plan.name == "etd2"
     assert traj.final.t == pytest.approx(1.0)
@@ -262,7 +278,8 @@ def test_extreme_undamped_gamma_0_no_stable_step_says_so_prop_2_2_i(method):
 
 
 def test_extreme_undamped_gamma_0_rkmk4_has_finite_limit_on_imaginary_axis_prop_2_2_i():
-    """RK4 contains a segment of the imaginary axis (|y| <= 2 sqrt 2): a real limit, not a refusal."""
+    """RK4 contains a segment of the imaginary axis (|y| <= 2 sqrt 2): a real limit, not a
+    refusal."""
     with pytest.raises(StabilityError) as exc:
         simulate(_undamped(10.0), "rkmk4", 3.0, keep_states=False, metrics=False)
     assert refusal_limit(exc.value) == pytest.approx(2 * math.sqrt(2), rel=5e-3)
@@ -285,7 +302,8 @@ def test_extreme_stiff_coupling_kappa_1e4_explicit_refuse_dt_limit_A_1_A_2(metho
         simulate(scene, method, dt, keep_states=False, metrics=False)
     msg = str(exc.value)
     assert "kappa" in msg
-    # first order: rotation deviations decay at -kappa/gamma; second order: m l^2 + gamma l + kappa = 0
+    # first order: rotation deviations decay at -kappa/gamma;
+    # second order: m l^2 + gamma l + kappa = 0
     eig = [-1e4] if order == 1 else second_order_eigenvalues(1.0, 1.0, 1e4) + [-1.0]
     assert refusal_limit(exc.value) == pytest.approx(rk_limit(method, eig), rel=5e-3)
     if order == 1:
@@ -301,10 +319,11 @@ def test_extreme_stiff_coupling_kappa_1e4_compliant_dt_accurate_adaptive_cost_A_
         assert np.allclose(fixed.times, ref.times, rtol=0, atol=1e-15)
         errs.append(max(state_error(scene, fixed.final, scene, ref.final).values()))
         d0 = ref.metrics[0].diameter
-        for p, q in zip(fixed.metrics, ref.metrics):                # to 1e-6 of the initial diameter
+        for p, q in zip(fixed.metrics, ref.metrics):        # to 1e-6 of the initial diameter
             assert abs(p.diameter - q.diameter) < 1e-6 * d0
     assert errs[1] < 1e-6
-    assert errs[0] / errs[1] > 10.0                              # 4th order (16) up to the transient
+    # 4th order (16) up to the transient
+    assert errs[0] / errs[1] > 10.0
     ada = simulate(scene, "adaptive", tolerance=1e-9)
     assert all_finite(ada)
     assert max(state_error(scene, ada.final, scene, ref.final).values()) < 1e-7
@@ -319,7 +338,7 @@ def test_extreme_stiff_coupling_kappa_1e4_second_order_rkmk4_at_compliant_dt_A_1
     fixed = simulate(scene, "rkmk4", 5e-4)                       # h sqrt(kappa/m) = 0.05
     err = state_error(scene, fixed.final, scene, ref.final)
     assert err["rot"] < 1e-5 and err["w"] < 1e-3
-    with pytest.raises(StabilityError):                          # and 0.03 > 2 sqrt 2 / 100 is refused
+    with pytest.raises(StabilityError):              # and 0.03 > 2 sqrt 2 / 100 is refused
         simulate(scene, "rkmk4", 0.03)
 
 
@@ -329,8 +348,8 @@ def test_extreme_stiff_coupling_kappa_1e4_second_order_rkmk4_at_compliant_dt_A_1
 
 @pytest.mark.parametrize("order", [1, 2])
 def test_extreme_large_n_10_000_few_steps_metrics_finite_exact_theorem_4_2(order):
-    scene = make_scene(3, order, count=10_000, seed=3, t_end=0.1, velocities={"angular": {"normal": 0.5}},
-                       centroids={"box": [-5.0, 5.0]})
+    scene = make_scene(3, order, count=10_000, seed=3, t_end=0.1,
+                       velocities={"angular": {"normal": 0.5}}, centroids={"box": [-5.0, 5.0]})
     traj = simulate(scene, "rkmk4", 0.05, samples=[0.0, 0.1])
     assert traj.steps == 2 and all_finite(traj)
     model = scene.model
@@ -343,8 +362,8 @@ def test_extreme_large_n_10_000_few_steps_metrics_finite_exact_theorem_4_2(order
         assert g.centroid_diameter == pytest.approx(hull_diameter(st.groups[0].x), rel=1e-12)
         mats = rot_matrices(model.rotations, st.groups[0].rot)
         if st is traj.final:                                  # the 9-D scan is the slow part: once
-            assert g.rotation_diameter == pytest.approx(chunked_max_distance(mats.reshape(len(mats), -1)),
-                                                           rel=1e-12)
+            brute = chunked_max_distance(mats.reshape(len(mats), -1))
+            assert g.rotation_diameter == pytest.approx(brute, rel=1e-12)
         assert g.orthogonality == pytest.approx(defect(mats), abs=1e-15) and defect(mats) < 1e-13
 
 
@@ -374,9 +393,10 @@ def test_extreme_dimension_10_simplices_stay_in_so10_and_converge_lemma_2_1_theo
 
 @pytest.mark.parametrize("dim,order,method,dt", [(3, 1, "rkmk4", 2.5), (4, 1, "rkmk4", 2.5),
                                                  (3, 2, "lie_verlet", 0.5), (4, 2, "etd2", 0.5)])
-def test_extreme_long_horizon_t_end_1e3_no_orthogonality_drift_stays_converged_lemma_2_1(dim, order, method, dt):
-    scene = make_scene(dim, order, count=6, seed=3, t_end=1000.0, samples={"every": 10.0}, mass=1.0,
-                       representation="matrix", velocities={"angular": {"normal": 0.5}})
+def test_extreme_long_horizon_t_end_1e3_no_orthogonality_drift_stays_converged_lemma_2_1(
+        dim, order, method, dt):
+    scene = make_scene(dim, order, count=6, seed=3, t_end=1000.0, samples={"every": 10.0},
+                       mass=1.0, representation="matrix", velocities={"angular": {"normal": 0.5}})
     traj = simulate(scene, method, dt)
     assert traj.final.t == pytest.approx(1000.0) and all_finite(traj)
     defects = [defect(rot_matrices(scene.model.rotations, st.groups[0].rot)) for st in traj.states]
@@ -412,8 +432,10 @@ def _placed_scene(offset, points_a, points_b, dim, order, kappa_2):
     return lib.placed_scene(offset, points_a, points_b, dim, order, kappa_2)
 
 
-@pytest.mark.parametrize("dim,order,kappa_2", [(2, 1, None), (3, 2, None), (2, 2, 0.5), (3, 1, 0.5)])
-def test_extreme_huge_coordinates_1e9_matching_diameter_relative_to_shape_theorem_4_2(dim, order, kappa_2):
+@pytest.mark.parametrize("dim,order,kappa_2",
+                         [(2, 1, None), (3, 2, None), (2, 2, 0.5), (3, 1, 0.5)])
+def test_extreme_huge_coordinates_1e9_matching_diameter_relative_to_shape_theorem_4_2(
+        dim, order, kappa_2):
     rng = np.random.default_rng(3)
     # relative positions on a 2^-10 grid: exactly representable next to 1e9 (spacing 2^-23), so the
     # far scene is exactly the near one translated
@@ -430,7 +452,8 @@ def test_extreme_huge_coordinates_1e9_matching_diameter_relative_to_shape_theore
             assert abs(gf.matching_diameter - gn.matching_diameter) <= 1e-12 * size
     assert tf.metrics[0].diameter > 1.0
     assert tf.diameters[-1] < 1e-3                            # and something happened
-    # the configurations themselves (independent: vertices relative to polytope 0's first vertex) agree
+    # the configurations themselves (independent: vertices relative to polytope 0's first
+    # vertex) agree
     for gi in range(len(far.model.groups)):
         vf, vn = vertices(far.model, tf.final, gi), vertices(near.model, tn.final, gi)
         assert np.max(np.abs((vf - vf[:1, :1, :]) - (vn - vn[:1, :1, :]))) <= 1e-12 * size
@@ -442,8 +465,10 @@ def test_extreme_huge_coordinates_1e9_scene_file_resolves_shape_theorem_4_2():
     assert np.max(np.abs(scene.initial.groups[0].x)) < 10       # offsets, not coordinates
     traj = simulate(scene, samples=[0.0, 30.0])
     assert traj.converged_at == pytest.approx(30.0)
-    assert traj.diameters[-1] < 1e-6                            # resolvable only because of the offsets
-    assert traj.diameters[-1] == pytest.approx(brute_matching_diameter(scene.model, traj.final, 0), abs=1e-13)
+    # resolvable only because of the offsets
+    assert traj.diameters[-1] < 1e-6
+    assert traj.diameters[-1] == pytest.approx(
+        brute_matching_diameter(scene.model, traj.final, 0), abs=1e-13)
 
 
 _explicit_triangles_at = lib.explicit_triangles_at
@@ -465,8 +490,9 @@ _scale_scene = lib.scale_ratio_scene
 
 
 def _f1_stiffness(scene):
-    """kappa * mean(s) / min(s): the fastest rate of the F-1 linearisation at consensus (independent:
-    J = (kappa/N) D^{-1} (1 s^T - sum(s) I), whose extreme eigenvalue is computed here)."""
+    """kappa * mean(s) / min(s): the fastest rate of the F-1 linearisation at consensus
+    (independent: J = (kappa/N) D^{-1} (1 s^T - sum(s) I), whose extreme eigenvalue is computed
+    here)."""
     s = np.asarray(scene.model.groups[0].scales)
     jac = (scene.model.kappa / len(s)) * (np.outer(1.0 / s, s) - np.diag(np.sum(s) / s))
     return float(np.max(np.abs(np.linalg.eigvals(jac))))
@@ -509,9 +535,9 @@ def test_extreme_scale_ratios_1e_6_1e_6_compliant_dt_accurate_F_1():
 
 
 def test_extreme_scale_ratios_1e_6_1e_6_adaptive_refuses_early_naming_stiffness_F_1():
-    """The adaptive method is explicit: its step is bounded by DOP853's stability limit (~5e-9 here),
-    so reaching t_end = 1 needs ~1e8 steps.  It says so before stepping, in one line, naming the
-    stiffness (the F-1 weights), instead of crawling to max_steps."""
+    """The adaptive method is explicit: its step is bounded by DOP853's stability limit (~5e-9
+    here), so reaching t_end = 1 needs ~1e8 steps.  It says so before stepping, in one line,
+    naming the stiffness (the F-1 weights), instead of crawling to max_steps."""
     scene = _scale_scene(1)
     scene = replace(scene, integrator=replace(scene.integrator, max_steps=100_000))
     with pytest.raises(PolymatchError) as exc:
@@ -520,11 +546,13 @@ def test_extreme_scale_ratios_1e_6_1e_6_adaptive_refuses_early_naming_stiffness_
     assert "\n" not in msg and exc.value.exit_code == 1
     assert "stiff" in msg and "s_k/s_i" in msg and "max_steps = 100000" in msg
     needed = float(re.search(r"at least ([0-9.eE+-]+) steps", msg).group(1))
-    assert needed == pytest.approx(0.9 * 6.0 * 0 + 1.0 / (0.9 * _dop853_real_limit() / _f1_stiffness(scene)), rel=0.2)
+    assert needed == pytest.approx(
+        0.9 * 6.0 * 0 + 1.0 / (0.9 * _dop853_real_limit() / _f1_stiffness(scene)), rel=0.2)
 
 
 def _dop853_real_limit():
-    """DOP853's stability interval on the negative real axis, from its tableau (independent bisection)."""
+    """DOP853's stability interval on the negative real axis, from its tableau (independent
+    bisection)."""
     from scipy.integrate import DOP853
     return tableau_limit(DOP853.A[:12, :12], DOP853.B, [-1.0], hi=20.0)
 
@@ -536,17 +564,23 @@ def _dop853_real_limit():
 @pytest.mark.parametrize("rep", ["auto", "matrix"])
 @pytest.mark.parametrize("order", [1, 2])
 @pytest.mark.parametrize("name", list(EQUILIBRIA))
-def test_extreme_non_consensus_equilibrium_reproduced_roundoff_grows_at_linear_rate_D0_ge_1(name, order, rep):
-    """W = 0 at these states, so the model stays there; floating point is 1e-16 off (sin(pi) != 0) and
-    the unstable mode grows from there at exactly the rate of the linearisation: first order
-    kappa * c, second order the positive root of m l^2 + gamma l - kappa c = 0."""
+def test_extreme_non_consensus_equilibrium_reproduced_roundoff_grows_at_linear_rate_D0_ge_1(
+        name, order, rep):
+    """W = 0 at these states, so the model stays there; floating point is 1e-16 off
+    (sin(pi) != 0) and the unstable mode grows from there at exactly the rate of the
+    linearisation: first order kappa * c, second order the positive root of
+    m l^2 + gamma l - kappa c = 0."""
     c, m, gamma, kappa = EQUILIBRIA[name][-1], 0.5, 1.0, 1.0
     scene, traj, t, eps, rate = lib.equilibrium_run(name, order, rep, 40.0, 0.5, m=m, gamma=gamma)
-    # the independent linearisation: first order kappa c, second order m l^2 + gamma l - kappa c = 0
-    assert rate == pytest.approx(kappa * c if order == 1 else max(np.roots([m, gamma, -kappa * c]).real))
+    # the independent linearisation: first order kappa c,
+    # second order m l^2 + gamma l - kappa c = 0
+    assert rate == pytest.approx(
+        kappa * c if order == 1 else max(np.roots([m, gamma, -kappa * c]).real))
     assert all_finite(traj)
-    assert eps[0] < 1e-15                                      # starts at the equilibrium (to round-off)
-    assert np.all(eps[t <= 10.0 / rate] < 1e-9)                # and stays there for 10 e-folding times
+    # starts at the equilibrium (to round-off)
+    assert eps[0] < 1e-15
+    # and stays there for 10 e-folding times
+    assert np.all(eps[t <= 10.0 / rate] < 1e-9)
     window = (eps > 1e-11) & (eps < 1e-3)
     assert window.sum() >= 10
     slope, intercept = np.polyfit(t[window], np.log(eps[window]), 1)
@@ -554,8 +588,8 @@ def test_extreme_non_consensus_equilibrium_reproduced_roundoff_grows_at_linear_r
     assert math.exp(intercept) < 1e-14                         # seeded by round-off only
 
 
-@pytest.mark.parametrize("scene_file", ["antipodal_triangles_2d.yaml", "antipodal_tetrahedra_3d.yaml",
-                                        "splay_triangles_2d.yaml"])
+@pytest.mark.parametrize("scene_file", ["antipodal_triangles_2d.yaml",
+                                        "antipodal_tetrahedra_3d.yaml", "splay_triangles_2d.yaml"])
 def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
     from polymatch_ros.core.simulate import convergence_verdict
     scene = load_scene(EXTREMES / scene_file)
@@ -565,7 +599,8 @@ def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
     code, msg = convergence_verdict(replace(scene, expect_convergence=True), traj.diameters[-1],
                                     traj.converged_at, traj.stationarity)
     assert code == 3 and "not consensus" in msg
-    code, msg = convergence_verdict(scene, traj.diameters[-1], traj.converged_at, traj.stationarity)
+    code, msg = convergence_verdict(
+        scene, traj.diameters[-1], traj.converged_at, traj.stationarity)
     assert code == 0 and "not consensus" in msg and "expected = false" in msg
 
 
@@ -573,7 +608,8 @@ def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
 def test_extreme_d0_ge_1_uniform_random_n_8_still_converges_outside_theorem_4_2(dim):
     for seed in (1, 2, 3):
         scene = make_scene(dim, 1, count=8, seed=seed, t_end=60.0, samples={"every": 10.0})
-        d0 = brute_rotation_diameter(rot_matrices(scene.model.rotations, scene.initial.groups[0].rot))
+        initial = rot_matrices(scene.model.rotations, scene.initial.groups[0].rot)
+        d0 = brute_rotation_diameter(initial)
         assert d0 >= 1.0                                      # outside Theorem 4.2's D0 < 1
         traj = simulate(scene, "rkmk4", 0.1)
         assert brute_matching_diameter(scene.model, traj.final, 0) < 1e-6
@@ -586,17 +622,21 @@ def test_extreme_d0_ge_1_uniform_random_n_8_still_converges_outside_theorem_4_2(
 _coincident = lib.coincident_scene
 
 
-@pytest.mark.parametrize("order,method", [(1, "lie_euler"), (1, "rkmk4"), (1, "adaptive"), (2, "rkmk4"),
-                                          (2, "etd2"), (2, "lie_verlet"), (2, "adaptive")])
+@pytest.mark.parametrize("order,method", [(1, "lie_euler"), (1, "rkmk4"), (1, "adaptive"),
+                                          (2, "rkmk4"), (2, "etd2"), (2, "lie_verlet"),
+                                          (2, "adaptive")])
 def test_extreme_coincident_centroids_mixed_finite_zero_force_keeps_them_F_2(order, method):
     scene = _coincident(order)
-    traj = simulate(scene, "adaptive", tolerance=1e-9) if method == "adaptive" else simulate(scene, method, 0.05)
+    if method == "adaptive":
+        traj = simulate(scene, "adaptive", tolerance=1e-9)
+    else:
+        traj = simulate(scene, method, 0.05)
     assert all_finite(traj)
     for met, st in zip(traj.metrics, traj.states):
-        assert met.group_separation == 0.0                 # the defined zero force: nothing moves them
+        assert met.group_separation == 0.0         # the defined zero force: nothing moves them
         for gs in st.groups:
             assert np.all(gs.x == 0.0)
-    for g in traj.metrics[-1].groups:                      # rotations still match inside each group
+    for g in traj.metrics[-1].groups:              # rotations still match inside each group
         assert g.matching_diameter < 1e-6
 
 
@@ -614,9 +654,10 @@ def test_extreme_coincident_centroids_mixed_any_asymmetry_separates_to_L_F_2(ord
 
 
 def test_extreme_coincident_pairs_across_groups_finite_separate_to_L_F_2():
-    """Each centroid of group a on one of group b (so the group centres coincide too): the pairs start
-    with zero force, round-off (not the model) picks the directions they leave in -- the path of a copy
-    translated to 1e9 differs -- but every run is finite and the groups end L apart."""
+    """Each centroid of group a on one of group b (so the group centres coincide too): the pairs
+    start with zero force, round-off (not the model) picks the directions they leave in -- the
+    path of a copy translated to 1e9 differs -- but every run is finite and the groups end L
+    apart."""
     for off in (0.0, 1e9):
         scene = lib.coincident_pairs_scene(off)
         traj = simulate(scene, "rkmk4", 0.05)
@@ -667,16 +708,19 @@ def test_extreme_nearly_collinear_triangle_3d_decomposes_lemma_3_2():
 # dt > t_end
 
 
-@pytest.mark.parametrize("order,method", [(1, "lie_euler"), (1, "rkmk4"), (1, "rk4_proj"), (2, "rkmk4"),
-                                          (2, "etd2"), (2, "lie_verlet")])
+@pytest.mark.parametrize("order,method", [(1, "lie_euler"), (1, "rkmk4"), (1, "rk4_proj"),
+                                          (2, "rkmk4"), (2, "etd2"), (2, "lie_verlet")])
 def test_extreme_dt_larger_than_t_end_warns_takes_one_step_section_5(order, method):
-    scene = make_scene(3, order, count=4, seed=2, t_end=0.3, velocities={"angular": {"normal": 0.5}})
-    with pytest.warns(UserWarning, match=r"dt = 5 is larger than t_end = 0.3: taking one step of t_end"):
+    scene = make_scene(3, order, count=4, seed=2, t_end=0.3,
+                       velocities={"angular": {"normal": 0.5}})
+    with pytest.warns(UserWarning,
+                      match=r"dt = 5 is larger than t_end = 0.3: taking one step of t_end"):
         traj = simulate(scene, method, 5.0)
     assert traj.steps == 1 and traj.plan.dt == 0.3
     assert traj.final.t == pytest.approx(0.3) and all_finite(traj)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")                           # dt = t_end: no warning, same state
+        # dt = t_end: no warning, same state
+        warnings.simplefilter("error")
         same = simulate(scene, method, 0.3)
     assert max(state_error(scene, traj.final, scene, same.final).values()) == 0.0
 
@@ -699,21 +743,27 @@ def test_extreme_one_agent_trivially_converged_any_integrator_theorem_4_2(order,
     from polymatch_ros.core.simulate import convergence_verdict
     names = [n for n, m in METHODS.items() if order in m.info.models] + ["adaptive"]
     for name in names:
-        scene = make_scene(dim, order, count=1, t_end=1.0, velocities={"angular": {"normal": 0.5},
-                                                                        "centroid": {"normal": 0.5}})
-        traj = simulate(scene, "adaptive", tolerance=1e-8) if name == "adaptive" else simulate(scene, name, 0.05)
+        velocities = {"angular": {"normal": 0.5}, "centroid": {"normal": 0.5}}
+        scene = make_scene(dim, order, count=1, t_end=1.0, velocities=velocities)
+        if name == "adaptive":
+            traj = simulate(scene, "adaptive", tolerance=1e-8)
+        else:
+            traj = simulate(scene, name, 0.05)
         assert all_finite(traj), name
         assert np.all(traj.diameters == 0.0) and traj.converged_at == 0.0
         assert traj.stationarity == 0.0
-        assert convergence_verdict(scene, traj.diameters[-1], traj.converged_at, traj.stationarity)[0] == 0
+        assert convergence_verdict(
+            scene, traj.diameters[-1], traj.converged_at, traj.stationarity)[0] == 0
 
 
 def test_extreme_one_agent_per_group_mixed_separates_to_L_F_2():
     one = {"count": 1, "rotations": "uniform"}
     scene = load_scene({"dimension": 2, "seed": 1, "model": {"order": 1, "kappa_2": 1.0, "L": 2.0},
                         "time": {"t_end": 20.0},
-                        "groups": [dict(one, name="a", shape="triangle", centroids={"points": [[0.0, 0.0]]}),
-                                   dict(one, name="b", shape="square", centroids={"points": [[0.5, 0.0]]})]})
+                        "groups": [dict(one, name="a", shape="triangle",
+                                        centroids={"points": [[0.0, 0.0]]}),
+                                   dict(one, name="b", shape="square",
+                                        centroids={"points": [[0.5, 0.0]]})]})
     traj = simulate(scene, "rkmk4", 0.05)
     assert all_finite(traj) and traj.diameters[-1] == 0.0
     assert traj.metrics[-1].group_separation == pytest.approx(2.0, abs=1e-9)
@@ -728,7 +778,8 @@ def test_extreme_cli_stiff_mass_refusal_exit_2_one_line_dt_limit_prop_2_1():
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1, res.stderr
-    assert lines[0].startswith("polymatch: error: rkmk4 is unstable") and "dt < 1.39e-08" in lines[0]
+    assert lines[0].startswith("polymatch: error: rkmk4 is unstable")
+    assert "dt < 1.39e-08" in lines[0]
     assert "Traceback" not in res.stderr and res.stdout == ""
 
 
@@ -743,17 +794,21 @@ def test_extreme_cli_antipodal_exit_3_names_non_consensus_equilibrium_D0_ge_1(tm
     res = run_cli("simulate", path, "-q")
     assert res.returncode == 3
     verdict = res.stdout.strip().splitlines()[-1]
-    assert verdict.startswith("did not converge") and "equilibrium that is not consensus" in verdict
+    assert verdict.startswith("did not converge")
+    assert "equilibrium that is not consensus" in verdict
     assert res.stderr == ""
 
 
 def test_extreme_cli_dt_larger_than_t_end_one_warning_line_section_5():
-    res = run_cli("simulate", EXTREMES / "antipodal_triangles_2d.yaml", "--t-end", "1", "--dt", "50", "-q")
+    res = run_cli("simulate", EXTREMES / "antipodal_triangles_2d.yaml",
+                  "--t-end", "1", "--dt", "50", "-q")
     assert res.returncode == 0
     lines = res.stderr.strip().splitlines()
-    assert lines == ["polymatch: warning: dt = 50 is larger than t_end = 1: taking one step of t_end"]
+    assert lines == [
+        "polymatch: warning: dt = 50 is larger than t_end = 1: taking one step of t_end"]
     assert "steps 1," in res.stdout
-    # clipped to t_end = 10 the step is beyond rkmk4's limit 2.79: the refusal still comes, in one line
+    # clipped to t_end = 10 the step is beyond rkmk4's limit 2.79: the refusal still comes,
+    # in one line
     res = run_cli("simulate", EXTREMES / "antipodal_triangles_2d.yaml", "--dt", "50", "-q")
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()

@@ -86,7 +86,8 @@ def test_nothing_imports_cli_and_only_cli_reaches_bench(path):
 def test_the_rules_catch_a_violation(tmp_path):
     """The checker itself: a core module importing rclpy or the ros layer is seen."""
     probe = tmp_path / "probe.py"
-    probe.write_text("def f():\n    import rclpy\n    from ..ros import wire\n    return rclpy, wire\n")
+    probe.write_text(
+        "def f():\n    import rclpy\n    from ..ros import wire\n    return rclpy, wire\n")
     found = imports_of(probe, "polymatch_ros.core.probe")
     assert any(is_ros(n) for n in found)
     assert "polymatch_ros.ros.wire" in found

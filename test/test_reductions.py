@@ -15,9 +15,10 @@ from polymatch_ros.core.simulate import simulate
 
 def _scene(**over):
     base = {"dimension": 3, "seed": 4, "model": {"order": 1, "kappa": 1.0, "gamma": 1.0},
-            "integrator": {"method": "rkmk4", "dt": 0.05}, "time": {"t_end": 3.0, "samples": {"count": 2}},
-            "groups": [{"name": "a", "shape": "tetrahedron", "count": 6, "rotations": {"within": 0.6},
-                        "centroids": {"box": [-3, 3]}}]}
+            "integrator": {"method": "rkmk4", "dt": 0.05},
+            "time": {"t_end": 3.0, "samples": {"count": 2}},
+            "groups": [{"name": "a", "shape": "tetrahedron", "count": 6,
+                        "rotations": {"within": 0.6}, "centroids": {"box": [-3, 3]}}]}
     for key, value in over.items():
         node = base
         parts = key.split(".")
@@ -38,7 +39,8 @@ def _vertices(scene, state, rot):
     for g, gs in zip(scene.model.groups, state.groups):
         mats = rot.to_matrices(gs.rot)
         s = np.ones(len(mats)) if g.scales is None else g.scales
-        out.append(gs.x[:, None, :] + s[:, None, None] * np.einsum("nij,aj->nai", mats, g.reference))
+        out.append(gs.x[:, None, :]
+                   + s[:, None, None] * np.einsum("nij,aj->nai", mats, g.reference))
     return np.concatenate([v.reshape(-1, scene.dim) for v in out])
 
 
@@ -53,10 +55,14 @@ def test_reduction_congruent_drops_scale_weights_F_1():
 
 
 def test_reduction_exact_centroid_flow_prop_2_1_matches_integrated_centroids():
-    """Closed-form centroids vs centroids carried by rkmk4's stages: equal to rkmk4's O(dt^4) error."""
-    for order, extra in ((1, {}), (2, {"model.mass": 0.5, "groups.0.velocities": {"centroid": {"normal": 0.5}}})):
-        model = {"order": order, "kappa": 1.0, "gamma": 1.0, **({"mass": 0.5} if order == 2 else {})}
-        exact = _scene(**{"model": dict(model)}, **{k: v for k, v in extra.items() if k != "model.mass"})
+    """Closed-form centroids vs centroids carried by rkmk4's stages: equal to rkmk4's O(dt^4)
+    error."""
+    second = {"model.mass": 0.5, "groups.0.velocities": {"centroid": {"normal": 0.5}}}
+    for order, extra in ((1, {}), (2, second)):
+        model = {"order": order, "kappa": 1.0, "gamma": 1.0,
+            **({"mass": 0.5} if order == 2 else {})}
+        exact = _scene(**{"model": dict(model)},
+                       **{k: v for k, v in extra.items() if k != "model.mass"})
         full = _scene(**{"model": dict(model, centroids="integrated")},
                       **{k: v for k, v in extra.items() if k != "model.mass"})
         assert exact.model.centroids_exact and not full.model.centroids_exact
@@ -65,16 +71,20 @@ def test_reduction_exact_centroid_flow_prop_2_1_matches_integrated_centroids():
             a, _ = _final(exact, dt=dt)
             b, _ = _final(full, dt=dt)
             errs.append(np.max(np.abs(a.groups[0].x - b.groups[0].x)))
-            assert np.max(np.abs(np.asarray(a.groups[0].rot) - np.asarray(b.groups[0].rot))) <= 1e-13
-        assert errs[0] < 1e-4 and errs[0] / errs[1] > 2 ** 3.5      # the integrated copy converges at order 4
+            rot_diff = np.asarray(a.groups[0].rot) - np.asarray(b.groups[0].rot)
+            assert np.max(np.abs(rot_diff)) <= 1e-13
+        # the integrated copy converges at order 4
+        assert errs[0] < 1e-4 and errs[0] / errs[1] > 2 ** 3.5
 
 
 def test_reduction_no_inter_group_potential_when_kappa_2_is_0_F_2():
     """Two groups with kappa_2 = 0 are two independent single-group problems."""
     two = {"dimension": 3, "seed": 5, "model": {"order": 2, "mass": 0.3, "kappa_2": 0.0, "L": 3.0},
            "time": {"t_end": 2.0, "samples": [2.0]},
-           "groups": [{"name": "tri", "shape": "triangle", "count": 4, "centroids": {"box": [-2, 2]}},
-                      {"name": "tet", "shape": "tetrahedron", "count": 5, "centroids": {"box": [-2, 2]}}]}
+           "groups": [{"name": "tri", "shape": "triangle", "count": 4,
+                       "centroids": {"box": [-2, 2]}},
+                      {"name": "tet", "shape": "tetrahedron", "count": 5,
+                       "centroids": {"box": [-2, 2]}}]}
     both = load_scene(two)
     assert not both.model.inter_group
     a, ra = _final(both)
@@ -89,7 +99,8 @@ def test_reduction_no_inter_group_potential_when_kappa_2_is_0_F_2():
         got = a.groups[gi].x + both.origin
         want = b.groups[0].x + alone.origin
         assert np.max(np.abs(got - want)) <= 1e-12
-        assert np.max(np.abs(ra.to_matrices(a.groups[gi].rot) - rb.to_matrices(b.groups[0].rot))) <= 1e-13
+        rot_diff = ra.to_matrices(a.groups[gi].rot) - rb.to_matrices(b.groups[0].rot)
+        assert np.max(np.abs(rot_diff)) <= 1e-13
 
 
 def test_reduction_first_order_model_is_the_m_to_0_limit_of_A_1():
@@ -97,10 +108,12 @@ def test_reduction_first_order_model_is_the_m_to_0_limit_of_A_1():
     first = _scene(**{"time.t_end": 2.0})
     diffs = []
     for m in (1e-2, 1e-3):
-        second = _scene(**{"time.t_end": 2.0, "model": {"order": 2, "mass": m, "kappa": 1.0, "gamma": 1.0}})
+        second = _scene(**{"time.t_end": 2.0, "model": {"order": 2,
+                        "mass": m, "kappa": 1.0, "gamma": 1.0}})
         assert second.initial.groups[0].w is not None and first.initial.groups[0].w is None
         a, ra = _final(first, "rkmk4", 0.002)
         b, rb = _final(second, "etd2", 0.002)
         diffs.append(np.max(np.abs(_vertices(first, a, ra) - _vertices(second, b, rb))))
     assert diffs[0] < 5e-2
-    assert 5 < diffs[0] / diffs[1] < 20                      # linear in m: a modelling error, not noise
+    # linear in m: a modelling error, not noise
+    assert 5 < diffs[0] / diffs[1] < 20

@@ -10,11 +10,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from ros_harness import PY, needs_ros, scene_path
 
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
-
-from ros_harness import PY, needs_ros, scene_path
+from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros
 
@@ -40,7 +40,8 @@ def central_vertices(scene, integrator, t):
     out = []
     for g, gs in zip(model.groups, traj.final.groups):
         mats = model.rotations.to_matrices(gs.rot)
-        out.append(gs.x + scene.origin + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2))
+        out.append(gs.x + scene.origin + np.einsum("nij,aj->nai",
+                   mats, g.reference).transpose(1, 0, 2))
     return out
 
 
@@ -56,12 +57,32 @@ def received_vertices(scene, path):
 @pytest.mark.parametrize("name,integrator,k", CASES)
 def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator, k):
     out = tmp_path / "final.npz"
-    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path(name), "--integrator", integrator,
-                      "--t-end", str(T_END), "-k", str(k), "--timeout", "150", "--no-compare",
-                      "--save", str(out), "-q"], timeout=180)
+    proc = ros.start(
+        [
+            PY,
+            "-m",
+            "polymatch_ros.cli",
+            "run",
+            scene_path(name),
+            "--integrator",
+            integrator,
+            "--t-end",
+            str(T_END),
+            "-k",
+            str(k),
+            "--timeout",
+            "150",
+            "--no-compare",
+            "--save",
+            str(out),
+            "-q",
+        ],
+        timeout=180,
+    )
     rc = ros.wait(proc, 190)
     text = ros.output(proc)
-    assert rc in (0, 3), text                      # 3: ran to t_end without converging (t_end is short)
+    # 3: ran to t_end without converging (t_end is short)
+    assert rc in (0, 3), text
     scene = load_scene(scene_path(name))
     t, got = received_vertices(scene, out)
     assert t == pytest.approx(T_END)
@@ -72,19 +93,48 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
     initial = []
     for g, gs in zip(scene.model.groups, scene.initial.groups):
         mats = scene.model.rotations.to_matrices(gs.rot)
-        initial.append(gs.x + scene.origin + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2))
+        initial.append(
+            gs.x + scene.origin + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2)
+        )
     moved = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, initial))
     assert moved > 0.1
 
 
-def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros):
+def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros, tmp_path):
     """README's demo: `polymatch run` converges and stops early; a separate subscriber process
     (the launch-free stand-in for `ros2 topic echo /polymatch/diameter`) sees the diameter fall
     below the scene's tolerance; the runner reports the lockstep deviation."""
-    echo = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/polymatch/diameter", "--until-below", "1e-6",
-                      "--timeout", "200"], timeout=220)
-    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene_path("congruent_triangles"),
-                      "-k", "2", "--timeout", "200"], timeout=230)
+    echo = ros.start(
+        [
+            PY,
+            "-m",
+            "polymatch_ros.cli",
+            "echo",
+            "/polymatch/diameter",
+            "--until-below",
+            "1e-6",
+            "--timeout",
+            "200",
+        ],
+        timeout=220,
+    )
+    records = tmp_path / "records.jsonl"
+    proc = ros.start(
+        [
+            PY,
+            "-m",
+            "polymatch_ros.cli",
+            "run",
+            scene_path("congruent_triangles"),
+            "-k",
+            "2",
+            "--timeout",
+            "200",
+            "--records",
+            str(records),
+        ],
+        timeout=230,
+    )
     rc = ros.wait(proc, 240)
     text = ros.output(proc)
     assert rc == 0, text
@@ -95,4 +145,9 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     assert m and float(m.group(1)) <= 1e-9, text
     assert "converged: matching diameter < 1e-06" in text
     t_final = float(re.search(r"\nt = ([0-9.e+-]+), wall time", text).group(1))
-    assert t_final < load_scene(scene_path("congruent_triangles")).t_end     # stopped on convergence
+    # a normal run is clean: nothing dropped, by the monitor or any agent
+    assert re.search(r"^monitor: last report .*; no messages dropped$", text, re.M), text
+    recs = run_records(records.read_text().splitlines())
+    assert len(recs) == 5 and all(r.finished for r in recs if r.role == "agent"), recs
+    assert all(r.dropped == {} for r in recs), [r.dropped for r in recs]
+    assert t_final < load_scene(scene_path("congruent_triangles")).t_end  # stopped on convergence

@@ -17,7 +17,8 @@ def _args(k=None, monitor=True):
 
 
 def test_one_agent_per_process_while_it_fits():
-    assert _agents_per_process(_args(), 30, localhost=True) == 1          # 30 + runner + monitor = 32
+    # 30 + runner + monitor = 32
+    assert _agents_per_process(_args(), 30, localhost=True) == 1
     assert _agents_per_process(_args(monitor=False), 31, localhost=True) == 1
 
 

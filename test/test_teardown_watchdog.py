@@ -13,7 +13,11 @@ from polymatch_ros.ros.ros_env import hung_in_teardown
 
 HUNG = textwrap.dedent("""
     from polymatch_ros.ros.ros_env import teardown_watchdog
-    print("agent 3: finished at t = 1 (20 rounds, 50.0 rounds/s); no messages dropped", flush=True)
+    from polymatch_ros.ros.wire import RunRecord
+    rec = RunRecord(role="agent", mode="lockstep", t=1.0, agents=(3,), finished=True, steps=20,
+    rounds=20)
+    print(rec.describe(), flush=True)
+    print(rec.to_json(), flush=True)
     with teardown_watchdog(0.5):
         while True:
             pass
@@ -53,3 +57,5 @@ def test_failure_before_the_final_line_is_not_a_teardown_hang():
     assert not hung_in_teardown(1, lines)
     assert not hung_in_teardown(2, ["agent 0: finished", "Timeout (0:00:10)!"])
     assert not hung_in_teardown(1, ["agent 0: finished"])
+    unfinished = '{"polymatch_run_record": 1, "role": "agent", "mode": "lockstep", "t": 0.5}'
+    assert not hung_in_teardown(1, [unfinished, "Timeout (0:00:10)!"])

@@ -3,7 +3,7 @@
     polymatch bench step         wall time of one integrator step (rkmk4 at N = 10,000, d = 3, ...)
     polymatch bench meanfield    mean field S = sum_k O_k against the naive O(N^2) double sum
     polymatch bench dop853       adaptive Lie DOP853 against scipy's DOP853 at a target error
-    polymatch bench precision    work-precision: every integrator and scipy, error over the run vs cost
+    polymatch bench precision    work-precision: every integrator and scipy, run error vs cost
     polymatch bench longhorizon  orthogonality defect and energy drift (gamma = 0) after 10^5 steps
     polymatch bench all --out DIR   every family, one report DIR/report.md
 
@@ -16,7 +16,7 @@ Adding a family: add a module to this package that defines
     NAME = "scaling"                 # the sub-subcommand
     HELP = "one line for --help"
     ORDER = 40                       # position in `bench all` (default 100)
-    def add_arguments(parser): ...   # its own options; --out, --quick, --repeats, --quiet are common
+    def add_arguments(parser): ...   # its own options (--out, --quick, --repeats, --quiet: common)
     def run(args, log) -> Report     # log(text) prints progress to stderr
 
 Modules are discovered, so nothing else needs editing.  ``run`` must honour
@@ -50,7 +50,8 @@ def families():
         try:
             mod = importlib.import_module(f"{__name__}.{info.name}")
         except Exception as exc:   # a broken family must not take `polymatch` down with it
-            print(f"polymatch: warning: benchmark family {info.name!r} not loaded: {exc}", file=sys.stderr)
+            print(f"polymatch: warning: benchmark family {info.name!r} not loaded: {exc}",
+                  file=sys.stderr)
             continue
         if hasattr(mod, "NAME") and hasattr(mod, "run"):
             mods.append(mod)
@@ -61,7 +62,8 @@ def add_common_options(p):
     p.add_argument("--out", metavar="DIR", help="also write DIR/<family>.md and PNG plots")
     p.add_argument("--quick", action="store_true",
                    help="tiny sizes, a few seconds (smoke test; the figures mean nothing)")
-    p.add_argument("--repeats", type=_positive_int, metavar="R", help="timing repeats (default: the family's)")
+    p.add_argument("--repeats", type=_positive_int, metavar="R",
+                   help="timing repeats (default: the family's)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
 
 
@@ -77,8 +79,10 @@ def _positive_int(text):
 
 def add_parser(subparsers):
     """Register `polymatch bench` and one sub-subcommand per family, plus `all`."""
-    p = subparsers.add_parser("bench", help="benchmarks: speed and accuracy figures (see `polymatch bench -h`)",
-                              description=__doc__.split("\n\n")[0] + "\n\n" + __doc__.split("\n\n")[1],
+    paragraphs = __doc__.split("\n\n")
+    p = subparsers.add_parser("bench", help="benchmarks: speed and accuracy figures "
+                              "(see `polymatch bench -h`)",
+                              description=paragraphs[0] + "\n\n" + paragraphs[1],
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="family", metavar="FAMILY")
     sub.required = True
@@ -92,10 +96,11 @@ def add_parser(subparsers):
         parsers[mod.NAME] = fp
     ap = sub.add_parser("all", help="run every family and write one report DIR/report.md")
     ap.add_argument("--out", metavar="DIR", required=True, help="output directory")
-    ap.add_argument("--only", metavar="A,B", help="only these families (comma separated); report.md keeps the "
-                    "other families' last reports found in DIR")
+    ap.add_argument("--only", metavar="A,B", help="only these families (comma separated); "
+                    "report.md keeps the other families' last reports found in DIR")
     ap.add_argument("--quick", action="store_true", help="tiny sizes for every family")
-    ap.add_argument("--repeats", type=_positive_int, metavar="R", help="timing repeats for every family")
+    ap.add_argument("--repeats", type=_positive_int, metavar="R",
+                    help="timing repeats for every family")
     ap.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     ap.set_defaults(func=cmd_all, bench_parsers=parsers)
     return p
@@ -114,7 +119,7 @@ def _run_family(mod, args):
     report = mod.run(args, log)
     elapsed = time.perf_counter() - t0
     try:
-        load = "load average %.2f %.2f %.2f" % os.getloadavg()
+        load = "load average {:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
     except OSError:
         load = "load average unknown"
     report.text(f"_{mod.NAME}: {elapsed:.1f} s in all; {load} at the end "
@@ -145,12 +150,13 @@ def cmd_all(args):
         wanted = [n.strip() for n in args.only.split(",") if n.strip()]
         unknown = [n for n in wanted if n not in parsers]
         if unknown:
-            print(f"polymatch: error: unknown benchmark family {unknown[0]!r}; known: {', '.join(names)}",
-                  file=sys.stderr)
+            print(f"polymatch: error: unknown benchmark family {unknown[0]!r}; "
+                  f"known: {', '.join(names)}", file=sys.stderr)
             return 2
         names = [n for n in names if n in wanted]
-    extra = (["--quick"] if args.quick else []) + (["--repeats", str(args.repeats)] if args.repeats else []) \
-        + (["--quiet"] if args.quiet else [])
+    extra = ((["--quick"] if args.quick else [])
+             + (["--repeats", str(args.repeats)] if args.repeats else [])
+             + (["--quiet"] if args.quiet else []))
     os.makedirs(args.out, exist_ok=True)
     sections, failed = [], []
     machine = machine_lines()
@@ -169,9 +175,10 @@ def cmd_all(args):
     head = ["# polymatch benchmark report", ""] + [f"- {line}" for line in machine] + [""]
     if args.quick:
         head += ["**--quick: tiny sizes; these figures only show that the benchmarks run.**", ""]
-    if args.only:                       # keep the other families' last reports: report.md stays whole
+    if args.only:       # keep the other families' last reports: report.md stays whole
         fresh = dict(sections)
-        sections = [(n, fresh[n] if n in fresh else _previous_section(args.out, n)) for n in parsers]
+        sections = [(n, fresh[n] if n in fresh else _previous_section(args.out, n))
+                     for n in parsers]
         sections = [(n, text) for n, text in sections if text is not None]
     head += ["Families: " + ", ".join(f"[{n}]({n}.md)" for n, _ in sections), ""]
     text = "\n".join(head) + "\n" + "\n".join(s for _, s in sections)
@@ -184,12 +191,13 @@ def cmd_all(args):
 
 
 def _previous_section(out_dir, name):
-    """A family's report from an earlier run in ``out_dir``, as a level-2 section (None if absent)."""
+    """A family's report from an earlier run in ``out_dir``, as a level-2 section (or None)."""
     path = os.path.join(out_dir, f"{name}.md")
     if not os.path.isfile(path):
         return None
     with open(path, encoding="utf-8") as fh:
         text = fh.read()
     if text.startswith("# "):           # written by `polymatch bench NAME --out`: one level up
-        text = "\n".join("#" + line if line.startswith("#") else line for line in text.splitlines()) + "\n"
+        lines = ("#" + line if line.startswith("#") else line for line in text.splitlines())
+        text = "\n".join(lines) + "\n"
     return text

@@ -47,16 +47,27 @@ def main(argv=None):
             inbox.setdefault(int(msg.data[0]), set()).add(peer)
         return receive
 
-    subs = [node.create_subscription(Float64MultiArray, f"/polymatch_bare/p{p}", callback(p), qos["stage_in"],
-                                     event_callbacks=sub_events)
-            for p in range(k) if p != me]
+    subs = [
+        node.create_subscription(
+            Float64MultiArray,
+            f"/polymatch_bare/p{p}",
+            callback(p),
+            qos["stage_in"],
+            event_callbacks=sub_events,
+        )
+        for p in range(k)
+        if p != me
+    ]
     if executor_kind == "events":
         from rclpy.experimental.events_executor import EventsExecutor
+
         executor.remove_node(node)
         executor = EventsExecutor()
         executor.add_node(node)
     t_node = time.monotonic()
-    while not (all(s.get_publisher_count() >= 1 for s in subs) and pub.get_subscription_count() >= k - 1):
+    while not (
+        all(s.get_publisher_count() >= 1 for s in subs) and pub.get_subscription_count() >= k - 1
+    ):
         executor.spin_once(timeout_sec=0.05)
     matched = time.monotonic() - t_node
     msg = Float64MultiArray()
@@ -70,8 +81,12 @@ def main(argv=None):
         inbox.pop(r, None)
     wall = time.perf_counter() - t0
     pub.wait_for_all_acked(Duration(seconds=5))
-    print(f"bare {me}/{k}: {rounds / wall:.1f} rounds/s over {rounds} rounds; matched after {matched:.2f} s "
-          f"({time.monotonic() - t_start - wall:.2f} s from process start)", flush=True)
+    print(
+        f"bare {me}/{k}: {rounds / wall:.1f} rounds/s over {rounds} rounds; matched after "
+        f"{matched:.2f} s "
+        f"({time.monotonic() - t_start - wall:.2f} s from process start)",
+        flush=True,
+    )
     node.destroy_node()
     rclpy.shutdown()
 

@@ -42,8 +42,16 @@ def _scene_yaml(n, steps, dt):
 
 
 def _parallel(argvs, env, timeout):
-    procs = [subprocess.Popen(["timeout", "-k", "5", str(timeout)] + argv, env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True) for argv in argvs]
+    procs = [
+        subprocess.Popen(
+            ["timeout", "-k", "5", str(timeout)] + argv,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for argv in argvs
+    ]
     outs = []
     for p in procs:
         try:
@@ -56,33 +64,93 @@ def _parallel(argvs, env, timeout):
 
 
 def _bare(n, rounds, env, timeout):
-    outs = _parallel([[sys.executable, "-m", "polymatch_ros.bench.bare_exchange", str(i), str(n), str(rounds)]
-                      for i in range(n)], env, timeout)
+    outs = _parallel(
+        [
+            [
+                sys.executable,
+                "-m",
+                "polymatch_ros.bench.bare_exchange",
+                str(i),
+                str(n),
+                str(rounds),
+            ]
+            for i in range(n)
+        ],
+        env,
+        timeout,
+    )
     found = [re.search(r"([0-9.]+) rounds/s .* matched after ([0-9.]+) s", o) for o in outs]
     return [float(m.group(1)) for m in found if m], [float(m.group(2)) for m in found if m]
 
 
 def _agents(n, path, env, timeout, run_id):
-    argvs = [[sys.executable, "-m", "polymatch_ros.ros.agent_node", "--ros-args", "-p", f"scene:={path}",
-              "-p", f"agent:={i}", "-p", f"run_id:={run_id}"] for i in range(n)]
-    return _parse_agents("\n".join(_parallel(argvs, env, timeout)))
+    argvs = [
+        [
+            sys.executable,
+            "-m",
+            "polymatch_ros.ros.agent_node",
+            "--ros-args",
+            "-p",
+            f"scene:={path}",
+            "-p",
+            f"agent:={i}",
+            "-p",
+            f"run_id:={run_id}",
+            "-r",
+            f"__node:=agent_{i}",
+        ]
+        for i in range(n)
+    ]
+    return _parse_agents("\n".join(_parallel(argvs, env, timeout)).splitlines())
 
 
-def _parse_agents(text):
-    rates = [float(x) for x in re.findall(r"^agent [0-9,]+: finished .*?\(\d+ rounds, ([0-9.]+) rounds/s", text,
-                                          re.M)]
-    matched = [float(x) for x in re.findall(r"peers matched after ([0-9.]+) s", text)]
-    return rates, matched
+def _parse_agents(lines):
+    """(rounds/s, seconds until peers matched) of every agent's run record among ``lines``."""
+    from ..ros.wire import run_records
+
+    records = [r for r in run_records(lines) if r.role == "agent" and r.finished]
+    return (
+        [r.rounds_per_second for r in records],
+        [r.matched_after for r in records if r.matched_after is not None],
+    )
 
 
 def _deployed(path, env, timeout, per_process):
-    out = subprocess.run(["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli", "run", path,
-                          "--no-compare", "--hold", "1e9", "--timeout", str(timeout - 10), "-q", "-v",
-                          "-k", str(per_process)],
-                         env=env, capture_output=True, text=True)
-    rates, matched = _parse_agents(out.stdout)
+    records = path + ".records.jsonl"
+    out = subprocess.run(
+        [
+            "timeout",
+            "-k",
+            "5",
+            str(timeout),
+            sys.executable,
+            "-m",
+            "polymatch_ros.cli",
+            "run",
+            path,
+            "--no-compare",
+            "--hold",
+            "1e9",
+            "--timeout",
+            str(timeout - 10),
+            "-q",
+            "--records",
+            records,
+            "-k",
+            str(per_process),
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    lines = []
+    if os.path.exists(records):
+        with open(records, encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    rates, matched = _parse_agents(lines)
     errors = [line for line in out.stderr.splitlines() if line.startswith("polymatch: error:")]
-    if out.returncode in (0, 3):           # 3: ran to t_end without matching yet (t_end is short here)
+    # 3: ran to t_end without matching yet (t_end is short here)
+    if out.returncode in (0, 3):
         return rates, None
     return rates, errors[-1] if errors else f"exit code {out.returncode}"
 
@@ -91,11 +159,13 @@ def _deployed_per_process(n):
     """Agents per process for the deployed run: 1 unless runner + monitor + n processes exceed
     the participants LOCALHOST discovery reaches (then what `polymatch run` itself would pick)."""
     from ..ros.runner import fewest_agents_per_process
+
     return fewest_agents_per_process(n, own=2)
 
 
 def _stats(values):
     import numpy as np
+
     return (max(values), float(np.median(values))) if values else (float("nan"), float("nan"))
 
 
@@ -109,11 +179,19 @@ def run(args, log):
     sizes = [4] if args.quick else args.agents
     rounds = 40 if args.quick else args.rounds
     repeats = 1 if args.quick else (args.repeats or 3)
-    report = Report(NAME, "Lockstep over ROS: agents vs the bare exchange (`polymatch bench distributed`)")
+    report = Report(
+        NAME, "Lockstep over ROS: agents vs the bare exchange (`polymatch bench distributed`)"
+    )
     rows, failures = [], []
     with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
-        env = ros_environment(dom, base={k: v for k, v in os.environ.items()
-                                         if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
+        env = ros_environment(
+            dom,
+            base={
+                k: v
+                for k, v in os.environ.items()
+                if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+            },
+        )
         for n in sizes:
             timeout = 60 + int(n * rounds / 10)
             path = os.path.join(workdir, f"bench_{n}.yaml")
@@ -121,7 +199,10 @@ def run(args, log):
                 fh.write(_scene_yaml(n, max(1, rounds // 4), 0.01))
             bare, agents, deployed, b_match, a_match = [], [], [], [], []
             for r in range(repeats):
-                log(f"N = {n}, repeat {r + 1}/{repeats}: bare, agents" + (", deployed" if args.deployed else ""))
+                log(
+                    f"N = {n}, repeat {r + 1}/{repeats}: bare, agents"
+                    + (", deployed" if args.deployed else "")
+                )
                 rates, matched = _bare(n, rounds, env, timeout)
                 bare.append(np.mean(rates) if len(rates) == n else float("nan"))
                 b_match += matched
@@ -132,35 +213,71 @@ def run(args, log):
                     per_process = _deployed_per_process(n)
                     rates, failure = _deployed(path, env, timeout, per_process)
                     procs = -(-n // per_process)
-                    deployed.append(np.mean(rates) if len(rates) == procs and not failure else float("nan"))
+                    deployed.append(
+                        np.mean(rates) if len(rates) == procs and not failure else float("nan")
+                    )
                     if failure:
                         failures.append(f"N = {n}, repeat {r + 1}, deployed: {failure}")
-            ok = lambda xs: [x for x in xs if x == x]                      # noqa: E731  (drop failed runs)
+            ok = lambda xs: [x for x in xs if x == x]  # noqa: E731  (drop failed runs)
             (b_best, b_med), (a_best, a_med) = _stats(ok(bare)), _stats(ok(agents))
             d_best, d_med = _stats(ok(deployed))
-            rows.append([n, f"{b_best:.1f} / {b_med:.1f}", f"{a_best:.1f} / {a_med:.1f}",
-                         f"{a_med / b_med:.0%}" if ok(bare) and ok(agents) else "-",
-                         f"{d_best:.1f} / {d_med:.1f}" if args.deployed else "-",
-                         f"{max(b_match):.2f}" if b_match else "-", f"{max(a_match):.2f}" if a_match else "-",
-                         f"{len(ok(bare))}+{len(ok(agents))}+{len(ok(deployed))} of {repeats}"])
-    report.table(["processes", "bare rounds/s best / median", "agents rounds/s best / median",
-                  "agents / bare (medians)", "deployed (runner + monitor)", "bare: slowest match (s)",
-                  "agents: slowest match (s)", "runs that finished"], rows,
-                 caption=f"{rounds} lockstep rounds, all-to-all, one agent per process, {repeats} alternating repeats; "
-                         "rates are means over the processes of a run; 'match' is the time from node creation "
-                         "until every peer's writer and reader were matched")
-    report.text("- agents: congruent triangles, first-order model, rkmk4 (4 rounds per step); a round = publish one "
-                "stage message, take every peer's, run the stage's numerics; poses are published every step.",
-                "- bare: the same QoS (RELIABLE, VOLATILE, readers KEEP_ALL), node and executor, no numerics.",
-                "- deployed: `polymatch run` with the monitor, which hears every pose and computes the metrics "
-                "each step on the same two cores.")
+            rows.append(
+                [
+                    n,
+                    f"{b_best:.1f} / {b_med:.1f}",
+                    f"{a_best:.1f} / {a_med:.1f}",
+                    f"{a_med / b_med:.0%}" if ok(bare) and ok(agents) else "-",
+                    f"{d_best:.1f} / {d_med:.1f}" if args.deployed else "-",
+                    f"{max(b_match):.2f}" if b_match else "-",
+                    f"{max(a_match):.2f}" if a_match else "-",
+                    f"{len(ok(bare))}+{len(ok(agents))}+{len(ok(deployed))} of {repeats}",
+                ]
+            )
+    report.table(
+        [
+            "processes",
+            "bare rounds/s best / median",
+            "agents rounds/s best / median",
+            "agents / bare (medians)",
+            "deployed (runner + monitor)",
+            "bare: slowest match (s)",
+            "agents: slowest match (s)",
+            "runs that finished",
+        ],
+        rows,
+        caption=f"{rounds} lockstep rounds, all-to-all, one agent per process, "
+        f"{repeats} alternating repeats; "
+        "rates are means over the processes of a run; 'match' is the time from "
+        "node creation "
+        "until every peer's writer and reader were matched",
+    )
+    report.text(
+        "- agents: congruent triangles, first-order model, rkmk4 (4 rounds per step); a round = "
+        "publish one "
+        "stage message, take every peer's, run the stage's numerics; poses are published "
+        "every step.",
+        "- bare: the same QoS (RELIABLE, VOLATILE, readers KEEP_ALL), node and executor, "
+        "no numerics.",
+        "- deployed: `polymatch run` with the monitor, which hears every pose and "
+        "computes the metrics "
+        "each step on the same two cores.",
+    )
     packed = [n for n in sizes if _deployed_per_process(n) > 1]
     if packed and args.deployed:
-        report.text("- deployed at " + ", ".join(f"N = {n}: {_deployed_per_process(n)} agents per process "
-                                                    f"({-(-n // _deployed_per_process(n))} processes)" for n in packed)
-                    + ": with the runner and the monitor, one process per agent would exceed the 32 DDS participants "
-                      "that LOCALHOST discovery reaches (rmw_fastrtps probes 32 participant ports on 127.0.0.1); "
-                      "`polymatch run` picks this itself. Its rate is per process.")
+        report.text(
+            "- deployed at "
+            + ", ".join(
+                f"N = {n}: {_deployed_per_process(n)} agents per process "
+                f"({-(-n // _deployed_per_process(n))} "
+                "processes)"
+                for n in packed
+            )
+            + ": with the runner and the monitor, one process per agent would exceed the "
+            "32 DDS participants "
+            "that LOCALHOST discovery reaches (rmw_fastrtps probes 32 participant ports "
+            "on 127.0.0.1); "
+            "`polymatch run` picks this itself. Its rate is per process."
+        )
     if failures:
         report.text("Failed runs:", *[f"- {f}" for f in failures])
     return report

@@ -1,7 +1,7 @@
 """Adaptive Lie DOP853 against scipy's DOP853 on the flattened system, at a target error.
 
 Scene: ``congruent_triangles`` (Fig. 1; 2-D, first-order model (A-2), N = 8).
-Solvers, each at rtol = atol = tol for tol in 1e-6 ... 1e-12:
+Solvers, each at rtol = atol = tol for tol in 1e-3 ... 1e-12:
 
   ours (angle)      ``simulate(scene, "adaptive", tolerance=tol)``: scipy's DOP853 tableau and
                     step control as a Munthe-Kaas method; in 2-D the rotations are angles (SO(2)
@@ -29,7 +29,9 @@ arbitrary times (B); the two are compared on the sample times.
 """
 
 NAME = "dop853"
-HELP = "adaptive Lie DOP853 vs scipy solve_ivp DOP853 on congruent_triangles, cost at 1e-8 max error"
+HELP = (
+    "adaptive Lie DOP853 vs scipy solve_ivp DOP853 on congruent_triangles, cost at 1e-8 max error"
+)
 ORDER = 30
 
 TARGET_ERROR = 1e-8
@@ -39,25 +41,30 @@ RATIO_TARGETS = tuple(10.0 ** -k for k in range(4, 11))
 
 def add_arguments(p):
     from .options import at_least, float_list
+
+    small = at_least(1e-300, float)
     p.add_argument("--scene", default="congruent_triangles",
                    help="first-order, single-group congruent scene (default congruent_triangles)")
     p.add_argument("--tolerances", type=float_list(1e-300),
-                   default=[10.0 ** -k for k in range(3, 13)],
+                   default=[10.0**-k for k in range(3, 13)],
                    help="rtol = atol values (default 1e-3,1e-4,...,1e-12)")
-    p.add_argument("--samples", type=at_least(2), default=301, help="sample times on [0, t_end] (default 301)")
-    p.add_argument("--target", type=at_least(1e-300, float), default=TARGET_ERROR,
+    p.add_argument("--samples", type=at_least(2), default=301,
+                   help="sample times on [0, t_end] (default 301)")
+    p.add_argument("--target", type=small, default=TARGET_ERROR,
                    help="target max error (default 1e-8)")
-    p.add_argument("--ref-dt", type=at_least(1e-300, float), default=1e-3,
+    p.add_argument("--ref-dt", type=small, default=1e-3,
                    help="rkmk4 reference step (default 1e-3)")
-    p.add_argument("--ref-tol", type=at_least(1e-300, float), default=1e-13,
+    p.add_argument("--ref-tol", type=small, default=1e-13,
                    help="tolerance of the adaptive reference (default 1e-13)")
     p.add_argument("--t-end", type=at_least(1e-300, float), help="override time.t_end")
 
 
 # -- runs -------------------------------------------------------------------------------------
 
+
 def _verts(scene, out):
     from ..core.metrics import vertices
+
     return vertices(out.centroids, out.mats, scene.model.groups[0].reference)
 
 
@@ -72,7 +79,8 @@ def _core_own_steps(scene, tol):
     m = scene.model
     accepted = [scene.initial]
     run = AdaptiveLie(tol, max_steps=scene.integrator.max_steps).solver(
-        System(m), State(0.0, scene.initial.groups), scene.t_end)
+        System(m), State(0.0, scene.initial.groups), scene.t_end
+    )
     while run.status == "running":
         run.step()
         accepted.append(run.state)
@@ -83,15 +91,19 @@ def _core_own_steps(scene, tol):
 
 def _check_scene(scene):
     from ..core import SceneError
+
     m = scene.model
     if m.order != 1 or len(m.groups) != 1 or m.groups[0].scales is not None or m.inter_group:
-        raise SceneError(f"{scene.name}: `bench dop853` needs a first-order (A-2), single-group, "
-                         f"congruent scene (the scipy right-hand side is written for that case)")
+        raise SceneError(
+            f"{scene.name}: `bench dop853` needs a first-order (A-2), single-group, "
+            f"congruent scene (the scipy right-hand side is written for that case)"
+        )
 
 
 def _interpolate(points, target):
     """log-log interpolation of wall time at error = target from (error, wall) points, or None."""
     import math
+
     pts = sorted(p for p in points if p[0] > 0)
     for (e1, w1), (e2, w2) in zip(pts, pts[1:]):
         if e1 <= target <= e2 and e1 < e2:
@@ -110,8 +122,13 @@ class _Reference:
         import numpy as np
 
         from .solve import Solver, solve
+
         ts = np.asarray(times, dtype=float)
-        out = solve(self.scene, Solver("adaptive", "adaptive", self.tol), np.concatenate([[0.0], ts[ts > 0]]))
+        out = solve(
+            self.scene,
+            Solver("adaptive", "adaptive", self.tol),
+            np.concatenate([[0.0], ts[ts > 0]]),
+        )
         v = _verts(self.scene, out)
         return v if ts[0] == 0 else v[1:]
 
@@ -148,11 +165,13 @@ def _target_ratio_rows(results, ours, theirs, targets):
 
 # -- the benchmark ----------------------------------------------------------------------------
 
+
 def _runs(sc, scene, tol, times):
     """One timed run A (outputs at ``times``) and one timed run B (final state only)."""
     import numpy as np
 
     from .solve import Solver, solve
+
     if sc is None:
         scipy = Solver("DOP853", "scipy", tol)
         return solve(scene, scipy, times), solve(scene, scipy, None)
@@ -161,14 +180,15 @@ def _runs(sc, scene, tol, times):
 
 
 def _row(label, sc, scene, tol, runs, ref_dense, ref):
-    """Wall/evals/error on the sample times (A) and on the solver's own steps (B) from timed runs."""
+    """Wall/evals/error on the sample times (A) and on the solver's own steps (B), timed."""
     import numpy as np
 
     from ..core.metrics import orthogonality
+
     dense_w = [a.wall for a, _ in runs]
     end_w = [b.wall for _, b in runs]
     out, out_end = runs[-1]
-    if sc is None:                                     # t_eval does not change scipy's steps
+    if sc is None:  # t_eval does not change scipy's steps
         own_t, own_v, own_m = out_end.times, _verts(scene, out_end), out_end.mats
         steps = out_end.steps
     else:
@@ -176,14 +196,26 @@ def _row(label, sc, scene, tol, runs, ref_dense, ref):
         steps = out.steps
     err = float(np.abs(_verts(scene, out) - ref_dense).max())
     err_own = float(np.abs(own_v - ref.at(own_t)).max())
-    return {"solver": label, "tol": tol, "wall": min(dense_w), "wall_med": float(np.median(dense_w)),
-            "evals": out.evals, "steps": steps, "err": err,
-            "wall_end": min(end_w), "wall_end_med": float(np.median(end_w)), "evals_end": out_end.evals,
-            "steps_end": out_end.steps, "err_own": err_own, "orth": orthogonality(own_m[-1])}
+    return {
+        "solver": label,
+        "tol": tol,
+        "wall": min(dense_w),
+        "wall_med": float(np.median(dense_w)),
+        "evals": out.evals,
+        "steps": steps,
+        "err": err,
+        "wall_end": min(end_w),
+        "wall_end_med": float(np.median(end_w)),
+        "evals_end": out_end.evals,
+        "steps_end": out_end.steps,
+        "err_own": err_own,
+        "orth": orthogonality(own_m[-1]),
+    }
 
 
 def _target_rows(results, solvers, target, wall_key, err_key, evals_key):
     from .timing import fmt_ms
+
     rows = []
     for label in solvers:
         rs = [r for r in results if r["solver"] == label]
@@ -191,18 +223,29 @@ def _target_rows(results, solvers, target, wall_key, err_key, evals_key):
         interp = _interpolate([(r[err_key], r[wall_key]) for r in rs], target)
         if ok:
             b = max(ok, key=lambda r: r["tol"])
-            rows.append([label, f"{b['tol']:.0e}", f"{b[err_key]:.1e}", fmt_ms(b[wall_key]), b[evals_key],
-                         f"{b[wall_key] / b[evals_key] * 1e6:.1f}", fmt_ms(interp) if interp else "-"])
+            rows.append(
+                [
+                    label,
+                    f"{b['tol']:.0e}",
+                    f"{b[err_key]:.1e}",
+                    fmt_ms(b[wall_key]),
+                    b[evals_key],
+                    f"{b[wall_key] / b[evals_key] * 1e6:.1f}",
+                    fmt_ms(interp) if interp else "-",
+                ]
+            )
         else:
-            rows.append([label, "none in the sweep", "-", "-", "-", "-", fmt_ms(interp) if interp else "-"])
+            rows.append(
+                [label, "none in the sweep", "-", "-", "-", "-", fmt_ms(interp) if interp else "-"]
+            )
     return rows
 
 
 def run(args, log):
     import numpy as np
 
-    from ..core.scene import resolve_scene_path
     from ..core import load_scene, with_representation
+    from ..core.scene import resolve_scene_path
     from .report import Report
     from .solve import Solver, solve
     from .timing import fmt_ms
@@ -226,45 +269,62 @@ def run(args, log):
     ref_gap = float(np.abs(ref.at(times) - ref_dense).max())
     shift = float(np.abs(ref_t - times).max())
 
-    solvers = {"ours (angle)": scene, "ours (matrix, Cayley)": with_representation(scene, "matrix"),
-               "scipy DOP853": None}
+    solvers = {
+        "ours (angle)": scene,
+        "ours (matrix, Cayley)": with_representation(scene, "matrix"),
+        "scipy DOP853": None,
+    }
     rows_by = {}
     for tol in tols:
         log(f"dop853: tol {tol:g}, {repeats} interleaved repeats of every solver")
         runs = {label: [] for label in solvers}
-        for _ in range(repeats):           # round-robin: a burst of machine load hits every solver alike
+        # round-robin: a burst of machine load hits every solver alike
+        for _ in range(repeats):
             for label, sc in solvers.items():
                 runs[label].append(_runs(sc, scene, tol, times))
         for label, sc in solvers.items():
             rows_by[label, tol] = _row(label, sc, scene, tol, runs[label], ref_dense, ref)
     results = [rows_by[label, tol] for label in solvers for tol in tols]
 
-    report.text(f"Scene `{scene.name}`: d = {scene.dim}, N = {scene.model.n_agents}, first-order model (A-2), "
-                f"t_end = {scene.t_end:g}.  Error = max over time and all vertices of |x^i_a - x^i_a(ref)|: "
-                f"(A) on {n_samples} sample times, (B) on the solver's own accepted steps.",
-                "",
-                f"References: rkmk4 at dt = {ref_dt:g} ({fmt_ms(wall_ref)} ms) on the sample times; ours at "
-                f"tol = {ref_tol:g} at any time.  They differ by at most {ref_gap:.1e} on the sample times, "
-                f"so errors well above that are resolved."
-                + (f"  WARNING: the rkmk4 sample times are rounded to its steps (shift {shift:.1e})."
-                   if shift > 1e-12 else ""))
-    rows = [[r["solver"], f"{r['tol']:.0e}", fmt_ms(r["wall"]), r["evals"], r["steps"], f"{r['err']:.2e}",
-             fmt_ms(r["wall_end"]), fmt_ms(r["wall_end_med"]), r["evals_end"], r["steps_end"],
-             f"{r['err_own']:.2e}", f"{r['orth']:.1e}"] for r in results]
-    report.table(["solver", "rtol=atol", f"A: wall ms, best of {repeats}", "A: evals", "A: steps",
-                  f"A: max err ({n_samples} times)", f"B: wall ms, best of {repeats}", "B: median ms",
-                  "B: evals", "B: steps", "B: max err (own steps)", "orth. defect"], rows,
-                 caption=f"Tolerance sweep. A: outputs at {n_samples} sample times; B: final state only "
-                         "(error on its own steps); repeats interleaved across solvers. "
-                         "orth. defect: max_i |O_i^T O_i - I|_F at t_end")
+    report.text(
+        f"Scene `{scene.name}`: d = {scene.dim}, N = {scene.model.n_agents}, first-order model "
+        f"(A-2), t_end = {scene.t_end:g}.  Error = max over time and all vertices of "
+        f"|x^i_a - x^i_a(ref)|: (A) on {n_samples} sample times, (B) on the solver's own "
+        "accepted steps.",
+        "",
+        f"References: rkmk4 at dt = {ref_dt:g} ({fmt_ms(wall_ref)} ms) on the sample times; ours "
+        f"at tol = {ref_tol:g} at any time.  They differ by at most {ref_gap:.1e} on the sample "
+        "times, so errors well above that are resolved."
+        + (f"  WARNING: the rkmk4 sample times are rounded to its steps (shift {shift:.1e})."
+           if shift > 1e-12 else ""),
+    )
+    rows = [[r["solver"], f"{r['tol']:.0e}", fmt_ms(r["wall"]), r["evals"], r["steps"],
+             f"{r['err']:.2e}", fmt_ms(r["wall_end"]), fmt_ms(r["wall_end_med"]), r["evals_end"],
+             r["steps_end"], f"{r['err_own']:.2e}", f"{r['orth']:.1e}"] for r in results]
+    report.table(
+        ["solver", "rtol=atol", f"A: wall ms, best of {repeats}", "A: evals", "A: steps",
+         f"A: max err ({n_samples} times)", f"B: wall ms, best of {repeats}", "B: median ms",
+         "B: evals", "B: steps", "B: max err (own steps)", "orth. defect"],
+        rows,
+        caption=f"Tolerance sweep. A: outputs at {n_samples} sample times; B: final state only "
+        "(error on its own steps); repeats interleaved across solvers. "
+        "orth. defect: max_i |O_i^T O_i - I|_F at t_end",
+    )
 
     target = args.target
     header = ["solver", "loosest tol", "its max error", "wall ms (best)", "rhs evals", "µs/eval",
               "wall ms interpolated"]
-    report.table(header, _target_rows(results, solvers, target, "wall_end", "err_own", "evals_end"),
-                 caption=f"Cheapest run with max error <= {target:.0e}, B (final state only, error on own steps)")
-    report.table(header, _target_rows(results, solvers, target, "wall", "err", "evals"),
-                 caption=f"Cheapest run with max error <= {target:.0e}, A ({n_samples} outputs)")
+    report.table(
+        header,
+        _target_rows(results, solvers, target, "wall_end", "err_own", "evals_end"),
+        caption=f"Cheapest run with max error <= {target:.0e}, "
+        "B (final state only, error on own steps)",
+    )
+    report.table(
+        header,
+        _target_rows(results, solvers, target, "wall", "err", "evals"),
+        caption=f"Cheapest run with max error <= {target:.0e}, A ({n_samples} outputs)",
+    )
     ours, theirs = "ours (angle)", "scipy DOP853"
     report.table(["rtol=atol", "A: ours ms", "A: scipy ms", "A: ours/scipy",
                   "A: max err ours / scipy", "B: ours ms", "B: scipy ms", "B: ours/scipy",
@@ -278,27 +338,44 @@ def run(args, log):
                  caption=f"{ours} against {theirs} at each error target: wall interpolated at "
                          "that max error (\"-\": the sweep does not bracket it)")
     report.text(
-        f"- \"wall ms interpolated\": log(wall) linear in log(error) between the two sweep points around "
-        f"{target:.0e} (\"-\": the sweep does not bracket the target).",
-        "- A: both interpolate the sample times with DOP853's 7th-order continuous extension (ours in the "
-        "Cayley/angle chart of each step; 3 extra evaluations per step that contains samples).  B is the "
-        "integrators' own cost for their accuracy.",
-        "- scipy's DOP853 integrates O in R^{2x2}: its orthogonality defect follows the tolerance; ours "
-        "keeps O in SO(2) (angles: exactly; Cayley: to round-off) at every tolerance.",
-        "- ours advances the centroids by their exact flow (Prop. 2.1, no evaluations); scipy integrates "
-        "them as part of y.")
+        '- "wall ms interpolated": log(wall) linear in log(error) between the two sweep points '
+        f'around {target:.0e} ("-": the sweep does not bracket the target).',
+        "- A: both interpolate the sample times with DOP853's 7th-order continuous extension "
+        "(ours in the Cayley/angle chart of each step; 3 extra evaluations per step that contains "
+        "samples).  B is the integrators' own cost for their accuracy.",
+        "- scipy's DOP853 integrates O in R^{2x2}: its orthogonality defect follows the "
+        "tolerance; ours keeps O in SO(2) (angles: exactly; Cayley: to round-off) at every "
+        "tolerance.",
+        "- ours advances the centroids by their exact flow (Prop. 2.1, no evaluations); scipy "
+        "integrates them as part of y.",
+    )
 
     def draw_wp(plt):
         fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
         for k, label in enumerate(solvers):
             rs = [r for r in results if r["solver"] == label]
             col = f"C{k}"
-            axes[0].loglog([r["err_own"] for r in rs], [r["wall_end"] * 1e3 for r in rs], "o-", color=col,
-                           label=f"{label}, B: final state only")
-            axes[0].loglog([r["err"] for r in rs], [r["wall"] * 1e3 for r in rs], "x:", color=col,
-                           label=f"{label}, A: {n_samples} outputs")
-            axes[1].loglog([r["tol"] for r in rs], [max(r["orth"], 1e-17) for r in rs], "o-", color=col,
-                           label=label)
+            axes[0].loglog(
+                [r["err_own"] for r in rs],
+                [r["wall_end"] * 1e3 for r in rs],
+                "o-",
+                color=col,
+                label=f"{label}, B: final state only",
+            )
+            axes[0].loglog(
+                [r["err"] for r in rs],
+                [r["wall"] * 1e3 for r in rs],
+                "x:",
+                color=col,
+                label=f"{label}, A: {n_samples} outputs",
+            )
+            axes[1].loglog(
+                [r["tol"] for r in rs],
+                [max(r["orth"], 1e-17) for r in rs],
+                "o-",
+                color=col,
+                label=label,
+            )
         axes[0].axvline(target, color="r", ls="--", lw=1, label=f"target {target:.0e}")
         axes[0].set_xlabel("max vertex error over time")
         axes[0].set_ylabel(f"wall ms (best of {repeats})")
@@ -311,5 +388,7 @@ def run(args, log):
             ax.legend(fontsize=7)
         return fig
 
-    report.figure("work_precision", draw_wp, "wall time against max error, and orthogonality defect")
+    report.figure(
+        "work_precision", draw_wp, "wall time against max error, and orthogonality defect"
+    )
     return report

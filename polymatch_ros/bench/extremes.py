@@ -10,7 +10,7 @@ says what happened and whether the expectation held.
     stiff_coupling kappa = 1e4: refusals, rkmk4 at compliant dt, the adaptive method's cost
     large_n        N = 10^4: a full run to consensus (first and second order)
     dim10          d = 10: 100 simplices in SO(10)
-    long_horizon   t_end = 10^4: orthogonality drift, converged stays converged (fixed and adaptive)
+    long_horizon   t_end = 10^4: orthogonality drift, converged stays converged (fixed, adaptive)
     huge_coords    centroids around 1e9 vs the same scene at the origin (N = 1000, mixed F-2)
     scale_ratios   similar ensemble with scales 1e-6 .. 1e6 (F-1)
     equilibria     antipodal (SO(2), SO(3)) and splay states: growth rate and escape time
@@ -34,14 +34,15 @@ KEYS = ("stiff_mass", "undamped", "stiff_coupling", "large_n", "dim10", "long_ho
 
 #: the detail table of an extreme: (caption, formatted with Variant.fields(), header)
 DETAILS = {
-    "stiff_mass": ("m = 1e-8: etd2 against the first-order model (A-2), N = {n_stiff}, t_end = {t_stiff:g} "
-                   "(reference rkmk4 dt = 1e-3 on the first-order scene)",
+    "stiff_mass": ("m = 1e-8: etd2 against the first-order model (A-2), N = {n_stiff}, "
+                   "t_end = {t_stiff:g} (reference rkmk4 dt = 1e-3 on the first-order scene)",
                    ["dt", "max error (state, diameters)", "ratio", "wall s", "finite"]),
-    "undamped": ("gamma = 0: relative energy deviation, N = 5, d = 2, dt = 0.1, t_end = {t_undamped:g}",
+    "undamped": ("gamma = 0: relative energy deviation, N = 5, d = 2, dt = 0.1, "
+                 "t_end = {t_undamped:g}",
                  ["method", "max, first tenth", "max, last tenth", "E(t_end)/E0 - 1", "steps",
                   "wall s"]),
-    "stiff_coupling": ("kappa = 1e4, first order, N = {n_coupling}, t_end = 0.005 (50 time constants 1/kappa): "
-                       "cost and error against rkmk4 h = 2.5e-6",
+    "stiff_coupling": ("kappa = 1e4, first order, N = {n_coupling}, t_end = 0.005 "
+                       "(50 time constants 1/kappa): cost and error against rkmk4 h = 2.5e-6",
                        ["method", "setting", "steps", "evaluations", "max error", "wall s"]),
     "large_n": ("N = {n_large}, d = 3 (regular tetrahedra), rkmk4 dt = 0.1",
                 ["order", "N", "steps", "D(0)", "D(t_end)", "converged at", "max orth. defect",
@@ -49,16 +50,19 @@ DETAILS = {
     "long_horizon": ("long horizon t_end = {t_long:g}, N = 6, matrix representation",
                      ["d", "order", "method", "setting", "steps", "orth. defect (first sample)",
                       "orth. defect (t_end)", "converged at", "max D after t = 100", "wall s"]),
-    "equilibria": ("Non-consensus equilibria: deviation eps(t) from the equilibrium, fitted eps0 e^{{rate t}} for "
-                   "1e-11 < eps < 1e-3 (rkmk4, dt = 0.05, kappa = gamma = 1, m = 0.5)",
+    "equilibria": ("Non-consensus equilibria: deviation eps(t) from the equilibrium, "
+                   "fitted eps0 e^{{rate t}} for 1e-11 < eps < 1e-3 "
+                   "(rkmk4, dt = 0.05, kappa = gamma = 1, m = 0.5)",
                    ["equilibrium", "order", "representation", "eps(0)", "linear rate",
                     "measured rate",
                     "fitted eps0", "escape (eps > 0.5) at t", "predicted ln(0.5/eps0)/rate",
                     "converged by t_end"]),
-    "coincident": ("Coincident centroids: one centroid moved by eps (second order, kappa_2 = 0.5, L = 3)",
+    "coincident": ("Coincident centroids: one centroid moved by eps "
+                   "(second order, kappa_2 = 0.5, L = 3)",
                    ["eps", "separation at t = 0", "separation > 1 at t", "separation at t_end",
                     "t_end"]),
-    "collinear": ("Nearly collinear triangles (length 1, height h), explicit vertices, 5 agents, first order",
+    "collinear": ("Nearly collinear triangles (length 1, height h), explicit vertices, "
+                  "5 agents, first order",
                   ["d", "height", "outcome"]),
 }
 

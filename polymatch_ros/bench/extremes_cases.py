@@ -11,17 +11,38 @@ quick ones (rows with ``quick=True``) and asserts that each expectation holds.
 from dataclasses import dataclass
 
 from . import extremes_lib as lib
-from .extremes_geometry import (coincident_asymmetry, coincident_at, coincident_pairs, collinear,
-                                d0_random,
-                                dim10, dt_gt_t_end, equilibrium, equilibrium_verdict,
-                                explicit_at_1e9,
-                                huge_coords, large_n, long_horizon, one_agent)
-from .extremes_stiff import (scale_adaptive, scale_compliant, scale_refusals,
-                             stiff_coupling_adaptive,
-                             stiff_coupling_compliant, stiff_coupling_refusals, stiff_mass_auto,
-                             stiff_mass_etd2, stiff_mass_refusals, stiff_mass_sweep,
-                             stiff_mass_verlet,
-                             undamped_energy, undamped_no_stable_step, undamped_refusals)
+from .extremes_geometry import (
+    coincident_asymmetry,
+    coincident_at,
+    coincident_pairs,
+    collinear,
+    d0_random,
+    dim10,
+    dt_gt_t_end,
+    equilibrium,
+    equilibrium_verdict,
+    explicit_at_1e9,
+    huge_coords,
+    large_n,
+    long_horizon,
+    one_agent,
+)
+from .extremes_stiff import (
+    scale_adaptive,
+    scale_compliant,
+    scale_refusals,
+    stiff_coupling_adaptive,
+    stiff_coupling_compliant,
+    stiff_coupling_refusals,
+    stiff_mass_auto,
+    stiff_mass_etd2,
+    stiff_mass_refusals,
+    stiff_mass_sweep,
+    stiff_mass_verlet,
+    undamped_energy,
+    undamped_no_stable_step,
+    undamped_refusals,
+)
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ def _sim(*args, **kw):
 
 
 def exact_diameter(points):
-    """Farthest pair of a point set: on its convex hull (d <= 3), else scipy's pairwise distances."""
+    """Farthest pair of a point set: on its convex hull (d <= 3), else scipy's pdist."""
     from scipy.spatial import ConvexHull
     from scipy.spatial.distance import pdist
     p = np.asarray(points, dtype=float)
@@ -53,8 +53,8 @@ def large_n(v, order):
     ok = (lib.finite(traj) and traj.converged and abs(d0 - e0) <= 1e-12 * d0
           and abs(dend - eend) <= 1e-12 * d0)
     return Outcome(
-        f"{traj.steps} steps in {traj.wall_time:.1f} s; diameter {d0:.2f} -> {dend:.1e}, converged "
-        f"at t = {traj.converged_at}; metrics = exact farthest pair (differences "
+        f"{traj.steps} steps in {traj.wall_time:.1f} s; diameter {d0:.2f} -> {dend:.1e}, "
+        f"converged at t = {traj.converged_at}; metrics = exact farthest pair (differences "
         f"{abs(d0 - e0):.0e}, {abs(dend - eend):.0e})", ok, (row,))
 
 
@@ -192,9 +192,10 @@ def coincident_pairs(v):
     seps = [t.metrics[-1].group_separation for t in (far, near)]
     ok = lib.finite(far) and lib.finite(near) and all(abs(x - 3.0) < 1e-3 for x in seps)
     return Outcome(
-        f"each centroid of group a sits on one of group b (group centres coincide): round-off picks "
-        f"the directions, so the copy at 1e9 differs from the one at 0 by up to {diff:.2f} in D on "
-        f"the way; both end at separation {seps[0]:.6f} / {seps[1]:.6f} (L = 3)", ok)
+        f"each centroid of group a sits on one of group b (group centres coincide): "
+        f"round-off picks the directions, so the copy at 1e9 differs from the one at 0 "
+        f"by up to {diff:.2f} in D on the way; both end at separation "
+        f"{seps[0]:.6f} / {seps[1]:.6f} (L = 3)", ok)
 
 
 def collinear_attempt(dim, height, order=1):
@@ -236,8 +237,8 @@ def dt_gt_t_end(v, order):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             traj = _sim(sc, name, 5.0)
-        ok &= (len(caught) == 1 and "larger than t_end" in str(caught[0].message) and traj.steps == 1
-               and lib.finite(traj) and abs(traj.final.t - 0.3) < 1e-15)
+        ok &= (len(caught) == 1 and "larger than t_end" in str(caught[0].message)
+               and traj.steps == 1 and lib.finite(traj) and abs(traj.final.t - 0.3) < 1e-15)
         names.append(name)
     return Outcome(f"one warning and one step of t_end for {', '.join(names)}", ok)
 

@@ -49,7 +49,9 @@ def scene(dim, order=1, *, count=6, seed=1, kappa=1.0, gamma=1.0, mass=0.5, shap
           rotations="uniform", centroids=None, velocities=None, t_end=10.0, samples=None,
           scales=None,
           representation="auto", max_steps=None):
-    """One group of ``count`` polytopes (regular d-simplices unless ``shape``), model (A-1)/(A-2)/(F-1)."""
+    """One group of ``count`` polytopes (regular d-simplices unless ``shape``).
+
+    The model is (A-1), (A-2) or (F-1) as the arguments select."""
     from ..core import load_scene
     model = {"order": order, "kappa": kappa, "gamma": gamma, "representation": representation}
     if order == 2:
@@ -100,7 +102,8 @@ def grid_points(rng, count, dim):
 
 
 def placed_scene(offset, pa, pb, dim, order, kappa_2=None, t_end=20.0, shape_b="square"):
-    """Triangles at centroids ``pa + offset``; with ``kappa_2`` also a second group at ``pb + offset``."""
+    """Triangles at centroids ``pa + offset``; with ``kappa_2`` also a second group at
+    ``pb + offset``."""
     from ..core import load_scene
     model = {"order": order, "kappa": 1.0, "gamma": 1.0}
     if order == 2:
@@ -141,13 +144,14 @@ def coincident_scene(order, at=(0.0, 0.0), t_end=20.0, every=1.0):
 
 
 def coincident_pairs_scene(offset, t_end=20.0):
-    """Each centroid of group a on one of group b (the group centres coincide too), around ``offset``."""
+    """Each centroid of group a on one of group b (so the group centres coincide), around
+    ``offset``."""
     pts = grid_points(np.random.default_rng(3), 6, 2)
     return placed_scene(offset, pts, pts[::-1], 2, 2, kappa_2=0.5, t_end=t_end)
 
 
 def collinear_agents(dim, height, count=5, seed=0):
-    """Vertices (count, 3, d) of triangles of length 1 and height ``height``, and their rotations."""
+    """Vertices (count, 3, d) of triangles of length 1 and height ``height``; their rotations."""
     rng = np.random.default_rng(seed)
     tri = np.zeros((3, dim))
     tri[1, 0], tri[2, 0], tri[2, 1] = 1.0, 0.5, height
@@ -176,7 +180,7 @@ def collinear_scene(dim, verts, order=1, every=5.0):
 
 
 def refusal_limit(exc):
-    """The stable-step limit a StabilityError names (its ``limit`` field; None if none or no error)."""
+    """The stable-step limit a StabilityError names (its ``limit``; None if none or no error)."""
     return getattr(exc, "limit", None)
 
 
@@ -191,7 +195,9 @@ def refusal(scene_, method, dt):
 
 
 def rk_stability_limit(order, eigenvalues):
-    """Largest h with |R(h lambda)| <= 1 for R(z) = sum_{k <= order} z^k / k! (explicit RK, orders 1, 2, 4)."""
+    """Largest h with |R(h lambda)| <= 1 for R(z) = sum_{k <= order} z^k / k!.
+
+    R is the stability polynomial of explicit RK of orders 1, 2 and 4."""
     coefs = [1.0 / math.factorial(k) for k in range(order + 1)]
 
     def stable(h):
@@ -231,7 +237,9 @@ def defect(scene_, state):
 
 
 def antipodal_deviation(rep, state):
-    """pi minus the angle of O_1^T O_2: sin(angle) = |R - R^T|_F / (2 sqrt 2) (accurate near pi)."""
+    """pi minus the angle of O_1^T O_2, from sin(angle) = |R - R^T|_F / (2 sqrt 2).
+
+    Accurate near pi, where the angle itself is ill-conditioned."""
     mats = rep.to_matrices(state.groups[0].rot)
     r = mats[0].T @ mats[1]
     return float(np.arcsin(min(1.0, np.linalg.norm(r - r.T) / (2 * math.sqrt(2)))))
@@ -245,7 +253,8 @@ def splay_deviation(rep, state):
     return float(np.linalg.norm(dev - dev.mean()))
 
 
-#: name: (label, d, shape, rotations, deviation, linear rate of the unstable mode at first order / kappa)
+#: name: (label, d, shape, rotations, deviation,
+#:        linear rate of the unstable mode at first order / kappa)
 EQUILIBRIA = {
     "antipodal_2d": ("antipodal SO(2)", 2, "triangle", {"angles": [0.0, math.pi]},
                      antipodal_deviation, 1.0),
@@ -259,7 +268,9 @@ EQUILIBRIA = {
 
 
 def equilibrium_run(name, order, rep, t_rates, every, m=0.5, gamma=1.0):
-    """Run an equilibrium for ``t_rates`` e-folding times: (scene, traj, times, deviations, rate)."""
+    """Run an equilibrium for ``t_rates`` e-folding times.
+
+    Returns (scene, traj, times, deviations, rate)."""
     from ..core import simulate
     _label, dim, shape, rots, deviation, c = EQUILIBRIA[name]
     rate = c if order == 1 else (-gamma + math.sqrt(gamma ** 2 + 4 * m * c)) / (2 * m)

@@ -62,7 +62,7 @@ class FlatSystem:
         return self.pack(gs.x + scene.origin, rot, gs.v, grp.algebra_to_skew(gs.w))
 
     def unpack(self, y):
-        """dict of arrays; y may be one state (size,) or solve_ivp's columns (size, T) -> leading T."""
+        """dict of arrays; y is one state (size,) or solve_ivp's columns (size, T): leading T."""
         y = np.asarray(y)
         if y.ndim == 1:
             return {k: y[self.slices[k]].reshape(self.shapes[k]) for k in self.names}
@@ -94,12 +94,13 @@ class FlatSystem:
         out[sl["x"]] = v.ravel()
         out[sl["v"]] = ((self.kappa * pull - self.gamma * v) / self.mass).ravel()
         out[sl["rot"]] = (w @ o).ravel()
-        out[sl["w"]] = (((self.kappa / (2.0 * n)) * self.torque(o) - self.gamma * w) / self.mass).ravel()
+        torque = (self.kappa / (2.0 * n)) * self.torque(o)
+        out[sl["w"]] = ((torque - self.gamma * w) / self.mass).ravel()
         return out
 
     # -- diagnostics ------------------------------------------------------------------------
     def energy(self, rot, w=None):
-        """Proposition 2.2 (i): (m/N) sum |W_i|^2 + (kappa/N) sum |O_i - Obar|^2 (over a leading T axis).
+        """Proposition 2.2 (i): (m/N) sum |W_i|^2 + (kappa/N) sum |O_i - Obar|^2 (leading T axis).
 
         Computed from the matrices as they are (not projected onto SO(d))."""
         rot = np.asarray(rot)

@@ -20,14 +20,17 @@ from the matrices as they are, without projecting them onto SO(d).
 """
 
 NAME = "longhorizon"
-HELP = "orthogonality defect and energy drift (gamma = 0) after 10^5 steps, every integrator and scipy"
+HELP = ("orthogonality defect and energy drift (gamma = 0) after 10^5 steps, "
+        "every integrator and scipy")
 ORDER = 50
 
 
 def add_arguments(p):
     from .options import at_least, float_list
-    p.add_argument("--steps", type=at_least(10), default=100_000, help="fixed steps per run (default 100000)")
-    p.add_argument("--dt", type=at_least(1e-300, float), default=0.05, help="fixed step (default 0.05)")
+    p.add_argument("--steps", type=at_least(10), default=100_000,
+                   help="fixed steps per run (default 100000)")
+    p.add_argument("--dt", type=at_least(1e-300, float), default=0.05,
+                   help="fixed step (default 0.05)")
     p.add_argument("--n", type=at_least(2), default=4, help="agents (default 4)")
     p.add_argument("--dim", type=at_least(2), default=3, help="dimension (default 3)")
     p.add_argument("--tolerances", type=float_list(1e-300), default=[1e-6, 1e-9],
@@ -38,13 +41,13 @@ def add_arguments(p):
 def _scene(order, n, dim, t_end, seed):
     from ..core import load_scene
     model = {"order": order, "kappa": 1.0, "gamma": 0.0 if order == 2 else 1.0}
-    group = {"name": "polytopes", "shape": {"simplex": dim}, "count": n, "centroids": {"box": [-5.0, 5.0]},
-             "rotations": "uniform"}
+    group = {"name": "polytopes", "shape": {"simplex": dim}, "count": n,
+             "centroids": {"box": [-5.0, 5.0]}, "rotations": "uniform"}
     if order == 2:
         model["mass"] = 1.0
         group["velocities"] = {"centroid": {"normal": 0.5}, "angular": {"normal": 0.5}}
-    return load_scene({"name": f"longhorizon_order{order}", "dimension": dim, "seed": seed, "model": model,
-                       "groups": [group], "time": {"t_end": t_end}})
+    return load_scene({"name": f"longhorizon_order{order}", "dimension": dim, "seed": seed,
+                       "model": model, "groups": [group], "time": {"t_end": t_end}})
 
 
 def _checkpoints(steps):
@@ -58,10 +61,12 @@ def _checkpoints(steps):
 
 
 def _sample_steps(steps, linear=5001):
-    """Step indices of the samples: log-spaced (early times), ``linear`` evenly spaced, the checkpoints."""
+    """Step indices of the samples: log-spaced (early times), ``linear`` evenly spaced, and the
+    checkpoints."""
     import numpy as np
     idx = np.concatenate([np.round(np.logspace(0, np.log10(steps), 81)),
-                          np.round(np.linspace(0, steps, min(linear, steps + 1))), _checkpoints(steps)])
+                          np.round(np.linspace(0, steps, min(linear, steps + 1))),
+                          _checkpoints(steps)])
     return np.unique(idx.astype(int))
 
 
@@ -120,24 +125,26 @@ def run(args, log):
     import numpy as np
 
     from .report import Report
-    from .solve import solvers_for, measure
+    from .solve import measure, solvers_for
 
     report = Report(NAME, "Long horizons (`polymatch bench longhorizon`)")
     steps = 1000 if args.quick else args.steps
     tols = [1e-6] if args.quick else sorted(args.tolerances, reverse=True)
-    dt, n, dim = args.dt, args.n, (2 if args.quick else args.dim)   # quick: angles, the cheapest steps
+    # quick: angles, the cheapest steps
+    dt, n, dim = args.dt, args.n, (2 if args.quick else args.dim)
     repeats = args.repeats or 1
     t_end = steps * dt
     marks_steps = _checkpoints(steps)
     marks = [k * dt for k in marks_steps]
     times = _sample_steps(steps) * dt
-    report.text(f"N = {n} regular {dim}-simplices in R^{dim}, uniform rotations, {steps:,} steps of dt = {dt:g} "
-                f"(t = {t_end:g}); scipy and ours adaptive over the same span at rtol = atol = "
-                f"{', '.join(f'{t:.0e}' for t in tols)}.  Quantities are evaluated at {len(times)} sample times "
-                f"(log- and linearly spaced); \"up to 10^k\" = running max over t <= 10^k dt.  Wall: seconds for "
-                f"the whole run, best / median of {repeats} (runs interleaved across solvers).")
-    mark_labels = [f"10^{int(round(np.log10(k)))}" if 10 ** int(round(np.log10(k))) == k else f"{k:,}"
-                   for k in marks_steps]
+    report.text(f"N = {n} regular {dim}-simplices in R^{dim}, uniform rotations, {steps:,} steps "
+                f"of dt = {dt:g} (t = {t_end:g}); scipy and ours adaptive over the same span at "
+                f"rtol = atol = {', '.join(f'{t:.0e}' for t in tols)}.  Quantities are evaluated "
+                f"at {len(times)} sample times (log- and linearly spaced); \"up to 10^k\" = "
+                f"running max over t <= 10^k dt.  Wall: seconds for the whole run, best / median "
+                f"of {repeats} (runs interleaved across solvers).")
+    mark_labels = [f"10^{int(round(np.log10(k)))}" if 10 ** int(round(np.log10(k))) == k
+                   else f"{k:,}" for k in marks_steps]
     figures = {}
 
     # -- A: second order, gamma = 0 ----------------------------------------------------------
@@ -157,9 +164,11 @@ def run(args, log):
         defect = _defect_series(mats)
         r.series = (t, drift, defect)
         rows.append([r.name, r.param] + _wall_cells(r) + [evals] + [f"{v:.1e}" for v in dm]
-                    + ["-" if p is None else f"{p:.2f}", _verdict(dm[-1], p), f"{defect.max():.1e}"])
+                    + ["-" if p is None else f"{p:.2f}", _verdict(dm[-1], p),
+                       f"{defect.max():.1e}"])
     u0 = flat.unpack(flat.initial(scene))
-    report.text("### A. Second-order model (A-1), gamma = 0: energy (Prop. 2.2 i) and orthogonality",
+    report.text("### A. Second-order model (A-1), gamma = 0: energy (Prop. 2.2 i) "
+                "and orthogonality",
                 "", f"m = kappa = 1, gamma = 0, E(0) = {flat.energy(u0['rot'], u0['w']):.4f}.")
     report.table(["method", "h or tol", "wall s (best)", "median s", "rhs evals"]
                  + [f"rel. energy drift up to {lab}" for lab in mark_labels]
@@ -186,23 +195,25 @@ def run(args, log):
                  + [f"orth. defect up to {lab}" for lab in mark_labels], rows,
                  caption="first order: max_i |O_i^T O_i - I|_F, running max")
     figures["B"] = [r for r in runs1 if r.status == "ok"]
-    report.text("- Lie methods (lie_*, rkmk4, etd*, lie_verlet, adaptive) stay on SO(d) by construction: their "
-                "defect is accumulated round-off.  Projection baselines re-project every step.  scipy's O "
-                "drifts off SO(d) at a rate set by its tolerance, and E is measured on those matrices.",
-                "- growth p: log10 of (max drift over the last decade of t) / (max over the decade before); "
-                "\"bounded\": p < 0.2 (an oscillation that does not grow); \"secular\": p >= 0.7 (about linear "
-                "growth in t, p = 1).")
+    report.text("- Lie methods (lie_*, rkmk4, etd*, lie_verlet, adaptive) stay on SO(d) by "
+                "construction: their defect is accumulated round-off.  Projection baselines "
+                "re-project every step.  scipy's O drifts off SO(d) at a rate set by its "
+                "tolerance, and E is measured on those matrices.",
+                "- growth p: log10 of (max drift over the last decade of t) / (max over the "
+                "decade before); \"bounded\": p < 0.2 (an oscillation that does not grow); "
+                "\"secular\": p >= 0.7 (about linear growth in t, p = 1).")
 
     def draw(plt):
         fig, axes = plt.subplots(1, 3, figsize=(16, 4.4))
-        panels = [(axes[0], figures["A"], 1), (axes[1], figures["A"], 2), (axes[2], figures["B"], 2)]
+        panels = [(axes[0], figures["A"], 1), (axes[1], figures["A"], 2),
+                   (axes[2], figures["B"], 2)]
         for ax, runs_, which in panels:
             for k, r in enumerate(runs_):
                 t, series = r.series[0], r.series[which]
                 style = "x:" if r.kind == "scipy" else ("D-" if r.kind == "adaptive" else "-")
                 sel = t > 0
-                ax.loglog(t[sel], np.maximum(series[sel], 1e-17), style, color=f"C{k % 10}", ms=3, lw=1,
-                          label=f"{r.name} {r.param}")
+                ax.loglog(t[sel], np.maximum(series[sel], 1e-17), style, color=f"C{k % 10}",
+                          ms=3, lw=1, label=f"{r.name} {r.param}")
         axes[0].set_title("A: gamma = 0, |E(t) - E(0)| / E(0)")
         axes[1].set_title("A: gamma = 0, orthogonality defect")
         axes[2].set_title("B: first order, orthogonality defect")

@@ -37,7 +37,7 @@ def add_arguments(p):
 
 
 def naive_rates(mats, idx, scale):
-    """kappa/(2 gamma N) sum_k (O_k O_i^T - O_i O_k^T) for the agents ``idx``, one agent at a time."""
+    """kappa/(2 gamma N) sum_k (O_k O_i^T - O_i O_k^T) for the agents ``idx``, one at a time."""
     import numpy as np
     n, d, _ = mats.shape
     flat = mats.reshape(n * d, d)
@@ -72,7 +72,8 @@ def run(args, log):
         model = base.model
         scale = model.kappa / (2.0 * model.gamma * n)
         mats = model.rotations.to_matrices(base.initial.groups[0].rot)
-        reps = [base] if model.rotations.name == "matrix" else [base, with_representation(base, "matrix")]
+        reps = ([base] if model.rotations.name == "matrix"
+                else [base, with_representation(base, "matrix")])
         mf = []
         for scene in reps:
             system = System(scene.model)
@@ -82,7 +83,8 @@ def run(args, log):
                 c = system.couple(groups, first_stage=False)
                 return system.rotation_rate(0, groups[0].rot, c)
 
-            log(f"meanfield: N = {n}, {representation_label(scene.model.rotations)}, {repeats} repeats")
+            log(f"meanfield: N = {n}, {representation_label(scene.model.rotations)}, "
+                f"{repeats} repeats")
             t = measure(mean_field, repeats)
             rate = scene.model.rotations.algebra_to_skew(mean_field(None))
             mf.append((representation_label(scene.model.rotations), t, rate))
@@ -90,14 +92,16 @@ def run(args, log):
         k = min(sample_size, n)
         idx = np.sort(rng.choice(n, size=k, replace=False))
         log(f"meanfield: N = {n}, naive sum over {k} sampled agents, {naive_repeats} passes")
-        t_sample = measure(lambda _: naive_rates(mats, idx, scale), naive_repeats)
+        t_sample = measure(lambda _, mats=mats, idx=idx, scale=scale:
+                           naive_rates(mats, idx, scale), naive_repeats)
         naive = naive_rates(mats, idx, scale)
         estimate = t_sample.scaled(n / k)
         full = None
         if n <= args.full_naive_max:
             log(f"meanfield: N = {n}, naive sum over all agents")
             everyone = np.arange(n)
-            full = measure(lambda _: naive_rates(mats, everyone, scale), naive_repeats, warmup=0)
+            full = measure(lambda _, mats=mats, rows=everyone, scale=scale:
+                           naive_rates(mats, rows, scale), naive_repeats, warmup=0)
         magnitude = float(np.abs(mf[0][2]).max())
         for label, t, rate in mf:
             diff = float(np.abs(rate[idx] - naive).max())
@@ -109,25 +113,29 @@ def run(args, log):
             results.append({"n": n, "rep": label, "mf": t, "naive": estimate, "full": full,
                             "diff": diff, "magnitude": magnitude})
 
-    report.table(["N", "representation", "mean field best ms", "median ms", "naive µs/agent (sample)",
-                  "naive total, scaled", "naive total, measured", "speed-up (best/best)", "max abs diff"], rows,
+    report.table(["N", "representation", "mean field best ms", "median ms",
+                  "naive µs/agent (sample)", "naive total, scaled", "naive total, measured",
+                  "speed-up (best/best)", "max abs diff"], rows,
                  caption=f"d = {dim}: System.couple + System.rotation_rate (all agents) vs "
                          f"sum_k (O_k O_i^T - O_i O_k^T) per agent")
-    lines = [f"- The naive double sum is timed on a random sample of agents ({naive_repeats} passes, best) and "
-             f"scaled by N / sample; it was run over all N agents only where \"naive total, measured\" "
-             f"has a figure (N <= {args.full_naive_max:,}); speed-ups use the scaled total.",
-             f"- Mean field: {repeats} repeats. \"max abs diff\" compares the sampled agents' naive rates with "
-             f"the mean-field rates W_i (entries of magnitude up to "
+    lines = [f"- The naive double sum is timed on a random sample of agents "
+             f"({naive_repeats} passes, best) and scaled by N / sample; it was run over all N "
+             f"agents only where \"naive total, measured\" has a figure "
+             f"(N <= {args.full_naive_max:,}); speed-ups use the scaled total.",
+             f"- Mean field: {repeats} repeats. \"max abs diff\" compares the sampled agents' "
+             f"naive rates with the mean-field rates W_i (entries of magnitude up to "
              f"{max(r['magnitude'] for r in results):.2g})."]
     at = [r for r in results if r["n"] == 10_000 and dim == 3]
     for r in at:
         ratio = r["naive"].best / r["mf"].best
-        lines.append(f"- N = 10,000, d = 3, {r['rep']}: mean field {ratio:,.0f}x faster than the naive sum "
-                     f"(target >= {TARGET_SPEEDUP:,.0f}x: {'met' if ratio >= TARGET_SPEEDUP else 'NOT met'}; "
+        met = "met" if ratio >= TARGET_SPEEDUP else "NOT met"
+        lines.append(f"- N = 10,000, d = 3, {r['rep']}: mean field {ratio:,.0f}x faster than "
+                     f"the naive sum (target >= {TARGET_SPEEDUP:,.0f}x: {met}; "
                      f"medians: {r['naive'].median / r['mf'].median:,.0f}x)")
     for r in results:
         if r["full"] is not None:
-            lines.append(f"- Scaling check at N = {r['n']:,}: extrapolated naive total {fmt_time(r['naive'].best)}, "
+            lines.append(f"- Scaling check at N = {r['n']:,}: extrapolated naive total "
+                         f"{fmt_time(r['naive'].best)}, "
                          f"measured over all agents {fmt_time(r['full'].best)} "
                          f"(ratio {r['full'].best / r['naive'].best:.2f}).")
             break
@@ -137,7 +145,8 @@ def run(args, log):
         fig, ax = plt.subplots(figsize=(6, 4.5))
         for rep in dict.fromkeys(r["rep"] for r in results):
             rs = [r for r in results if r["rep"] == rep]
-            ax.loglog([r["n"] for r in rs], [r["mf"].best * 1e3 for r in rs], "o-", label=f"mean field, {rep}")
+            ax.loglog([r["n"] for r in rs], [r["mf"].best * 1e3 for r in rs],
+                      "o-", label=f"mean field, {rep}")
         first = [r for r in results if r["rep"] == results[0]["rep"]]
         ax.loglog([r["n"] for r in first], [r["naive"].best * 1e3 for r in first], "s--",
                   label="naive double sum (sampled, scaled by N/sample)")

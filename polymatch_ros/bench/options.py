@@ -8,7 +8,8 @@ def _list_of(convert, what, minimum):
         try:
             values = [convert(v) for v in str(text).split(",") if v.strip()]
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected comma-separated {what}, got {text!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"expected comma-separated {what}, got {text!r}") from None
         if not values:
             raise argparse.ArgumentTypeError(f"expected at least one value, got {text!r}")
         bad = [v for v in values if not v >= minimum]

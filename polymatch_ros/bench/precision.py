@@ -29,7 +29,8 @@ machine hits every solver alike.
 """
 
 NAME = "precision"
-HELP = "work-precision: max vertex error over the run vs wall time and evaluations, all integrators and scipy"
+HELP = ("work-precision: max vertex error over the run vs wall time and evaluations, "
+        "all integrators and scipy")
 ORDER = 40
 
 STEPS = [0.2, 0.1, 0.05, 0.02, 0.01, 0.005]
@@ -57,13 +58,15 @@ def add_arguments(p):
     p.add_argument("--cases", default=",".join(CASES),
                    help="comma-separated case ids (default: all): " + ", ".join(CASES))
     p.add_argument("--steps", type=float_list(1e-300), default=STEPS,
-                   help="fixed step sizes h; each must divide --sample-every (default 0.2,0.1,...,0.005)")
+                   help="fixed step sizes h; each must divide --sample-every "
+                        "(default 0.2,0.1,...,0.005)")
     p.add_argument("--tolerances", type=float_list(1e-300), default=TOLERANCES,
                    help="tolerances of ours and scipy's (default 1e-3,...,1e-12)")
     p.add_argument("--targets", type=float_list(1e-300), default=TARGETS,
                    help="target errors of the frontier table (default 1e-4,1e-6,1e-8)")
     p.add_argument("--n", type=at_least(2), default=10, help="agents per case (default 10)")
-    p.add_argument("--t-end", type=at_least(1e-300, float), default=20.0, help="time span (default 20)")
+    p.add_argument("--t-end", type=at_least(1e-300, float),
+                   default=20.0, help="time span (default 20)")
     p.add_argument("--sample-every", type=at_least(1e-300, float), default=0.2,
                    help="spacing of the sample times the error is taken at (default 0.2)")
     p.add_argument("--ref-tol", type=at_least(1e-300, float), default=1e-13,
@@ -84,8 +87,8 @@ def case_scene(case, n, t_end, every, seed):
     if order == 2:
         model["mass"] = mass
         group["velocities"] = {"centroid": {"normal": 0.5}, "angular": {"normal": 0.5}}
-    return load_scene({"name": case, "dimension": dim, "seed": seed, "model": model, "groups": [group],
-                       "time": {"t_end": t_end, "samples": {"every": every}}})
+    return load_scene({"name": case, "dimension": dim, "seed": seed, "model": model,
+                       "groups": [group], "time": {"t_end": t_end, "samples": {"every": every}}})
 
 
 def rotation_diameter(scene):
@@ -134,10 +137,10 @@ def case_table(cells, repeats):
         if not c.ok:
             rows.append([c.name, c.param, c.status, "-", "-", "-", "-"])
             continue
-        rows.append([c.name, c.param, _fmt_err(c.err), fmt_ms(c.best), fmt_ms(c.median), c.out.evals,
-                     f"{c.orth:.1e}"])
-    header = ["method", "h or tol", "max error", f"wall ms (best of {repeats})", "median ms", "rhs evals",
-              "orth. defect"]
+        rows.append([c.name, c.param, _fmt_err(c.err), fmt_ms(c.best), fmt_ms(c.median),
+                     c.out.evals, f"{c.orth:.1e}"])
+    header = ["method", "h or tol", "max error", f"wall ms (best of {repeats})", "median ms",
+              "rhs evals", "orth. defect"]
     return header, rows
 
 
@@ -180,7 +183,8 @@ def frontier_rows(label, cells, targets):
         scipy = next((c for c in ok if c.kind == "scipy"), None)
         fixed = next((c for c in ok if c.kind == "fixed"), None)
         fewest = min(ok, key=lambda c: c.out.evals)
-        rows.append([label, f"{target:.0e}", name(win), f"{fmt_ms(win.best)} / {fmt_ms(win.median)}", win.out.evals,
+        rows.append([label, f"{target:.0e}", name(win),
+                     f"{fmt_ms(win.best)} / {fmt_ms(win.median)}", win.out.evals,
                      f"{name(second)} ({fmt_ms(second.best)})" if second else "-",
                      f"{name(scipy)} ({fmt_ms(scipy.best)})" if scipy else "none",
                      f"{name(fixed)} ({fmt_ms(fixed.best)})" if fixed else "none",
@@ -225,11 +229,13 @@ def _check_grid(steps, every, t_end):
     for h in steps:
         k = every / h
         if abs(k - round(k)) > 1e-9 * k:
-            raise PolymatchError(f"bench precision: step {h:g} does not divide the sample spacing {every:g}; "
-                                 "the error is taken at the sample times, which every step grid must contain")
+            raise PolymatchError(f"bench precision: step {h:g} does not divide the sample "
+                                 f"spacing {every:g}; the error is taken at the sample times, "
+                                 "which every step grid must contain")
     k = t_end / every
     if abs(k - round(k)) > 1e-9 * k:
-        raise PolymatchError(f"bench precision: the sample spacing {every:g} must divide t_end = {t_end:g}")
+        raise PolymatchError(
+            f"bench precision: the sample spacing {every:g} must divide t_end = {t_end:g}")
 
 
 def run(args, log):
@@ -247,22 +253,25 @@ def run(args, log):
     else:
         cases = [c.strip() for c in args.cases.split(",") if c.strip()]
         steps, tols = sorted(args.steps, reverse=True), sorted(args.tolerances, reverse=True)
-        n, t_end, every, ref_tol, ref_dt = args.n, args.t_end, args.sample_every, args.ref_tol, args.ref_dt
+        n, t_end, every = args.n, args.t_end, args.sample_every
+        ref_tol, ref_dt = args.ref_tol, args.ref_dt
     unknown = [c for c in cases if c not in CASES]
     if unknown:
-        raise PolymatchError(f"bench precision: unknown case {unknown[0]!r}; known: {', '.join(CASES)}")
+        raise PolymatchError(
+            f"bench precision: unknown case {unknown[0]!r}; known: {', '.join(CASES)}")
     _check_grid(list(steps) + [ref_dt], every, t_end)
     repeats = args.repeats or (1 if args.quick else 3)
     targets = sorted(args.targets, reverse=True)
 
     report.text(
-        f"N = {n} congruent regular d-simplices, kappa = gamma = 1 (second order: m as stated, centroid and "
-        f"angular velocities ~ N(0, 0.5^2)), t_end = {t_end:g}.  Error = max over {int(round(t_end / every)) + 1} "
-        f"sample times (every {every:g}) and all vertices of |x^i_a - x^i_a(ref)| (Euclidean, absolute "
-        f"coordinates).  Wall = the whole `simulate` / `solve_ivp` call producing those samples, best (and "
-        f"median) of {repeats} repeats interleaved over every cell of a case.  evals = right-hand-side "
-        f"evaluations (adaptive solvers: including the 3 per step that dense output costs).  orth. defect = "
-        f"max over samples and agents of |O_i^T O_i - I|_F.")
+        f"N = {n} congruent regular d-simplices, kappa = gamma = 1 (second order: m as stated, "
+        f"centroid and angular velocities ~ N(0, 0.5^2)), t_end = {t_end:g}.  Error = max over "
+        f"{int(round(t_end / every)) + 1} sample times (every {every:g}) and all vertices of "
+        f"|x^i_a - x^i_a(ref)| (Euclidean, absolute coordinates).  Wall = the whole `simulate` / "
+        f"`solve_ivp` call producing those samples, best (and median) of {repeats} repeats "
+        f"interleaved over every cell of a case.  evals = right-hand-side evaluations (adaptive "
+        f"solvers: including the 3 per step that dense output costs).  orth. defect = max over "
+        f"samples and agents of |O_i^T O_i - I|_F.")
 
     frontier, orders, summary = [], [], []
     for case in cases:
@@ -274,47 +283,59 @@ def run(args, log):
         log(f"precision: {case} ({label}, D0 = {d0:.2f}): references")
         ref = solve(scene, Solver("adaptive", "adaptive", ref_tol), times)
         ref_verts = vertices(ref.centroids, ref.mats, reference)
-        gap = vertex_error(solve(scene, Solver("rkmk4", "fixed", ref_dt), times), ref_verts, reference)
+        check = solve(scene, Solver("rkmk4", "fixed", ref_dt), times)
+        gap = vertex_error(check, ref_verts, reference)
         cells = solvers_for(scene.model.order, steps, tols)
         log(f"precision: {case}: {len(cells)} cells x {repeats} interleaved repeats")
-        measure(cells, scene, times, repeats, lambda text: log(f"precision:   {text}"), warmup=True)
+        measure(cells, scene, times, repeats, lambda text: log(f"precision:   {text}"),
+                warmup=True)
         _score(cells, times, ref_verts, reference)
 
         m = scene.model
         params = f"m = {m.mass:g}, " if m.order == 2 else ""
         report.text(f"### {label}  (`{case}`)",
                     "",
-                    f"d = {m.dim}, N = {m.n_agents}, {params}D0 = max_ij |O_i - O_j|_F = {d0:.3f} at t = 0.  "
-                    f"Reference: ours adaptive at tol {ref_tol:g} ({ref.steps} steps); rkmk4 at dt = {ref_dt:g} "
-                    f"agrees with it to {gap:.1e} (max vertex distance over the samples): errors near that "
-                    f"floor are not resolved.")
+                    f"d = {m.dim}, N = {m.n_agents}, {params}D0 = max_ij |O_i - O_j|_F = "
+                    f"{d0:.3f} at t = 0.  Reference: ours adaptive at tol {ref_tol:g} "
+                    f"({ref.steps} steps); rkmk4 at dt = {ref_dt:g} agrees with it to {gap:.1e} "
+                    f"(max vertex distance over the samples): errors near that floor are not "
+                    f"resolved.")
         header, rows = case_table(cells, repeats)
         report.table(header, rows, caption=f"{label}: every solver")
         orows = order_rows(cells, gap)
-        report.table(["method", "nominal order", "observed order (consecutive h, errors > 100 x floor)", "note"],
-                     orows, caption=f"{label}: observed convergence order of the fixed-step methods")
+        report.table(["method", "nominal order",
+                      "observed order (consecutive h, errors > 100 x floor)", "note"],
+                     orows,
+                     caption=f"{label}: observed convergence order of the fixed-step methods")
         orders += [[case] + r for r in orows if r[3] == "below nominal"]
-        report.figure(case, _figure(label, cells, targets, repeats), f"{label}: error vs wall time and evaluations")
+        report.figure(case, _figure(label, cells, targets, repeats),
+                      f"{label}: error vs wall time and evaluations")
         frontier += frontier_rows(case, cells, targets)
-        refused = sorted({f"{c.name} h = {c.value:g}" for c in cells if c.status.startswith("refused")})
-        failed = sorted({f"{c.name} {c.param}: {c.status}" for c in cells if c.status.startswith("failed")})
+        refused = sorted(
+            {f"{c.name} h = {c.value:g}" for c in cells if c.status.startswith("refused")})
+        failed = sorted(
+            {f"{c.name} {c.param}: {c.status}" for c in cells if c.status.startswith("failed")})
         if refused or failed:
             summary.append(f"- `{case}`: " + "; ".join(
                 ([f"refused (unstable): {', '.join(refused)}"] if refused else []) + failed))
 
     report.text("### Frontier")
-    report.table(["case", "target", "cheapest (best wall)", "best / median ms", "evals", "runner-up (other method)",
-                  "cheapest scipy", "cheapest fixed step", "fewest evals"], frontier,
-                 caption="Cheapest run meeting each target error (wall time: best of the interleaved repeats). "
-                         "Fixed steps are what a distributed (ROS lockstep) ensemble can run.")
-    notes = ["- Fixed-step Lie methods (lie_*, rkmk4, etd*, lie_verlet) keep O_i in SO(d) by construction: "
-             "their orth. defect is round-off.  The projection baselines re-project every step; scipy "
-             "integrates O in R^{d x d} and its defect follows its tolerance.",
-             "- Decoupled centroids follow their exact flow (Prop. 2.1) in every core method, so a core "
-             "method's error is its rotations' error; scipy integrates the centroids too."]
+    report.table(["case", "target", "cheapest (best wall)", "best / median ms", "evals",
+                  "runner-up (other method)", "cheapest scipy", "cheapest fixed step",
+                  "fewest evals"], frontier,
+                 caption="Cheapest run meeting each target error (wall time: best of the "
+                         "interleaved repeats). Fixed steps are what a distributed "
+                         "(ROS lockstep) ensemble can run.")
+    notes = ["- Fixed-step Lie methods (lie_*, rkmk4, etd*, lie_verlet) keep O_i in SO(d) by "
+             "construction: their orth. defect is round-off.  The projection baselines re-project "
+             "every step; scipy integrates O in R^{d x d} and its defect follows its tolerance.",
+             "- Decoupled centroids follow their exact flow (Prop. 2.1) in every core method, "
+             "so a core method's error is its rotations' error; scipy integrates the centroids "
+             "too."]
     if summary:
         notes += ["- Refusals and failures:"] + summary
     if orders:
-        notes.append("- Observed order below nominal: " + "; ".join(f"{r[0]} {r[1]} ({r[3]})" for r in orders))
+        notes.append("- Observed order below nominal: "
+                     + "; ".join(f"{r[0]} {r[1]} ({r[3]})" for r in orders))
     report.text(*notes)
     return report

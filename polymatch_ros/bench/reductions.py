@@ -7,19 +7,22 @@ at t_end — round-off for exact reductions, the stated error otherwise.
 """
 
 NAME = "reductions"
-HELP = "cost of each model reduction (angles, SoA Cayley, no weights, exact centroids, ...) vs the full model"
+HELP = ("cost of each model reduction (angles, SoA Cayley, no weights, exact centroids, ...) "
+        "vs the full model")
 ORDER = 70
 
 
 def add_arguments(p):
     from .options import at_least
-    p.add_argument("--agents", type=at_least(2), default=1000, help="agents per case (default 1000)")
+    p.add_argument("--agents", type=at_least(2), default=1000,
+                   help="agents per case (default 1000)")
 
 
 def _scene(dim, n, t_end, **model):
     from ..core.scene import load_scene
     shape = {2: "triangle", 3: "tetrahedron"}[dim]
-    spec = {"dimension": dim, "seed": 3, "model": {"order": 1, "kappa": 1.0, "gamma": 1.0, **model},
+    spec = {"dimension": dim, "seed": 3,
+            "model": {"order": 1, "kappa": 1.0, "gamma": 1.0, **model},
             "time": {"t_end": t_end, "samples": {"count": 2}},
             "groups": [{"name": "a", "shape": shape, "count": n, "rotations": {"within": 0.8},
                         "centroids": {"box": [-3, 3]}}]}
@@ -33,8 +36,9 @@ def _vertices(scene, state, rot):
     import numpy as np
 
     from ..core.metrics import vertices
-    return np.concatenate([vertices(gs.x + scene.origin, rot.to_matrices(gs.rot), g.reference, g.scales)
-                           .reshape(-1, scene.dim) for g, gs in zip(scene.model.groups, state.groups)])
+    return np.concatenate([
+        vertices(gs.x + scene.origin, rot.to_matrices(gs.rot), g.reference, g.scales)
+        .reshape(-1, scene.dim) for g, gs in zip(scene.model.groups, state.groups)])
 
 
 def _timed(scene, method, dt, repeats):
@@ -57,11 +61,13 @@ def _copy_initial(dst, src):
         if dst.model.rotations.name == src.model.rotations.name:
             gd.rot[...] = gs.rot
         else:
-            gd.rot[...] = dst.model.rotations.from_matrices(src.model.rotations.to_matrices(gs.rot))
+            gd.rot[...] = dst.model.rotations.from_matrices(
+                src.model.rotations.to_matrices(gs.rot))
         if gd.v is not None and gs.v is not None:
             gd.v[:] = gs.v
         if gd.w is not None and gs.w is not None:
-            gd.w[...] = dst.model.rotations.algebra_from_skew(src.model.rotations.algebra_to_skew(gs.w))
+            gd.w[...] = dst.model.rotations.algebra_from_skew(
+                src.model.rotations.algebra_to_skew(gs.w))
     return np.asarray(0)
 
 
@@ -90,16 +96,18 @@ def run(args, log):
                      f"{diff:.1e}", expectation])
 
     s2 = _scene(2, n, t_end)
-    case("2-D: angles (Kuramoto) vs 2x2 matrices", with_representation(s2, "matrix"), s2, "rkmk4", 0.05,
-         "round-off")
+    case("2-D: angles (Kuramoto) vs 2x2 matrices", with_representation(s2, "matrix"), s2,
+         "rkmk4", 0.05, "round-off")
     s3 = _scene(3, n, t_end)
-    case("3-D: SoA Cayley vs (N,3,3) matrices", with_representation(s3, "matrix"), s3, "rkmk4", 0.05,
-         "round-off")
+    case("3-D: SoA Cayley vs (N,3,3) matrices", with_representation(s3, "matrix"), s3,
+         "rkmk4", 0.05, "round-off")
     sim = load_scene({"dimension": 3, "seed": 3, "time": {"t_end": t_end, "samples": {"count": 2}},
-                      "groups": [{"name": "a", "shape": "tetrahedron", "count": n, "rotations": {"within": 0.8},
-                                  "centroids": {"box": [-3, 3]}, "scales": [1.0] * n}]})
+                      "groups": [{"name": "a", "shape": "tetrahedron", "count": n,
+                                  "rotations": {"within": 0.8}, "centroids": {"box": [-3, 3]},
+                                  "scales": [1.0] * n}]})
     _copy_initial(sim, s3)
-    case("congruent: no scale weights vs F-1 weights s_k/s_i = 1", sim, s3, "rkmk4", 0.05, "round-off")
+    case("congruent: no scale weights vs F-1 weights s_k/s_i = 1", sim, s3, "rkmk4", 0.05,
+         "round-off")
     s2nd = _scene(3, n, t_end, order=2, mass=0.5)
     full = replace(s2nd, model=replace(s2nd.model, centroids="integrated"))
     case("centroids: exact flow (Prop. 2.1) vs integrated by rkmk4", full, s2nd, "rkmk4", 0.05,
@@ -107,10 +115,13 @@ def run(args, log):
     m = max(4, n // 5)
     two = {"dimension": 3, "seed": 5, "model": {"order": 1, "kappa_2": 0.0, "L": 3.0},
            "time": {"t_end": t_end, "samples": {"count": 2}},
-           "groups": [{"name": "tri", "shape": "triangle", "count": m, "centroids": {"box": [-2, 2]}},
-                      {"name": "tet", "shape": "tetrahedron", "count": m, "centroids": {"box": [-2, 2]}}]}
+           "groups": [{"name": "tri", "shape": "triangle", "count": m,
+                       "centroids": {"box": [-2, 2]}},
+                      {"name": "tet", "shape": "tetrahedron", "count": m,
+                       "centroids": {"box": [-2, 2]}}]}
     reduced = load_scene(two)
-    full = replace(reduced, model=replace(reduced.model, kappa_2=1e-300))   # potential on, force ~ 0
+    # potential on, force ~ 0
+    full = replace(reduced, model=replace(reduced.model, kappa_2=1e-300))
     case(f"kappa_2 = 0: no inter-group potential ({m} + {m} agents)", full, reduced, "rkmk4", 0.05,
          "rkmk4's centroid error (with a potential, centroids are integrated)")
     first = _scene(3, n, t_end)
@@ -124,13 +135,15 @@ def run(args, log):
     t_red, b = _timed(first, "rkmk4", 0.05, repeats)
     diff = float(np.max(np.abs(_vertices(second, a.final, a.scene.model.rotations)
                                - _vertices(first, b.final, b.scene.model.rotations))))
-    rows.append(["first order (A-2) vs second order m = 1e-3 (etd2 / rkmk4)", f"{t_full * 1e3:.1f}",
-                 f"{t_red * 1e3:.1f}", f"{t_full / t_red:.1f}x", f"{diff:.1e}", "O(m/gamma) modelling error"])
-    report.table(["reduction", "full model ms", "reduced ms", "full / reduced", "max vertex difference at t_end",
-                  "expected difference"], rows,
-                 caption=f"N = {n} agents (first-order model unless stated), t_end = {t_end:g}, dt = 0.05, "
-                         f"best of {repeats}")
-    report.text("- Every reduction is applied by the scene loader on its own; `polymatch explain SCENE` says which.",
-                "- The full models are what the paper writes: d x d matrices, weights s_k/s_i, the F-2 potential, "
-                "centroids as ODEs, velocities in (A-1).")
+    rows.append(["first order (A-2) vs second order m = 1e-3 (etd2 / rkmk4)",
+                 f"{t_full * 1e3:.1f}", f"{t_red * 1e3:.1f}", f"{t_full / t_red:.1f}x",
+                 f"{diff:.1e}", "O(m/gamma) modelling error"])
+    report.table(["reduction", "full model ms", "reduced ms", "full / reduced",
+                  "max vertex difference at t_end", "expected difference"], rows,
+                 caption=f"N = {n} agents (first-order model unless stated), t_end = {t_end:g}, "
+                         f"dt = 0.05, best of {repeats}")
+    report.text("- Every reduction is applied by the scene loader on its own; "
+                "`polymatch explain SCENE` says which.",
+                "- The full models are what the paper writes: d x d matrices, weights s_k/s_i, "
+                "the F-2 potential, centroids as ODEs, velocities in (A-1).")
     return report

@@ -28,7 +28,8 @@ class Report:
 
     def __init__(self, family, title):
         self.family, self.title = family, title
-        self.blocks = []        # ("text", str) | ("table", caption, header, rows) | ("figure", name)
+        # ("text", str) | ("table", caption, header, rows) | ("figure", name)
+        self.blocks = []
         self.figures = {}       # name -> (draw(plt) -> figure, caption)
 
     def text(self, *lines):
@@ -60,7 +61,8 @@ class Report:
         return "\n".join(out).rstrip() + "\n"
 
     def write_figures(self, out_dir):
-        """Render every figure to ``out_dir``; returns the names written (none without matplotlib)."""
+        """Render every figure to ``out_dir``; return the names written (none without
+        matplotlib)."""
         if not self.figures:
             return []
         try:
@@ -74,7 +76,8 @@ class Report:
         written = []
         for name, (draw, _caption) in self.figures.items():
             fig = draw(plt)
-            fig.savefig(os.path.join(out_dir, self.figure_file(name)), dpi=120, bbox_inches="tight")
+            fig.savefig(os.path.join(out_dir, self.figure_file(name)),
+                        dpi=120, bbox_inches="tight")
             plt.close(fig)
             written.append(name)
         return written

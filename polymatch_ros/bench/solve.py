@@ -18,7 +18,8 @@ SCIPY_METHODS = ("RK45", "DOP853")
 
 @dataclass(frozen=True)
 class Solution:
-    """Arrays over the output times: centroids (T, N, d), mats (T, N, d, d), w (T, N, d, d) or None."""
+    """Arrays over the output times: centroids (T, N, d), mats (T, N, d, d),
+    w (T, N, d, d) or None."""
 
     times: np.ndarray
     centroids: np.ndarray
@@ -66,7 +67,8 @@ class Solver:
 
 
 def solvers_for(order, steps, tolerances, scipy=SCIPY_METHODS):
-    """Every registered integrator accepting the model at each step, ours adaptive and scipy at each tol."""
+    """Every registered integrator accepting the model at each step; ours adaptive and scipy's
+    at each tolerance."""
     from ..core import METHODS
 
     out = [

@@ -32,16 +32,20 @@ TARGET_SECONDS = 4e-3       # the issue's target: one rkmk4 step at N = 10,000, 
 
 def add_arguments(p):
     from .options import at_least, int_list
-    p.add_argument("--n", type=at_least(1), default=10_000, help="agents for the headline table (default 10000)")
-    p.add_argument("--dim", type=at_least(2), default=3, help="dimension for the headline table (default 3)")
+    p.add_argument("--n", type=at_least(1), default=10_000,
+                   help="agents for the headline table (default 10000)")
+    p.add_argument("--dim", type=at_least(2), default=3,
+                   help="dimension for the headline table (default 3)")
     p.add_argument("--sizes", type=int_list(1), default=[10, 100, 1000, 10_000, 100_000],
                    help="N values of the N x d table (default 10,100,1000,10000,100000)")
     p.add_argument("--dims", type=int_list(2), default=[2, 3, 4, 6, 10],
                    help="d values of the N x d table (default 2,3,4,6,10)")
-    p.add_argument("--grid-order", type=int, choices=(1, 2), default=1, help="model order of the N x d table")
+    p.add_argument("--grid-order", type=int, choices=(1, 2),
+                   default=1, help="model order of the N x d table")
     p.add_argument("--max-step-seconds", type=at_least(0.0, float), default=1.5,
                    help="skip N x d cells whose step is predicted to take longer (default 1.5)")
-    p.add_argument("--dt", type=at_least(1e-300, float), default=0.05, help="step size (does not change the cost)")
+    p.add_argument("--dt", type=at_least(1e-300, float), default=0.05,
+                   help="step size (does not change the cost)")
     p.add_argument("--ratio-dims", type=int_list(2), default=[3, 4, 10],
                    help="d values timed side by side at --n for the cost ratios between "
                         "dimensions (default 3,4,10)")
@@ -94,10 +98,20 @@ def headline(args, log, report):
                 meth = METHODS[name]
                 scene = _prepare(base, meth)
                 fn, setup = _stepper(meth, scene, args.dt)
-                configs.append({"order": order, "rep": representation_label(scene.model.rotations),
-                                "default": rep == "auto" and scene is base, "method": name, "stages": meth.info.stages,
-                                "fn": fn, "setup": setup})
-    log(f"step: N = {n}, d = {dim}: {len(configs)} configurations x {repeats} repeats, interleaved")
+                configs.append(
+                    {
+                        "order": order,
+                        "rep": representation_label(scene.model.rotations),
+                        "default": rep == "auto" and scene is base,
+                        "method": name,
+                        "stages": meth.info.stages,
+                        "fn": fn,
+                        "setup": setup,
+                    }
+                )
+    log(
+        f"step: N = {n}, d = {dim}: {len(configs)} configurations x {repeats} repeats, interleaved"
+    )
     timings = measure_interleaved([(c["fn"], c["setup"]) for c in configs], repeats)
     for c, t in zip(configs, timings):
         c["timing"] = t
@@ -105,48 +119,111 @@ def headline(args, log, report):
     rows = []
     for c in configs:
         t = c["timing"]
-        rows.append([{1: "1st (A-2)", 2: "2nd (A-1)"}[c["order"]],
-                     c["rep"] + (" *default*" if c["default"] else ""), c["method"], c["stages"],
-                     fmt_ms(t.best), fmt_ms(t.median), fmt_ms(t.worst), f"{t.best / c['stages'] * 1e3:.3f}"])
-    report.table(["model", "representation", "method", "evals/step", "best ms", "median ms", "max ms",
-                  "best ms/eval"], rows,
-                 caption=f"One step, N = {n:,}, d = {dim}, {repeats} interleaved repeats each")
+        rows.append(
+            [
+                {1: "1st (A-2)", 2: "2nd (A-1)"}[c["order"]],
+                c["rep"] + (" *default*" if c["default"] else ""),
+                c["method"],
+                c["stages"],
+                fmt_ms(t.best),
+                fmt_ms(t.median),
+                fmt_ms(t.worst),
+                f"{t.best / c['stages'] * 1e3:.3f}",
+            ]
+        )
+    report.table(
+        [
+            "model",
+            "representation",
+            "method",
+            "evals/step",
+            "best ms",
+            "median ms",
+            "max ms",
+            "best ms/eval",
+        ],
+        rows,
+        caption=f"One step, N = {n:,}, d = {dim}, {repeats} interleaved repeats each",
+    )
 
     chain = 3 if args.quick else 50
     runs = 1 if args.quick else 5
     at_target = n == 10_000 and dim == 3
     trows, lines = [], []
     for order in (1, 2):
-        main = next(c for c in configs if c["order"] == order and c["default"] and c["method"] == "rkmk4")
+        main = next(
+            c for c in configs if c["order"] == order and c["default"] and c["method"] == "rkmk4"
+        )
         t = main["timing"]
         log(f"step: rkmk4, order {order}: {runs} runs of {chain} consecutive steps")
         run_t = _consecutive(METHODS["rkmk4"], timing_scene(n, dim, order), args.dt, chain, runs)
-        row = [f"{'first' if order == 1 else 'second'} order, {main['rep']}", fmt_ms(t.best), fmt_ms(t.median),
-               f"{100 * t.spread:.0f}%", fmt_ms(run_t.best), fmt_ms(run_t.median)]
+        row = [
+            f"{'first' if order == 1 else 'second'} order, {main['rep']}",
+            fmt_ms(t.best),
+            fmt_ms(t.median),
+            f"{100 * t.spread:.0f}%",
+            fmt_ms(run_t.best),
+            fmt_ms(run_t.median),
+        ]
         if at_target:
-            row.append(", ".join(f"{name}: {'met' if v < TARGET_SECONDS else 'NOT met'}"
-                                 for name, v in (("best", t.best), ("median", t.median),
-                                                 (f"{chain}-step run", run_t.best))))
+            row.append(
+                ", ".join(
+                    f"{name}: {'met' if v < TARGET_SECONDS else 'NOT met'}"
+                    for name, v in (
+                        ("best", t.best),
+                        ("median", t.median),
+                        (f"{chain}-step run", run_t.best),
+                    )
+                )
+            )
         trows.append(row)
         for other in configs:
-            if dim == 3 and other["order"] == order and other["method"] == "rkmk4" and not other["default"]:
-                lines.append(f"- {'first' if order == 1 else 'second'} order: rkmk4 in {other['rep']} takes "
-                             f"{other['timing'].best / t.best:.2f}x the default's time (best vs best)")
-    header = ["rkmk4", "one step: best ms", "median ms", "spread (max/best - 1)",
-              f"ms/step in a {chain}-step run (best of {runs})", "median"]
+            if (
+                dim == 3
+                and other["order"] == order
+                and other["method"] == "rkmk4"
+                and not other["default"]
+            ):
+                lines.append(
+                    f"- {'first' if order == 1 else 'second'} order: rkmk4 in {other['rep']} "
+                    "takes "
+                    f"{other['timing'].best / t.best:.2f}x the default's time (best vs "
+                    "best)"
+                )
+    header = [
+        "rkmk4",
+        "one step: best ms",
+        "median ms",
+        "spread (max/best - 1)",
+        f"ms/step in a {chain}-step run (best of {runs})",
+        "median",
+    ]
     if at_target:
         header.append(f"target < {TARGET_SECONDS * 1e3:g} ms")
-    report.table(header, trows, caption=f"rkmk4 at N = {n:,}, d = {dim}"
-                 + ("" if at_target else " (the < 4 ms target is stated for N = 10,000, d = 3)"))
+    report.table(
+        header,
+        trows,
+        caption=f"rkmk4 at N = {n:,}, d = {dim}"
+        + ("" if at_target else " (the < 4 ms target is stated for N = 10,000, d = 3)"),
+    )
     if dim == 3:
-        lines.append("- rk4_proj never calls the retraction, so its so3 and so3-exp rows run the same code: "
-                     "their difference shows the measurement noise.")
+        lines.append(
+            "- rk4_proj never calls the retraction, so its so3 and so3-exp rows run the same "
+            "code: "
+            "their difference shows the measurement noise."
+        )
     elif dim == 2:
-        lines.append("- rk4_proj needs matrices: in 2-D it always runs on the 2x2 matrix representation.")
-    lines.append("- \"One step\" rows are interleaved with the other configurations, whose arrays evict this "
-                 "one's from the CPU caches between repeats: a cold-cache step. The consecutive-step column "
-                 "and the N x d grid below (one configuration at a time) time the warm step of a running "
-                 "simulation.")
+        lines.append(
+            "- rk4_proj needs matrices: in 2-D it always runs on the 2x2 matrix representation."
+        )
+    lines.append(
+        '- "One step" rows are interleaved with the other configurations, whose arrays evict this '
+        "one's from the CPU caches between repeats: a cold-cache step. The "
+        "consecutive-step column "
+        "and the N x d grid below (one configuration at a time) time the warm step of a "
+        "running "
+        "simulation."
+    )
     report.text(*lines)
     return configs, n, dim
 
@@ -212,31 +289,45 @@ def grid(args, log, report):
             scene = timing_scene(n, dim, args.grid_order)
             label = representation_label(scene.model.rotations)
             fn, setup = _stepper(meth, scene, args.dt)
-            repeats = max_repeats if predicted is None else max(3, min(max_repeats, int(cell_budget / predicted)))
+            repeats = (
+                max_repeats
+                if predicted is None
+                else max(3, min(max_repeats, int(cell_budget / predicted)))
+            )
             log(f"step grid: N = {n}, d = {dim}, {repeats} repeats")
             t = measure(fn, repeats, setup)
             results[(n, dim)] = t
             row[j] = f"{fmt_ms(t.best)} / {fmt_ms(t.median)}"
             prev = (n, t.median)
         rows.append([f"{dim}: {label}"] + row)
-    report.table(["d: representation"] + [f"N = {n:,}" for n in sizes], rows,
-                 caption=f"rkmk4, one step, {'first' if args.grid_order == 1 else 'second'}-order model: "
-                         "best / median ms (up to %d repeats, fewer for slow cells)" % max_repeats)
-    notes = [f"Cells predicted (linear in N from the previous N) to take longer than "
-             f"{args.max_step_seconds:g} s per step are skipped (`--max-step-seconds`)."]
+    report.table(
+        ["d: representation"] + [f"N = {n:,}" for n in sizes],
+        rows,
+        caption=f"rkmk4, one step, {'first' if args.grid_order == 1 else 'second'}-order model: "
+        "best / median ms (up to %d repeats, fewer for slow cells)" % max_repeats,
+    )
+    notes = [
+        f"Cells predicted (linear in N from the previous N) to take longer than "
+        f"{args.max_step_seconds:g} s per step are skipped (`--max-step-seconds`)."
+    ]
     if skipped:
-        notes.append("Skipped: " + ", ".join(f"N = {n:,}, d = {d} (~{fmt_time(p)}/step)" for n, d, p in skipped)
-                     + ".")
-    notes.append("The cost is O(N d^3) per evaluation: d = 2 uses angles (SO(2) is abelian), "
-                 "d = 3 the structure-of-arrays Cayley map, d >= 4 N x d x d matrices with the "
-                 "Cayley map in closed form (d = 4) or by batched matrix products (d >= 5), no "
-                 "per-matrix solves.")
+        notes.append(
+            "Skipped: "
+            + ", ".join(f"N = {n:,}, d = {d} (~{fmt_time(p)}/step)" for n, d, p in skipped)
+            + "."
+        )
+    notes.append(
+        "The cost is O(N d^3) per evaluation: d = 2 uses angles (SO(2) is abelian), d = 3 the "
+        "structure-of-arrays Cayley map, d >= 4 N x d x d matrices with the Cayley map in "
+        "closed form (d = 4) or by batched matrix products (d >= 5), no per-matrix solves."
+    )
     report.text(*notes)
     return results, sizes, dims
 
 
 def run(args, log):
     from .report import Report
+
     report = Report(NAME, "One integrator step (`polymatch bench step`)")
     configs, n, dim = headline(args, log, report)
     dimension_ratios(args, log, report)
@@ -244,22 +335,33 @@ def run(args, log):
 
     def draw_bars(plt):
         import numpy as np
+
         fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
         methods = list(dict.fromkeys(c["method"] for c in configs))
         reps = list(dict.fromkeys(c["rep"] for c in configs))
         width = 0.8 / len(reps)
         for ax, order in zip(axes, (1, 2)):
             for k, rep in enumerate(reps):
-                cs = [next(c for c in configs if c["order"] == order and c["rep"] == rep and c["method"] == m)
-                      for m in methods]
+                cs = [
+                    next(
+                        c
+                        for c in configs
+                        if c["order"] == order and c["rep"] == rep and c["method"] == m
+                    )
+                    for m in methods
+                ]
                 x = np.arange(len(methods)) + (k - (len(reps) - 1) / 2) * width
                 ax.bar(x, [c["timing"].best * 1e3 for c in cs], width, label=rep)
                 ax.plot(x, [c["timing"].median * 1e3 for c in cs], "k_", ms=10)
             if n == 10_000 and dim == 3:
-                ax.axhline(TARGET_SECONDS * 1e3, color="r", ls="--", lw=1, label="target 4 ms (rkmk4)")
+                ax.axhline(
+                    TARGET_SECONDS * 1e3, color="r", ls="--", lw=1, label="target 4 ms (rkmk4)"
+                )
             ax.set_xticks(range(len(methods)), methods)
             ax.set_yscale("log")
-            ax.set_title(f"{'first' if order == 1 else 'second'}-order model, N = {n:,}, d = {dim}")
+            ax.set_title(
+                f"{'first' if order == 1 else 'second'}-order model, N = {n:,}, d = {dim}"
+            )
         axes[0].set_ylabel("ms per step (bar: best, tick: median)")
         axes[1].legend(fontsize=8)
         return fig
@@ -272,7 +374,13 @@ def run(args, log):
                 ax.loglog(ns, [results[(n_, d)].best * 1e3 for n_ in ns], "o-", label=f"d = {d}")
         if results:
             (n0, _d0), t0 = min(results.items())
-            ax.loglog(sizes, [t0.best * 1e3 * s_ / n0 for s_ in sizes], "k:", lw=1, label="slope 1 (O(N))")
+            ax.loglog(
+                sizes,
+                [t0.best * 1e3 * s_ / n0 for s_ in sizes],
+                "k:",
+                lw=1,
+                label="slope 1 (O(N))",
+            )
         ax.axhline(TARGET_SECONDS * 1e3, color="r", ls="--", lw=1, label="4 ms")
         ax.set_xlabel("N (agents)")
         ax.set_ylabel("ms per rkmk4 step (best)")

@@ -106,14 +106,16 @@ def machine_lines():
     except OSError:
         pass
     try:
-        load = "load average %.2f %.2f %.2f" % os.getloadavg()
+        load = "load average {:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
     except OSError:
         load = "load average unknown"
     blas = _blas_name()
-    threads = {k: os.environ[k] for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+    threads = {k: os.environ[k]
+               for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
                if k in os.environ}
     return [f"machine: {cpu}, {os.cpu_count()} logical cores, {load} at start",
-            f"python {platform.python_version()}, numpy {np.__version__} ({blas}), scipy {scipy.__version__}"
+            f"python {platform.python_version()}, numpy {np.__version__} ({blas}), "
+            f"scipy {scipy.__version__}"
             + (f", {threads}" if threads else ""),
             f"date: {time.strftime('%Y-%m-%d %H:%M:%S %Z')}"]
 

@@ -13,14 +13,16 @@ rates and injected transport delays.
 """
 
 import os
-import re
 import subprocess
 import sys
 import tempfile
 
 NAME = "trade"
-HELP = "speed vs accuracy over ROS: lockstep error and wall per simulated second per integrator; realtime " \
-       "error vs rate and delay"
+HELP = (
+    "speed vs accuracy over ROS: lockstep error and wall per simulated second per integrator; "
+    "realtime "
+    "error vs rate and delay"
+)
 ORDER = 65
 
 SCENE_YAML = """\
@@ -32,24 +34,32 @@ model: {order: 1, kappa: 1.0, gamma: 1.0}
 integrator: {method: rkmk4, dt: 0.05}
 time: {t_end: 4.0}
 groups:
-  - {name: triangles, shape: triangle, count: 8, centroids: {box: [-6.0, 6.0]}, rotations: {within: 0.3}}
+  - {name: triangles, shape: triangle, count: 8, centroids: {box: [-6.0, 6.0]}, rotations: {within:
+  0.3}}
 """
 ROUNDS = 400
 
 
 def add_arguments(p):
-    p.add_argument("--t-end", type=float, default=4.0, help="simulated seconds per run (default 4)")
+    p.add_argument(
+        "--t-end", type=float, default=4.0, help="simulated seconds per run (default 4)"
+    )
 
 
 def _cli(env, argv, timeout):
-    return subprocess.run(["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli"] + argv,
-                          env=env, capture_output=True, text=True)
+    return subprocess.run(
+        ["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli"] + argv,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
 
 
 def _vertex_error_over_run(scene, method, dt, ref):
     import numpy as np
 
     from ..core.simulate import simulate
+
     traj = simulate(scene, method, dt, samples=ref["times"], metrics=False)
     worst = 0.0
     for st, t in zip(traj.states, traj.times):
@@ -62,6 +72,7 @@ def _vertex_error_over_run(scene, method, dt, ref):
 
 def _verts(scene, state):
     from ..core.metrics import vertices
+
     g, gs = scene.model.groups[0], state.groups[0]
     return vertices(gs.x, scene.model.rotations.to_matrices(gs.rot), g.reference)
 
@@ -70,8 +81,19 @@ def _reference(scene, times):
     import numpy as np
 
     from ..core.simulate import simulate
+
     traj = simulate(scene, "adaptive", tolerance=1e-12, samples=np.asarray(times), metrics=False)
     return {"times": np.array(traj.times), "verts": [_verts(scene, st) for st in traj.states]}
+
+
+def _agent_records(path):
+    """The agents' run records a `polymatch run --records` wrote (none if the run failed early)."""
+    from ..ros.wire import run_records
+
+    if not os.path.exists(path):
+        return []
+    with open(path, encoding="utf-8") as fh:
+        return [r for r in run_records(fh) if r.role == "agent"]
 
 
 def run(args, log):
@@ -86,8 +108,11 @@ def run(args, log):
 
     report = Report(NAME, "Speed against accuracy over the ROS node set (`polymatch bench trade`)")
     t_end = 0.5 if args.quick else args.t_end
-    methods = [("rkmk4", 0.1)] if args.quick else [(m, h) for m in ("lie_euler", "lie_heun", "rkmk4")
-                                                   for h in (0.1, 0.05, 0.025)]
+    methods = (
+        [("rkmk4", 0.1)]
+        if args.quick
+        else [(m, h) for m in ("lie_euler", "lie_heun", "rkmk4") for h in (0.1, 0.05, 0.025)]
+    )
     rows = []
     with tempfile.TemporaryDirectory() as tmp, domain_id() as dom:
         path = os.path.join(tmp, "trade_triangles.yaml")
@@ -95,60 +120,172 @@ def run(args, log):
             fh.write(SCENE_YAML)
         scene = replace(load_scene(path), t_end=t_end)
         ref = _reference(scene, np.linspace(0.0, t_end, 41))
-        env = ros_environment(dom, base={k: v for k, v in os.environ.items()
-                                         if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
+        env = ros_environment(
+            dom,
+            base={
+                k: v
+                for k, v in os.environ.items()
+                if k not in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+            },
+        )
         from ..core.integrators import METHODS
+
         for method, dt in methods:
             per_step = METHODS[method].info.rounds
-            t_run = (40 if args.quick else ROUNDS) * dt / per_step      # enough rounds for a steady rate
+            t_run = (
+                (40 if args.quick else ROUNDS) * dt / per_step
+            )  # enough rounds for a steady rate
             log(f"lockstep {method} dt = {dt}: {t_run:g} simulated s")
-            out = _cli(env, ["run", path, "--integrator", method, "--dt", str(dt), "--t-end", str(t_run),
-                             "--hold", "1e9", "--no-monitor", "--no-compare", "-q", "-v", "--timeout", "300"], 340)
-            rates = [float(x) for x in re.findall(r"\(\d+ rounds, ([0-9.]+) rounds/s", out.stdout)]
+            records = os.path.join(tmp, f"lockstep_{method}_{dt}.jsonl")
+            _cli(
+                env,
+                [
+                    "run",
+                    path,
+                    "--integrator",
+                    method,
+                    "--dt",
+                    str(dt),
+                    "--t-end",
+                    str(t_run),
+                    "--hold",
+                    "1e9",
+                    "--no-monitor",
+                    "--no-compare",
+                    "-q",
+                    "--records",
+                    records,
+                    "--timeout",
+                    "300",
+                ],
+                340,
+            )
+            rates = [r.rounds_per_second for r in _agent_records(records)]
             rps = float(np.mean(rates)) if rates else float("nan")
             wall_per_s = per_step / (dt * rps) if rates else float("nan")
             err = _vertex_error_over_run(scene, method, dt, ref)
             rows.append([method, dt, per_step, f"{rps:.1f}", f"{wall_per_s:.2f}", f"{err:.1e}"])
-        report.table(["integrator", "dt", "rounds/step", "rounds/s (mean of 8 agents)",
-                      "wall s per simulated s", f"max vertex error over t in [0, {t_end:g}]"], rows,
-                     caption=f"Lockstep, 8 congruent triangles (D0 < 1), one agent per process, no monitor; rates "
-                             f"over {ROUNDS} rounds; error against adaptive at tol 1e-12 on 41 sample times")
+        report.table(
+            [
+                "integrator",
+                "dt",
+                "rounds/step",
+                "rounds/s (mean of 8 agents)",
+                "wall s per simulated s",
+                f"max vertex error over t in [0, {t_end:g}]",
+            ],
+            rows,
+            caption="Lockstep, 8 congruent triangles (D0 < 1), one agent per process, no monitor; "
+            f"rates "
+            f"over {ROUNDS} rounds; error against adaptive at tol 1e-12 on 41 "
+            "sample times",
+        )
         rt_rows = []
-        cases = [(50.0, 0.0)] if args.quick else [(10.0, 0.0), (25.0, 0.0), (50.0, 0.0), (100.0, 0.0),
-                                                   (50.0, 0.05), (50.0, 0.1), (50.0, 0.2)]
+        cases = (
+            [(50.0, 0.0)]
+            if args.quick
+            else [
+                (10.0, 0.0),
+                (25.0, 0.0),
+                (50.0, 0.0),
+                (100.0, 0.0),
+                (50.0, 0.05),
+                (50.0, 0.1),
+                (50.0, 0.2),
+            ]
+        )
         scale = 4.0
         for rate, delay in cases:
             log(f"realtime rate {rate:g} Hz, delay {delay:g} s")
             npz = os.path.join(tmp, f"rt_{rate}_{delay}.npz")
-            out = _cli(env, ["run", path, "--mode", "realtime", "--rate", str(rate), "--time-scale", str(scale),
-                             "--delay", str(delay), "--t-end", str(t_end), "--hold", "1e9", "--no-monitor",
-                             "-q", "-v", "--save", npz, "--timeout", "200"], 240)
-            ticks = [(int(a), int(b)) for a, b in re.findall(r"after (\d+) realtime steps, (\d+) started more",
-                                                             out.stdout)]
-            late = f"{sum(b for _, b in ticks) / max(1, sum(a for a, _ in ticks)):.0%}" if ticks else "-"
+            records = os.path.join(tmp, f"rt_{rate}_{delay}.jsonl")
+            out = _cli(
+                env,
+                [
+                    "run",
+                    path,
+                    "--mode",
+                    "realtime",
+                    "--rate",
+                    str(rate),
+                    "--time-scale",
+                    str(scale),
+                    "--delay",
+                    str(delay),
+                    "--t-end",
+                    str(t_end),
+                    "--hold",
+                    "1e9",
+                    "--no-monitor",
+                    "-q",
+                    "--records",
+                    records,
+                    "--save",
+                    npz,
+                    "--timeout",
+                    "200",
+                ],
+                240,
+            )
+            ticks = [(r.steps, r.late_ticks) for r in _agent_records(records)]
+            late = (
+                f"{sum(b for _, b in ticks) / max(1, sum(a for a, _ in ticks)):.0%}"
+                if ticks
+                else "-"
+            )
             if not os.path.exists(npz):
-                rt_rows.append([rate, scale / rate, delay, "-", "-", "run failed: " + out.stderr.strip()[-80:]])
+                rt_rows.append(
+                    [
+                        rate,
+                        scale / rate,
+                        delay,
+                        "-",
+                        "-",
+                        "run failed: " + out.stderr.strip()[-80:],
+                    ]
+                )
                 continue
             data = np.load(npz)
             times = data["group0_times"]
             agent_ref = _reference(scene, np.unique(np.append(times, 0.0)))
             err = 0.0
             g = scene.model.groups[0]
-            got = data["group0_centroids"][:, None, :] + np.einsum("nij,aj->nai", data["group0_rotations"],
-                                                                     g.reference)
+            got = data["group0_centroids"][:, None, :] + np.einsum(
+                "nij,aj->nai", data["group0_rotations"], g.reference
+            )
             for i, t in enumerate(times):
                 k = int(np.argmin(np.abs(agent_ref["times"] - t)))
                 want = agent_ref["verts"][k][i] + scene.origin
                 err = max(err, float(np.max(np.abs(got[i] - want))))
-            rt_rows.append([rate, f"{scale / rate:g}", delay, f"{delay * scale:g}", late, f"{err:.1e}"])
-        report.table(["rate (Hz)", "dt (simulated s)", "injected delay (wall s)", "delay (simulated s)",
-                      "ticks started late", "max vertex error at the agents' final stamps"], rt_rows,
-                     caption=f"Realtime, 8 congruent triangles (D0 < 1), time scale {scale:g}, rkmk4 per tick, "
-                             f"t_end {t_end:g}; each agent's final pose against the reference at its own stamp")
-    report.text("- Lockstep equals the centralised trajectory to round-off, so its error is the method's; its "
-                "cost is rounds: a 4-stage method pays 4 rounds per step.",
-                "- Realtime errors combine the step, the stale peer poses (one tick or more) and the delay. A peer's "
-                "pose is a tick old, so the error is first order in the tick (dt) however accurate the per-tick "
-                "method, until the processes cannot keep the rate: 'ticks started late' counts ticks that began "
-                "more than one period behind schedule (a late agent then steps in a burst on stale poses).")
+            rt_rows.append(
+                [rate, f"{scale / rate:g}", delay, f"{delay * scale:g}", late, f"{err:.1e}"]
+            )
+        report.table(
+            [
+                "rate (Hz)",
+                "dt (simulated s)",
+                "injected delay (wall s)",
+                "delay (simulated s)",
+                "ticks started late",
+                "max vertex error at the agents' final stamps",
+            ],
+            rt_rows,
+            caption=f"Realtime, 8 congruent triangles (D0 < 1), time scale {scale:g}, "
+            "rkmk4 per tick, "
+            f"t_end {t_end:g}; each agent's final pose against the reference at "
+            "its own stamp",
+        )
+    report.text(
+        "- Lockstep equals the centralised trajectory to round-off, so its error is the method's; "
+        "its "
+        "cost is rounds: a 4-stage method pays 4 rounds per step.",
+        "- Realtime errors combine the step, the stale peer poses (one tick or more) and "
+        "the delay. A peer's "
+        "pose is a tick old, so the error is first order in the tick (dt) however "
+        "accurate the per-tick "
+        "method, until the processes cannot keep the rate: 'ticks started late' counts "
+        "ticks that began "
+        "more than one period behind schedule (a late agent then steps in a burst on "
+        "stale poses).",
+    )
     return report

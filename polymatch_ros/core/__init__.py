@@ -11,8 +11,14 @@ The ROS agents, the monitor and the benchmarks use exactly these pieces:
 """
 
 from .decompose import decompose
-from .errors import (ParameterError, PolymatchError, SceneError, ShapeError, StabilityError,
-                     StepLimitError)
+from .errors import (
+    ParameterError,
+    PolymatchError,
+    SceneError,
+    ShapeError,
+    StabilityError,
+    StepLimitError,
+)
 from .integrators import METHODS, check_stability, get_method, max_stable_dt
 from .metrics import EnsembleMetrics, GroupMetrics, ensemble_metrics, point_set_diameter
 from .model import Coupling, GroupState, Model, State, System, lohe_torque

@@ -28,6 +28,7 @@ import numpy as np
 from scipy.integrate import DOP853
 
 from .adaptive_chart import Chart
+from .centroids import CentroidFlow
 from .errors import PolymatchError, StepLimitError
 from .model import GroupState, Model, State, System
 from .solver import FINISHED, RUNNING, MethodInfo, exact_centroids, with_centroids
@@ -222,7 +223,7 @@ class AdaptiveSolver:
         for all the step's sample times at once, in the same order of operations as scipy's.
         """
         chart, y, K = self.chart, self.state, self.K
-        for s, (a, c) in enumerate(self.method.dense_extra, start=N_STAGES + 1):
+        for s, (a, _c) in enumerate(self.method.dense_extra, start=N_STAGES + 1):
             K[s] = self._fun(chart, (K[:s].T @ a[:s]) * h)[0]
         F = np.empty((DOP853.D.shape[0] + 3, chart.n))
         F[0] = theta
@@ -246,8 +247,9 @@ class AdaptiveSolver:
         gi, _, shape, _ = chart.parts[0]           # one group, rotations only: no chart states
         gs, grp, groups = y.groups[gi], system.group, list(y.groups)
         dts = [t - y.t for t in times]
-        cents = self._first_order_centroids(gi, gs, dts) if system.model.order == 1 else \
-            [system.exact_centroids(gi, gs, self.coupling, dt) for dt in dts]
+        all_to_all = isinstance(system.flows[gi], CentroidFlow)
+        cents = self._first_order_centroids(gi, gs, dts) if system.model.order == 1 and \
+            all_to_all else [system.exact_centroids(gi, gs, self.coupling, dt) for dt in dts]
         rots = grp.retract_each(vals.reshape((len(vals),) + shape), gs.rot)
         out = []
         for t, rot, (x, v) in zip(times, rots, cents):
@@ -256,7 +258,9 @@ class AdaptiveSolver:
         return out
 
     def _first_order_centroids(self, gi, gs, dts):
-        """``CentroidFlow.advance`` of (A-2)'s centroids for every dt at once (Prop. 2.1, m = 0).
+        """``CentroidFlow.advance`` of (A-2)'s all-to-all centroids for every dt at once.
+
+        Proposition 2.1 with m = 0 (graph flows go mode by mode, ``GraphCentroidFlow``).
 
         x(dt) = mean + p(dt) (x - mean) with the flow's own propagator p(dt).
         """

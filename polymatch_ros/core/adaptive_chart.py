@@ -95,6 +95,6 @@ class Chart:
         if self.single_part:                          # one group, rotations only: no copy needed
             return rates[self.parts[0][0]][0].reshape(-1)
         out = np.empty(self.n)
-        for gi, kind, shape, sl in self.parts:
+        for gi, kind, _shape, sl in self.parts:
             out[sl] = rates[gi][self._INDEX[kind]].reshape(-1)
         return out

@@ -76,6 +76,31 @@ def _rotation_from_reference_svd(q, ref_u, ref_s, ref_vt, rank):
     return _complete(np.array(images).T, ref_vt[:len(images)].T)
 
 
+def _checked_vertex_sets(vertex_sets, n, d, label, offset):
+    """Each polytope's vertices as a finite (n, d) array with distinct vertices, or ShapeError."""
+    sets = []
+    for i, raw in enumerate(vertex_sets):
+        name = f"{label} {i + offset}"
+        try:
+            v = np.array(raw, dtype=float)
+        except (TypeError, ValueError):
+            raise ShapeError(f"{name}: vertices are not a list of coordinate lists") from None
+        if v.ndim != 2:
+            raise ShapeError(f"{name}: vertices are not a list of coordinate lists")
+        if v.shape[1] != d:
+            raise ShapeError(f"{name}: vertices have {v.shape[1]} coordinates, "
+                             f"the scene has dimension {d}")
+        if v.shape[0] != n:
+            raise ShapeError(f"{name} has {v.shape[0]} vertices, the reference has {n}")
+        bad = np.argwhere(~np.isfinite(v))
+        if bad.size:
+            raise ShapeError(f"{name}: vertex {bad[0][0]} has a non-finite coordinate "
+                             f"({v[tuple(bad[0])]})")
+        check_distinct_vertices(v, name, ShapeError)
+        sets.append(v)
+    return sets
+
+
 def decompose(vertex_sets, reference, *, similar=False, tol=1e-9, label="polytope", offset=0):
     """Centroids (N, d), rotations (N, d, d) and scales (N,) of congruent or similar vertex sets.
 
@@ -98,24 +123,7 @@ def decompose(vertex_sets, reference, *, similar=False, tol=1e-9, label="polytop
     n, d = ref.shape
     size = float(np.max(np.linalg.norm(ref, axis=1)))
     rank = int(np.linalg.matrix_rank(ref, tol=1e-9 * size))
-    sets = []
-    for i, raw in enumerate(vertex_sets):
-        name = f"{label} {i + offset}"
-        try:
-            v = np.array(raw, dtype=float)
-        except (TypeError, ValueError):
-            raise ShapeError(f"{name}: vertices are not a list of coordinate lists") from None
-        if v.ndim != 2:
-            raise ShapeError(f"{name}: vertices are not a list of coordinate lists")
-        if v.shape[1] != d:
-            raise ShapeError(f"{name}: vertices have {v.shape[1]} coordinates, the scene has dimension {d}")
-        if v.shape[0] != n:
-            raise ShapeError(f"{name} has {v.shape[0]} vertices, the reference has {n}")
-        bad = np.argwhere(~np.isfinite(v))
-        if bad.size:
-            raise ShapeError(f"{name}: vertex {bad[0][0]} has a non-finite coordinate ({v[tuple(bad[0])]})")
-        check_distinct_vertices(v, name, ShapeError)
-        sets.append(v)
+    sets = _checked_vertex_sets(vertex_sets, n, d, label, offset)
     if not sets:
         return np.zeros((0, d)), np.zeros((0, d, d)), np.zeros(0)
     if rank <= d - 2 and d >= 2:
@@ -156,8 +164,9 @@ def _explain_mismatch(name, q, ref, m, similar, mismatch, allowed, rank):
             s = float(np.sum(o * m)) / float(np.sum(ref * ref)) if similar else 1.0
             mirror = float(np.max(np.linalg.norm(q - s * ref @ o.T, axis=1)))
             if mirror <= allowed:
-                raise ShapeError(f"{name} is a mirror image of the reference (its best fit has det -1); "
-                                 f"as a rotation the vertex mismatch is {mismatch:.3g} > {allowed:.3g}")
+                raise ShapeError(f"{name} is a mirror image of the reference (its best fit has "
+                                 f"det -1); as a rotation the vertex mismatch is {mismatch:.3g} > "
+                                 f"{allowed:.3g}")
     kind = "similar" if similar else "congruent"
     raise ShapeError(f"{name} is not {kind} to the reference: max vertex mismatch {mismatch:.3g} "
                      f"exceeds the tolerance {allowed:.3g}")

@@ -5,25 +5,30 @@ The paper couples every pair of a group (the complete graph, kappa/N sum_k in (A
 with which agent i hears agent k (row i is the receiver):
 
     centroids  kappa/N_g sum_k a_ik (xbar_k - xbar_i)
-    rotations  kappa/(2 N_g) sum_k a_ik (O_k O_i^T - O_i O_k^T) = kappa/(2 N_g) (S_i O_i^T - O_i S_i^T),
+    rotations  kappa/(2 N_g) sum_k a_ik (O_k O_i^T - O_i O_k^T)
+             = kappa/(2 N_g) (S_i O_i^T - O_i S_i^T),
                S_i = sum_k a_ik O_k
 
 so one sparse product ``A @ O`` gives every agent's weighted field in O(|E| d^2).  With
 a_ik = 1 for all k != i this is the paper's model exactly (S_i = S - O_i and the O_i O_i^T
 terms cancel), which is why the complete graph keeps the mean field and carries no matrix.
 
-Graph specifications (a scene's ``graph`` key):
+Graph specifications (a scene's ``graph`` key, overridable per group as ``groups[i].graph``):
 ``complete`` | ``{ring: k}`` (k neighbours on each side) | ``{k_nearest: k}`` (undirected
 union of each agent's k nearest by initial centroid distance) | ``{random: {p: P, seed: S}}``
-(Erdos-Renyi) | ``{edges: [[i, k], ...], weights: [...], directed: false}``.
+(Erdos-Renyi) | ``{edges: [[i, k], ...], weights: [...], directed: false}``.  Any mapping may
+add ``normalise: degree`` (kappa/deg_i instead of kappa/N_g; default ``size``) and
+``allow_disconnected: true`` (accept a graph ``check_connected`` refuses; the metrics then
+report each component's diameter).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
-from scipy import sparse
+from scipy import linalg, sparse
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
@@ -31,9 +36,21 @@ from .checks import Map, number
 from .errors import SceneError
 
 KINDS = ("complete", "ring", "k_nearest", "random", "edges")
+NORMALISATIONS = ("size", "degree")
+#: above this many agents the coupling rate is Gershgorin's bound, not the exact spectrum
+DENSE_SPECTRUM_LIMIT = 1000
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
+class LocalWeights:
+    """A graph's weights for some rows: p (centroid sums), p diag(s) (F-1 field), row sums."""
+
+    p: sparse.csr_matrix
+    rot: sparse.csr_matrix
+    row_sums: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class Graph:
     """A group's coupling graph; ``weights`` is None for the complete graph (the mean field)."""
 
@@ -41,13 +58,15 @@ class Graph:
     size: int
     weights: sparse.csr_matrix | None = None
     directed: bool = False
+    normalise: str = "size"            # "degree": kappa/deg_i instead of kappa/N_g
+    allow_disconnected: bool = False
 
     @property
     def complete(self) -> bool:
         return self.weights is None
 
     def matrix(self) -> sparse.csr_matrix:
-        """The weights a_ik as a sparse matrix (the complete graph's too: ones off the diagonal)."""
+        """The weights a_ik as a sparse matrix (the complete graph's: ones off the diagonal)."""
         if self.weights is not None:
             return self.weights
         full = np.ones((self.size, self.size)) - np.eye(self.size)
@@ -76,14 +95,114 @@ class Graph:
         return np.asarray(self.weights.sum(axis=1)).ravel()
 
 
+    @property
+    def edge_count(self) -> int:
+        """|E|: nonzero weights a_ik (an undirected edge counts twice, once per direction)."""
+        return self.size * (self.size - 1) if self.weights is None else int(self.weights.nnz)
+
+    def describe(self) -> str:
+        """One phrase for ``polymatch explain``: the graph and its cost per evaluation."""
+        if self.complete:
+            return "complete (mean field S = sum_k O_k: O(N d^3) per evaluation, no matrix)"
+        kind = ("directed " if self.directed else "") + self.kind
+        norm = "kappa/deg_i" if self.normalise == "degree" else "kappa/N_g"
+        return (f"{kind}, |E| = {self.edge_count} weights, mean degree "
+                f"{self.edge_count / max(self.size, 1):.3g}, {norm} "
+                f"(one sparse product A @ O: O(|E| d^2 + N d^3) per evaluation)")
+
+    @cached_property
+    def coupling_weights(self) -> sparse.csr_matrix:
+        """p_ik such that every coupling sum is kappa/N_g sum_k p_ik (...) (A-1, A-2 on a graph).
+
+        p = a (normalise: size) or p_ik = a_ik N_g / deg_i (normalise: degree; rows of
+        agents without in-neighbours stay zero).
+        """
+        a = self.matrix()
+        if self.normalise != "degree":
+            return a
+        deg = self.degrees()
+        scale = np.divide(self.size, deg, out=np.zeros_like(deg), where=deg > 0)
+        return sparse.csr_matrix(sparse.diags(scale) @ a)
+
+    @cached_property
+    def components(self) -> np.ndarray:
+        """Component label of every agent (weakly connected components for directed graphs)."""
+        if self.complete:
+            return np.zeros(self.size, dtype=int)
+        _, labels = csgraph.connected_components(self.weights, directed=True, connection="weak")
+        return labels
+
+    def laplacian(self, scales: np.ndarray | None = None) -> sparse.csr_matrix:
+        """L = (diag(r) - M) / N_g with M = diag(1/s) P diag(s) (F-1 weights; s = 1 if None).
+
+        The centroids obey x' = -(kappa/gamma) L x (first order, scales ignored) and the
+        rotations linearise at consensus to xi' = -(kappa/gamma) L xi.
+        """
+        p = self.coupling_weights
+        if scales is not None:
+            p = sparse.diags(1.0 / scales) @ p @ sparse.diags(scales)
+        rows = np.asarray(p.sum(axis=1)).ravel()
+        return sparse.csr_matrix((sparse.diags(rows) - p) / self.size)
+
+    def coupling_rate(self, scales: np.ndarray | None = None) -> float:
+        """max |lambda| of ``laplacian(scales)``: the graph's stiffness factor (1 for complete).
+
+        Exact up to ``DENSE_SPECTRUM_LIMIT`` agents, Gershgorin's bound 2 max_i L_ii beyond.
+        """
+        key = None if scales is None else np.asarray(scales, dtype=float).tobytes()
+        cache = self.__dict__.setdefault("_rates", {})       # frozen: cached like a property
+        if key not in cache:
+            lap = self.laplacian(scales)
+            if self.size <= DENSE_SPECTRUM_LIMIT:
+                rate = np.max(np.abs(np.linalg.eigvals(lap.toarray())), initial=0.0)
+            else:
+                rate = 2.0 * lap.diagonal().max(initial=0.0)
+            cache[key] = float(rate)
+        return cache[key]
+
+    def local_weights(self, rows=None, scales: np.ndarray | None = None) -> LocalWeights:
+        """The coupling weights of some rows (None: all), for sums against the whole group."""
+        p = self.coupling_weights
+        if rows is not None:
+            p = p[np.asarray(rows, dtype=int)]
+        rot = p if scales is None else sparse.csr_matrix(p @ sparse.diags(scales))
+        return LocalWeights(p, rot, np.asarray(p.sum(axis=1)).ravel())
+
+    def symmetric_pair(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K, b) with K symmetric, b > 0 and L = diag(b)^{-1} K (undirected graphs only).
+
+        ``scipy.linalg.eigh(K, diag(b))`` then diagonalises L: Prop 2.1's exact flow.
+        """
+        a = self.matrix().toarray()
+        lap_a = np.diag(a.sum(axis=1)) - a
+        if self.normalise != "degree":
+            return lap_a / self.size, np.ones(self.size)
+        deg = self.degrees()
+        return lap_a, np.where(deg > 0, deg, 1.0)
+
+    @cached_property
+    def laplacian_modes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(lambda, V, V^T diag(b)): L = V diag(lambda) V^T diag(b) for an undirected graph.
+
+        ``scipy.linalg.eigh`` of the symmetric pair (K, diag(b)); eigenvalues below round-off
+        (one per component) are exactly 0.  O(N^3) once, cached with the graph.
+        """
+        k, b = self.symmetric_pair()
+        lam, vec = linalg.eigh(k) if self.normalise != "degree" else linalg.eigh(k, np.diag(b))
+        lam[lam < 1e-12 * max(float(lam.max(initial=0.0)), 1.0 / self.size)] = 0.0
+        return lam, vec, vec.T * b[None, :]
+
+
 def build_graph(spec, path: str, size: int, centroids: np.ndarray | None = None) -> Graph:
     """A validated ``Graph`` of ``size`` agents from a scene's ``graph`` value at ``path``."""
     if spec is None or spec == "complete":
         return Graph("complete", size)
     if isinstance(spec, str):
-        raise SceneError(f"{path}: unknown graph {spec!r} (expected complete or a mapping with one of "
+        raise SceneError(f"{path}: unknown graph {spec!r} (expected complete or a mapping "
+                         f"with one of "
                          f"{', '.join(KINDS[1:])})")
-    m = Map(spec, path, KINDS[1:] + ("weights", "directed"))
+    m = Map(spec, path, KINDS[1:] + ("weights", "directed", "normalise", "allow_disconnected"))
+    options = _options(m)
     kinds = [k for k in KINDS[1:] if k in spec]
     if len(kinds) != 1:
         raise SceneError(f"{path}: expected exactly one of {', '.join(KINDS[1:])}")
@@ -98,8 +217,36 @@ def build_graph(spec, path: str, size: int, centroids: np.ndarray | None = None)
     elif kind == "random":
         adjacency = _random(spec["random"], m.at("random"), size)
     else:
-        return _edges(m, size)
-    return Graph(kind, size, sparse.csr_matrix(adjacency))
+        return replace(_edges(m, size), **options)
+    return Graph(kind, size, sparse.csr_matrix(adjacency), **options)
+
+
+def _options(m: Map) -> dict:
+    normalise = m.raw("normalise", "size")
+    if normalise not in NORMALISATIONS:
+        raise SceneError(f"{m.at('normalise')}: expected size or degree, got {normalise!r}")
+    allow = m.raw("allow_disconnected", False)
+    if not isinstance(allow, bool):
+        raise SceneError(f"{m.at('allow_disconnected')}: expected true or false, got {allow!r}")
+    return {"normalise": normalise, "allow_disconnected": allow}
+
+
+def group_graphs(scene_spec, group_specs: list, sizes: list[int],
+                 centroids: list[np.ndarray]) -> list[Graph | None]:
+    """Each group's validated graph: its own ``graph`` key or the scene's; None = complete.
+
+    A graph on which a group cannot match as one is refused (``check_connected``) unless
+    it says ``allow_disconnected: true``.
+    """
+    out = []
+    for gi, (raw, size, x) in enumerate(zip(group_specs, sizes, centroids)):
+        own = isinstance(raw, dict) and raw.get("graph") is not None
+        path = f"groups[{gi}].graph" if own else "graph"
+        graph = build_graph(raw["graph"] if own else scene_spec, path, size, x)
+        if not graph.allow_disconnected:
+            check_connected(graph, path if own else f"graph (groups[{gi}])")
+        out.append(None if graph.complete else graph)
+    return out
 
 
 def _ring(k: int, size: int) -> np.ndarray:
@@ -153,7 +300,8 @@ def _edges(m: Map, size: int) -> Graph:
     if weights is None:
         weights = [1.0] * len(pairs)
     if not isinstance(weights, list) or len(weights) != len(pairs):
-        raise SceneError(f"{m.at('weights')}: expected one positive weight per edge ({len(pairs)})")
+        raise SceneError(f"{m.at('weights')}: expected one positive weight per edge "
+                         f"({len(pairs)})")
     w = [number(v, f"{m.at('weights')}[{j}]", positive=True) for j, v in enumerate(weights)]
     directed = m.raw("directed", False)
     if not isinstance(directed, bool):
@@ -179,7 +327,8 @@ def check_connected(graph: Graph, path: str) -> None:
     if not graph.directed:
         count, labels = csgraph.connected_components(flow, directed=False)
         if count > 1:
-            raise SceneError(f"{path}: the graph is disconnected: components {_components(labels, count)}")
+            raise SceneError(f"{path}: the graph is disconnected: components "
+                             f"{_components(labels, count)}")
         return
     count, labels = csgraph.connected_components(flow, directed=True, connection="strong")
     reached = np.zeros(count, dtype=bool)

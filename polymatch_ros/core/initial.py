@@ -7,8 +7,9 @@ ensembles (F-1); centroid and angular velocities for the second-order model (A-1
 
 import numpy as np
 
-from .checks import Map, matrix_rows, number, vector
+from .checks import Map, describe, matrix_rows, number, vector
 from .errors import SceneError
+from .limits import MAX_LENGTH, MIN_SIZE
 
 
 def centroids(raw, path, dim, count, rng):
@@ -16,28 +17,27 @@ def centroids(raw, path, dim, count, rng):
         (kind, val), = raw.items()
         p = f"{path}.{kind}"
         if kind == "box":
-            b = np.array(val, dtype=float) if isinstance(val, list) else None
-            if b is None or b.size == 0:
-                raise SceneError(f"{p}: expected [lo, hi] or one [lo, hi] per dimension")
-            if b.shape == (2,):
-                b = np.tile(b, (dim, 1))
-            if b.shape != (dim, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 1] < b[:, 0]):
+            pair = isinstance(val, list) and len(val) == 2 and not isinstance(val[0], list)
+            b = np.tile(vector(val, p, 2, bound=MAX_LENGTH), (dim, 1)) if pair else \
+                matrix_rows(val, p, dim, 2, bound=MAX_LENGTH)
+            if np.any(b[:, 1] < b[:, 0]):
                 raise SceneError(f"{p}: expected [lo, hi] or {dim} pairs [lo, hi] with lo <= hi")
             return b[:, 0] + (b[:, 1] - b[:, 0]) * rng.random((count, dim))
         if kind == "points":
-            return matrix_rows(val, p, count, dim)
+            return matrix_rows(val, p, count, dim, bound=MAX_LENGTH)
         if kind == "normal":
             nm = Map(val, p, ("mean", "std"))
-            mean = vector(nm.raw("mean", [0.0] * dim), nm.at("mean"), dim)
-            std = nm.number("std", 1.0, minimum=0)
+            mean = vector(nm.raw("mean", [0.0] * dim), nm.at("mean"), dim, bound=MAX_LENGTH)
+            std = nm.number("std", 1.0, minimum=0, maximum=MAX_LENGTH / 10)
             return mean + std * rng.standard_normal((count, dim))
         if kind == "at":
-            return np.tile(vector(val, p, dim), (count, 1))
-    raise SceneError(f"{path}: expected one of {{box: ...}}, {{points: ...}}, {{normal: ...}}, {{at: [...]}}")
+            return np.tile(vector(val, p, dim, bound=MAX_LENGTH), (count, 1))
+    raise SceneError(f"{path}: expected one of {{box: ...}}, {{points: ...}}, {{normal: ...}}, "
+                     f"{{at: [...]}}, got {describe(raw)}")
 
 
 def base_rotation(raw, path, dim):
-    if raw is None or raw == "identity":
+    if raw is None or (isinstance(raw, str) and raw == "identity"):
         return np.eye(dim)
     if isinstance(raw, dict) and len(raw) == 1:
         (kind, val), = raw.items()
@@ -54,7 +54,8 @@ def base_rotation(raw, path, dim):
             return Rotation.from_rotvec(vector(val, p, 3)).as_matrix()
         if kind == "matrix":
             return check_rotation(matrix_rows(val, p, dim, dim), p)
-    raise SceneError(f"{path}: expected identity, {{angle: a}}, {{rotvec: [...]}} or {{matrix: [[...]]}}")
+    raise SceneError(f"{path}: expected identity, {{angle: a}}, {{rotvec: [...]}} or "
+                     f"{{matrix: [[...]]}}, got {describe(raw)}")
 
 
 def check_rotation(m, path):
@@ -67,33 +68,39 @@ def check_rotation(m, path):
 
 
 def random_rotation_within(dim, count, angle, rng):
-    """Rotations exp(theta A) with A a uniformly random unit-spectral-norm skew matrix, theta ~ U[0, angle]."""
+    """Rotations exp(theta A), A a random unit-spectral-norm skew matrix, theta ~ U[0, angle]."""
     from scipy.linalg import expm
     out = np.empty((count, dim, dim))
-    for i in range(count):
-        a = rng.standard_normal((dim, dim))
-        a = a - a.T
-        a /= np.linalg.norm(a, 2)
-        out[i] = expm(rng.uniform(0.0, angle) * a)
+    for start in range(0, count, 4096):             # batched: the draws match one at a time
+        n = min(4096, count - start)
+        a = np.empty((n, dim, dim))
+        theta = np.empty(n)
+        for i in range(n):
+            g = rng.standard_normal((dim, dim))
+            a[i] = g - g.T
+            theta[i] = rng.uniform(0.0, angle)
+        a /= np.linalg.norm(a, 2, axis=(1, 2))[:, None, None]
+        out[start:start + n] = expm(theta[:, None, None] * a)
     return out
 
 
 def rotations(raw, path, dim, count, rng):
-    if raw == "uniform":
+    if isinstance(raw, str) and raw == "uniform":
         if dim == 2:
             a = rng.uniform(-np.pi, np.pi, count)
-            return np.stack([np.stack([np.cos(a), -np.sin(a)], -1), np.stack([np.sin(a), np.cos(a)], -1)], -2)
+            return np.stack([np.stack([np.cos(a), -np.sin(a)], -1),
+                             np.stack([np.sin(a), np.cos(a)], -1)], -2)
         if dim == 3:
             from scipy.spatial.transform import Rotation
             return Rotation.random(count, random_state=rng).as_matrix().reshape(count, 3, 3)
-        from scipy.stats import special_ortho_group   # slow to import: only when needed
+        from scipy.stats import special_ortho_group  # slow to import: only when needed
         return special_ortho_group.rvs(dim, size=count, random_state=rng).reshape(count, dim, dim)
-    if raw == "identity":
+    if isinstance(raw, str) and raw == "identity":
         return np.repeat(np.eye(dim)[None], count, axis=0)
     if isinstance(raw, dict):
         if "within" in raw:
             rm = Map(raw, path, ("within", "base"))
-            angle = rm.number("within", minimum=0)
+            angle = rm.number("within", minimum=0, maximum=1e6)
             base = base_rotation(rm.raw("base"), rm.at("base"), dim)
             return random_rotation_within(dim, count, angle, rng) @ base
         if len(raw) == 1:
@@ -102,42 +109,49 @@ def rotations(raw, path, dim, count, rng):
             if kind == "angles":
                 if dim != 2:
                     raise SceneError(f"{p}: angles define rotations only for dimension 2")
-                a = vector(val, p, count)
+                a = vector(val, p, count, bound=1e6)
                 return np.stack([np.stack([np.cos(a), -np.sin(a)], -1),
                                  np.stack([np.sin(a), np.cos(a)], -1)], -2)
             if kind == "rotvecs":
                 from scipy.spatial.transform import Rotation
                 if dim != 3:
-                    raise SceneError(f"{p}: rotation vectors define rotations only for dimension 3")
-                return Rotation.from_rotvec(matrix_rows(val, p, count, 3)).as_matrix()
+                    raise SceneError(f"{p}: rotation vectors define rotations only for "
+                                     f"dimension 3")
+                return Rotation.from_rotvec(matrix_rows(val, p, count, 3, bound=1e6)).as_matrix()
             if kind == "matrices":
                 if not isinstance(val, list) or len(val) != count:
-                    raise SceneError(f"{p}: expected {count} matrices")
+                    raise SceneError(f"{p}: expected {count} matrices, got {describe(val)}")
                 return np.array([check_rotation(matrix_rows(m, f"{p}[{i}]", dim, dim), f"{p}[{i}]")
                                  for i, m in enumerate(val)])
     raise SceneError(f"{path}: expected uniform, identity, {{within: angle, base: ...}}, "
-                     f"{{angles: [...]}}, {{rotvecs: [...]}} or {{matrices: [...]}}")
+                     f"{{angles: [...]}}, {{rotvecs: [...]}} or {{matrices: [...]}}, "
+                     f"got {describe(raw)}")
 
 
 def scales(raw, path, count, rng):
+    """Scales s_i of a similar ensemble (F-1), each within [MIN_SIZE, 1 / MIN_SIZE]."""
+    usage = "expected a list, {uniform: [lo, hi]} or {log_uniform: [lo, hi]}"
+    lo_hi = (MIN_SIZE, 1.0 / MIN_SIZE)
     if isinstance(raw, list):
         s = vector(raw, path, count)
-    elif isinstance(raw, dict) and len(raw) == 1:
+        p = path
+    elif isinstance(raw, dict) and len(raw) == 1 and next(iter(raw)) in ("uniform", "log_uniform"):
         (kind, val), = raw.items()
-        b = vector(val, f"{path}.{kind}", 2)
+        p = f"{path}.{kind}"
+        b = vector(val, p, 2)
         if not 0 < b[0] <= b[1]:
-            raise SceneError(f"{path}.{kind}: expected [lo, hi] with 0 < lo <= hi")
-        if kind == "uniform":
-            s = rng.uniform(b[0], b[1], count)
-        elif kind == "log_uniform":
-            s = np.exp(rng.uniform(np.log(b[0]), np.log(b[1]), count))
-        else:
-            raise SceneError(f"{path}: expected a list, {{uniform: [lo, hi]}} or {{log_uniform: [lo, hi]}}")
+            raise SceneError(f"{p}: expected [lo, hi] with 0 < lo <= hi")
+        s = b
     else:
-        raise SceneError(f"{path}: expected a list, {{uniform: [lo, hi]}} or {{log_uniform: [lo, hi]}}")
-    if np.any(s <= 0):
-        raise SceneError(f"{path}: scales must be > 0")
-    return s
+        raise SceneError(f"{path}: {usage}, got {describe(raw)}")
+    if not np.all((s >= lo_hi[0]) & (s <= lo_hi[1])):
+        raise SceneError(f"{p}: scales must lie in [{lo_hi[0]:g}, {lo_hi[1]:g}] (beyond, the F-1 "
+                         f"torque weights s_k/s_i are not representable)")
+    if isinstance(raw, list):
+        return s
+    if kind == "uniform":
+        return rng.uniform(b[0], b[1], count)
+    return np.exp(rng.uniform(np.log(b[0]), np.log(b[1]), count))
 
 
 def velocities(raw, path, dim, count, rng):
@@ -149,21 +163,24 @@ def velocities(raw, path, dim, count, rng):
 
 
 def random_vectors(raw, path, shape, rng):
-    if raw == "zero" or raw == 0:
+    if (isinstance(raw, str) and raw == "zero") or (type(raw) in (int, float) and raw == 0):
         return np.zeros(shape)
     if isinstance(raw, dict) and len(raw) == 1:
         (kind, val), = raw.items()
         if kind == "normal":
-            return number(val, f"{path}.normal", minimum=0) * rng.standard_normal(shape)
+            std = number(val, f"{path}.normal", minimum=0, maximum=MAX_LENGTH / 10)
+            return std * rng.standard_normal(shape)
         if kind == "values":
-            return matrix_rows(val, f"{path}.values", *shape)
-    raise SceneError(f"{path}: expected zero, {{normal: std}} or {{values: [[...], ...]}}")
+            return matrix_rows(val, f"{path}.values", *shape, bound=MAX_LENGTH)
+    raise SceneError(f"{path}: expected zero, {{normal: std}} or {{values: [[...], ...]}}, "
+                     f"got {describe(raw)}")
 
 
 def explicit_vectors(values, path, key, dim, order):
     if all(v is None for v in values):
         return None
-    return np.array([np.zeros(dim) if v is None else vector(v, f"{path}[{i}].{key}", dim)
+    return np.array([np.zeros(dim) if v is None else
+                     vector(v, f"{path}[{i}].{key}", dim, bound=MAX_LENGTH)
                      for i, v in enumerate(values)])
 
 
@@ -171,7 +188,8 @@ def explicit_omegas(values, path, dim, order, rotations):
     if all(v is None for v in values):
         return None
     k = dim * (dim - 1) // 2
-    rows = [np.zeros(k) if v is None else vector(v, f"{path}[{i}].angular_velocity", k)
+    rows = [np.zeros(k) if v is None else
+            vector(v, f"{path}[{i}].angular_velocity", k, bound=MAX_LENGTH)
             for i, v in enumerate(values)]
     w = skew_from_components(np.array(rows), dim)
     return rotations.algebra_from_skew(w)

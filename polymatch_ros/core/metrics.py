@@ -17,6 +17,10 @@ Per group g:
   energy              (m/N) sum |O_i'|_F^2 + kappa/(2N^2) sum_{i,k} |O_i - O_k|_F^2   (Prop. 2.2 i)
                       = (m/N) sum |W_i|_F^2 + (kappa/N) sum |O_i - Obar|_F^2
   orthogonality       max_i |O_i^T O_i - I|_F                          (Lemma 2.1)
+
+Per ensemble, ``component_diameters``: for each group the matching diameter of every component
+of its disconnected communication graph (``allow_disconnected: true``), None for a connected
+group; None altogether when every group is connected.
 """
 
 from dataclasses import dataclass
@@ -145,11 +149,13 @@ class EnsembleMetrics:
     """Per-group metrics and the ensemble's headline diameter (max matching diameter).
 
     ``group_separation``: smallest distance between group centres (F-2 only, else None).
+    ``component_diameters``: per group, its graph components' matching diameters (module doc).
     """
 
     groups: tuple[GroupMetrics, ...]
     diameter: float
     group_separation: float | None = None
+    component_diameters: tuple[tuple[float, ...] | None, ...] | None = None
 
 
 def _vertex_diameter(grp: RotationGroup, gs: GroupState, reference: np.ndarray,
@@ -172,6 +178,22 @@ def group_metrics(model: Model, gi: int, gs: GroupState) -> GroupMetrics:
                         rotation_energy(model, gs), orthogonality_defect(grp, gs.rot))
 
 
+def component_diameters(model: Model, gi: int, gs: GroupState) -> tuple[float, ...] | None:
+    """Matching diameter of each component of group gi's graph (None: one component)."""
+    g = model.groups[gi]
+    labels = None if g.graph is None else g.graph.components
+    if labels is None or labels.max(initial=0) == 0:
+        return None
+    grp = model.rotations
+    reference = g.reference if g.scales is None else g.reference * float(np.mean(g.scales))
+    parts = []
+    for c in range(int(labels.max()) + 1):
+        rows = np.flatnonzero(labels == c)
+        part = GroupState(gs.x[rows], grp.take(gs.rot, rows))
+        parts.append(_vertex_diameter(grp, part, reference))
+    return tuple(parts)
+
+
 def ensemble_metrics(model: Model, state: State) -> EnsembleMetrics:
     """Per-group metrics and the headline diameter (max matching diameter over groups)."""
     groups = tuple(group_metrics(model, gi, gs) for gi, gs in enumerate(state.groups))
@@ -180,7 +202,9 @@ def ensemble_metrics(model: Model, state: State) -> EnsembleMetrics:
         means = [gs.x.mean(axis=0) for gs in state.groups]
         separation = min(float(np.linalg.norm(a - b))
                          for i, a in enumerate(means) for b in means[i + 1:])
-    return EnsembleMetrics(groups, max(m.matching_diameter for m in groups), separation)
+    parts = tuple(component_diameters(model, gi, gs) for gi, gs in enumerate(state.groups))
+    parts = None if all(p is None for p in parts) else parts
+    return EnsembleMetrics(groups, max(m.matching_diameter for m in groups), separation, parts)
 
 
 def stationarity(system: System, state: State) -> float:

@@ -16,6 +16,11 @@ with S = sum_k O_k (the mean field: O(N d^3) instead of O(N^2 d^3)).
            generalised to any number of groups by summing over every other group h with
            weight kappa_2 / N_h.
 
+On a communication graph (``Group.graph``, ``core.graph``) every sum over k becomes
+sum_k a_ik (...): S_i = sum_k a_ik s_k O_k is one field per agent (one sparse product
+A @ O, O(|E| d^2)) and the centroid force kappa/N sum_k a_ik (xbar_k - xbar_i).  With
+a_ik = 1 for every pair this is the paper's model; the complete graph keeps the mean field.
+
 ``lohe_torque`` is the one assembly of the rotation coupling (A-1)/(A-2)/(F-1).
 Centroids never couple to rotations, so centroid and rotation parts are
 evaluated separately (``centroids``: the exact flow of Proposition 2.1 and the
@@ -33,8 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from .centroids import CentroidFlow, pair_force
+from .centroids import CentroidFlow, GraphCentroidFlow, pair_force
 from .errors import SceneError
+from .graph import Graph
 from .so import RotationGroup
 from .so.base import Array, MeanField
 
@@ -52,6 +58,7 @@ class Group:
     edges: tuple
     scales: np.ndarray | None = None   # (N_g,) s_i for similar ensembles (F-1); None = congruent
     start: int = 0                 # global index of the group's first agent
+    graph: Graph | None = None     # communication graph; None: complete (the paper's mean field)
 
     @property
     def indices(self) -> range:
@@ -86,8 +93,12 @@ class Model:
 
     @property
     def centroids_exact(self) -> bool:
-        """Centroids decouple into linear consensus per group: solved in closed form."""
-        return not self.inter_group and self.centroids == "exact"
+        """Centroids decouple into linear symmetric consensus per group: solved in closed form.
+
+        Directed graphs (non-symmetric Laplacian) integrate them with the method's stages.
+        """
+        directed = any(g.graph is not None and g.graph.directed for g in self.groups)
+        return not self.inter_group and self.centroids == "exact" and not directed
 
     def group_of(self, agent: int) -> tuple[int, int]:
         for gi, g in enumerate(self.groups):
@@ -130,12 +141,21 @@ class Request:
 
 @dataclass(slots=True)
 class GroupCoupling:
-    """What agent i needs from its group: S, N, and the centroid mean (and mean velocity)."""
+    """What agent i needs from its group: S, N, and the centroid mean (and mean velocity).
+
+    On a graph ``s`` holds one field S_i per local row and the centroids come as
+    ``neighbour_x`` = sum_k p_ik x_k per local row (integrated) or as the group's arrays at
+    the step start (``group_x``, ``group_v``, rows ``index``: the exact flow).
+    """
 
     s: MeanField
     n: int
     mean_x: np.ndarray | None = None
     mean_v: np.ndarray | None = None
+    neighbour_x: np.ndarray | None = None
+    group_x: np.ndarray | None = None
+    group_v: np.ndarray | None = None
+    index: np.ndarray | None = None
 
 
 @dataclass(slots=True)
@@ -171,8 +191,13 @@ class System:
         self.model = model
         self.group = model.rotations
         self.rows = tuple(None for _ in model.groups) if rows is None else tuple(rows)
-        self.flows = tuple(CentroidFlow(model.mass, model.gamma, model.kappa)
-                           for _ in model.groups)
+        self.graph_weights = tuple(None if g.graph is None else g.graph.local_weights(r, g.scales)
+                                   for g, r in zip(model.groups, self.rows))
+        self.flows = tuple(
+            GraphCentroidFlow(model.mass, model.gamma, model.kappa, g.graph, r)
+            if g.graph is not None and model.centroids_exact
+            else CentroidFlow(model.mass, model.gamma, model.kappa)
+            for g, r in zip(model.groups, self.rows))
         # the torque's gain: kappa (A-1) or kappa/gamma (A-2, where W_i itself is the torque)
         self._torque_gain = model.kappa if model.order == 2 else model.kappa / model.gamma
         self._inv_scales = []
@@ -194,6 +219,24 @@ class System:
             fields.append("v")
         return tuple(fields)
 
+    def sources(self, gi: int, row: int, first_stage: bool) -> dict[str, np.ndarray]:
+        """The rows of group gi whose fields agent ``row`` of it needs at a stage.
+
+        Complete graph: every other row.  On a graph the rotations (and integrated
+        centroids) come from the in-neighbours only; the exact centroid flow of an
+        undirected graph is a global linear map, so at a step's first stage it reads the
+        whole group (``model.centroids: integrated`` keeps every exchange between
+        in-neighbours).
+        """
+        g, m = self.model.groups[gi], self.model
+        everyone = np.delete(np.arange(g.size), row)
+        near = everyone if g.graph is None else g.graph.in_neighbours(row)
+        fields = self.exchange_fields(first_stage)
+        cent = near                              # complete graph: near is everyone
+        if m.centroids_exact and g.graph is not None:
+            cent = everyone if first_stage else near[:0]
+        return {f: near if f == "rot" else cent for f in fields}
+
     def evaluate(self, stage: State,
                  first_stage: bool = False) -> Generator[Request, Any, Coupling]:
         """Generator: the coupling at ``stage``; yields a ``Request`` when it must be exchanged.
@@ -214,9 +257,12 @@ class System:
         grp = self.group
         need_means = first_stage or not m.centroids_exact
         out = []
-        for g, e in zip(m.groups, ensemble):
+        for gi, (g, e) in enumerate(zip(m.groups, ensemble)):
             if e is None or e.rot is None:
                 out.append(None)
+                continue
+            if g.graph is not None:
+                out.append(self._couple_graph(gi, e, need_means))
                 continue
             n = grp.count(e.rot)
             s = grp.mean_field(e.rot, None if g.scales is None else _ensemble_scales(g, e, n))
@@ -228,6 +274,19 @@ class System:
         centroids = tuple(None if e is None else e.x for e in ensemble) if m.inter_group else None
         return Coupling(tuple(out), centroids)
 
+    def _couple_graph(self, gi: int, e, need_means: bool) -> GroupCoupling:
+        """Per-row fields S_i = sum_k a_ik s_k O_k (one sparse product) and centroid sums."""
+        w = self.graph_weights[gi]
+        idx = getattr(e, "index", None)
+        p, rot = (w.p, w.rot) if idx is None else (w.p[:, idx], w.rot[:, idx])
+        out = GroupCoupling(self.group.neighbour_fields(e.rot, rot), self.model.groups[gi].size)
+        if not self.model.centroids_exact:
+            out.neighbour_x = p @ e.x
+        elif need_means:
+            out.group_x, out.index = e.x, idx
+            out.group_v = e.v if self.model.order == 2 else None
+        return out
+
     # -- local right-hand sides -----------------------------------------------
     def rotation_rate(self, gi: int, rot: Array, coupling: Coupling) -> Array:
         """First order: W_i of (A-2)/(F-1).  Second order: the torque of (A-1)/(F-1).
@@ -238,9 +297,17 @@ class System:
                            self._inv_scales[gi])
 
     def centroid_force(self, gi: int, x: np.ndarray, coupling: Coupling) -> np.ndarray:
-        """kappa (mean - x_i) + F-2 forces from every other group (not divided by gamma or m)."""
+        """kappa (mean - x_i) + F-2 forces from every other group (not divided by gamma or m).
+
+        On a graph: kappa/N sum_k p_ik (x_k - x_i) = kappa/N (neighbour_x - r_i x_i).
+        """
         m = self.model
-        force = m.kappa * (coupling.groups[gi].mean_x - x)
+        c = coupling.groups[gi]
+        if c.neighbour_x is not None:
+            rows = self.graph_weights[gi].row_sums[:, None]
+            force = (m.kappa / c.n) * (c.neighbour_x - rows * x)
+        else:
+            force = m.kappa * (c.mean_x - x)
         if m.inter_group:
             for hi, y in enumerate(coupling.centroids):
                 if hi != gi and y is not None:
@@ -249,8 +316,10 @@ class System:
 
     def exact_centroids(self, gi: int, gs: GroupState, coupling: Coupling,
                         h: float) -> tuple[np.ndarray, np.ndarray | None]:
-        """(x, v) of group gi after h along the exact flow of Proposition 2.1."""
+        """(x, v) of group gi after h on the exact flow of Proposition 2.1 (or its graph form)."""
         c = coupling.groups[gi]
+        if c.group_x is not None:
+            return self.flows[gi].advance_group(c.group_x, c.group_v, h, c.index)
         return self.flows[gi].advance(gs.x, gs.v, c.mean_x, c.mean_v, h)
 
     def is_active(self, gs: GroupState | None) -> bool:

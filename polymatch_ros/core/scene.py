@@ -13,19 +13,31 @@ its own size even when coordinates are of magnitude 1e9.
 import math
 import os
 import sys
-import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
-import yaml
 
-from . import initial
-from .checks import Map, vector
-from .decompose import RotationNotUniqueWarning, decompose
+from . import graph
+from .checks import Map, describe, number, vector
 from .errors import SceneError
-from .model import Group, GroupState, Model, State, validate_model
-from .shapes import make_shape
+from .integrators import METHODS
+from .limits import (
+    FLOAT,
+    MAX_DIMENSION,
+    MAX_LENGTH,
+    MAX_RATE,
+    MAX_SAMPLES,
+    MIN_RELATIVE_TOLERANCE,
+    MIN_T_END,
+    Budget,
+    check_rates,
+)
+from .model import Model, State, validate_model
+from .scene_groups import GroupContext, build_group
 from .so import group_for
+from .yamlfile import parse_yaml, read_scene_file
+
+DEFAULT_DT = 0.05
 
 
 @dataclass(frozen=True)
@@ -74,145 +86,232 @@ def shipped_config_dirs():
 
 def resolve_scene_path(name):
     """A path as given, or a shipped scene by name (``congruent_triangles``)."""
+    if os.path.isdir(name):
+        raise SceneError(f"{name}: is a directory, not a scene file")
     if os.path.isfile(name):
         return name
     stem = name[:-5] if name.endswith(".yaml") else name
     for d in shipped_config_dirs():
-        cand = os.path.join(d, stem + ".yaml")          # e.g. congruent_triangles, extremes/stiff_mass
+        cand = os.path.join(d, stem + ".yaml")     # congruent_triangles, extremes/stiff_mass
         if os.path.isfile(cand):
             return cand
     raise SceneError(f"{name}: no such scene file (nor a shipped scene of that name; "
-                         f"see `polymatch scenes`)")
+                     f"see `polymatch scenes`)")
 
 
-def load_scene(source, overrides=None):
-    """Load and validate a scene from a file path, a shipped scene name, a YAML string or a dict."""
+def load_scene(source, overrides=None, *, limits=None):
+    """Load and validate a scene from a file path, a shipped scene name, a YAML string or a dict.
+
+    ``limits`` (``core.limits.Limits``) bounds the memory the scene may need; files are
+    also bounded in size, nesting and alias expansion (``core.yamlfile``).
+    """
     path = None
     if isinstance(source, dict):
         data = source
+    elif isinstance(source, os.PathLike) or (isinstance(source, str) and "\n" not in source):
+        path = resolve_scene_path(os.fspath(source))
+        data = parse_yaml(read_scene_file(path), path)
+    elif isinstance(source, str):
+        data = parse_yaml(source)
     else:
-        text = source
-        if isinstance(source, os.PathLike) or (isinstance(source, str) and "\n" not in source):
-            path = resolve_scene_path(os.fspath(source))
-            with open(path, encoding="utf-8") as fh:
-                text = fh.read()
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            where = f"line {mark.line + 1}" if mark else "?"
-            raise SceneError(f"{path or 'scene'}: not valid YAML ({where}: "
-                             f"{getattr(exc, 'problem', exc)})") from None
+        raise SceneError(f"scene: expected a file name, YAML text or a mapping, got "
+                         f"{type(source).__name__}")
     if overrides:
         data = _apply_overrides(data, overrides)
-    scene = build_scene(data)
+    scene = build_scene(data, limits)
     scene.path = path
     return scene
 
 
 def _apply_overrides(data, overrides):
     """Set dotted keys (``integrator.dt``) to values; used by the CLI."""
-    import copy
-    data = copy.deepcopy(data)
+    if not isinstance(data, dict):
+        return data                                     # build_scene names the problem
+    data = dict(data)
     for key, value in overrides.items():
         if value is None:
             continue
         node = data
         parts = key.split(".")
         for p in parts[:-1]:
-            node = node.setdefault(p, {})
-        node[parts[-1]] = value
+            child = node.get(p, {})
+            node[p] = dict(child) if isinstance(child, dict) else child
+            node = node[p]
+            if not isinstance(node, dict):
+                break
+        else:
+            node[parts[-1]] = value
     return data
 
 
-def build_scene(data):
-    top = Map(data, "", ("name", "description", "dimension", "seed", "model", "integrator",
-                          "time", "convergence", "groups", "figure"))
-    dim = top.number("dimension", integer=True, minimum=2)
-    seed = top.number("seed", 0, integer=True, minimum=0)
-    rng = np.random.default_rng(seed)
-    notes = []
+MODEL_KEYS = ("order", "kappa", "gamma", "mass", "kappa_2", "L", "representation", "centroids")
+TOP_KEYS = ("name", "description", "dimension", "seed", "model", "integrator", "time",
+            "convergence", "groups", "figure", "graph")
 
-    mm = Map(top.raw("model", {}), "model",
-              ("order", "kappa", "gamma", "mass", "kappa_2", "L", "representation", "centroids"))
+
+def build_scene(data, limits=None):
+    top = Map(data, "", TOP_KEYS)
+    name = top.text("name", "scene")
+    description = top.text("description", "")
+    dim = top.number("dimension", integer=True, minimum=2, maximum=MAX_DIMENSION)
+    seed = top.number("seed", 0, integer=True, minimum=0, maximum=2**63 - 1)
+    budget = Budget(limits)
+    params = _model_params(Map(top.raw("model", {}), "model", MODEL_KEYS), dim)
+    tm = Map(top.raw("time", {}), "time", ("t_end", "samples"))
+    t_end = tm.number("t_end", 20.0, minimum=MIN_T_END)
+    samples = _samples(tm, t_end)
+    budget.charge("time.samples", len(samples) * 2048, f"metrics at {len(samples)} samples")
+    spec = _integrator_spec(Map(top.raw("integrator", {}), "integrator",
+                                ("method", "dt", "tolerance", "max_steps")), t_end)
+
+    groups, states, ctx = _groups(top, dim, params, seed, budget)
+    model = Model(dim=dim, order=params["order"], kappa=params["kappa"], gamma=params["gamma"],
+                  mass=params["mass"], groups=tuple(groups), rotations=params["rotations"],
+                  kappa_2=params["kappa_2"], L=params["L"], centroids=params["centroids"])
+    validate_model(model)
+    check_rates("model", model_rates(model))
+    origin = np.concatenate([gs.x for gs in states]).mean(axis=0)
+    for gs in states:
+        gs.x = gs.x - origin
+    cm = Map(top.raw("convergence", {}), "convergence", ("tolerance", "expected"))
+    conv_tol = cm.number("tolerance", 1e-6, positive=True, maximum=MAX_LENGTH)
+    expected = cm.flag("expected", True)
+    fm = Map(top.raw("figure", {}), "figure", ("snapshots",))
+    snaps = vector(fm.raw("snapshots", [0, 3, 6, 12]), "figure.snapshots")
+    snapshots = tuple(float(t) for t in snaps if 0 <= t <= t_end)
+    return Scene(name=name, description=description, model=model,
+                 initial=State(0.0, tuple(states)), origin=origin, integrator=spec, t_end=t_end,
+                 samples=samples, snapshots=snapshots, tolerance=conv_tol,
+                 expect_convergence=expected, seed=seed, notes=ctx.notes)
+
+
+def _model_params(mm, dim):
     order = mm.number("order", 1, integer=True)
     if order not in (1, 2):
         raise SceneError(f"model.order: must be 1 (A-2) or 2 (A-1), got {order}")
-    kappa = mm.number("kappa", 1.0, minimum=0)
-    gamma = mm.number("gamma", 1.0, minimum=0)
-    mass = mm.number("mass", 0.0 if order == 1 else 1.0, minimum=0)
-    if order == 1 and mass != 0:
-        raise SceneError(f"model.mass: the first-order model (A-2) has m = 0, got {mass}; set order: 2")
-    kappa_2 = mm.number("kappa_2", 0.0, minimum=0)
-    L = mm.number("L", 0.0, minimum=0)
-    representation = mm.raw("representation", "auto")
+    out = {"order": order}
+    for key, default in (("kappa", 1.0), ("gamma", 1.0), ("mass", 0.0 if order == 1 else 1.0),
+                         ("kappa_2", 0.0)):
+        out[key] = mm.number(key, default, minimum=0, maximum=MAX_RATE)
+    if order == 1 and out["mass"] != 0:
+        raise SceneError(f"model.mass: the first-order model (A-2) has m = 0, got {out['mass']}; "
+                         f"set order: 2")
+    out["L"] = mm.number("L", 0.0, minimum=0, maximum=MAX_LENGTH)
+    out["has_L"] = mm.has("L")
+    representation = mm.text("representation", "auto")
     try:
-        rotations = group_for(dim, representation)
+        out["rotations"] = group_for(dim, representation)
     except ValueError as exc:
         raise SceneError(f"model.representation: {exc}") from None
+    out["centroids"] = mm.text("centroids", "exact")
+    if out["centroids"] not in ("exact", "integrated"):
+        raise SceneError(f"model.centroids: expected exact or integrated, "
+                         f"got {out['centroids']!r}")
+    return out
 
+
+def _groups(top, dim, params, seed, budget):
     raw_groups = top.raw("groups")
-    if not isinstance(raw_groups, list) or not raw_groups:
-        raise SceneError("groups: required, a non-empty list of groups")
-    groups, states = [], []
-    start = 0
-    names = set()
+    if raw_groups is None:
+        raise SceneError("groups: required, a list of groups (each '- shape: ..., count: ...')")
+    if not isinstance(raw_groups, list):
+        raise SceneError(f"groups: expected a list of groups (each '- shape: ...'), "
+                         f"got {describe(raw_groups)}")
+    if not raw_groups:
+        raise SceneError("groups: empty; give at least one group")
+    ctx = GroupContext(dim, params["order"], np.random.default_rng(seed), params["rotations"],
+                       budget)
+    groups, states, names = [], [], set()
     for gi, raw in enumerate(raw_groups):
-        g, gs = _build_group(raw, f"groups[{gi}]", dim, order, rng, rotations, start, notes)
+        g, gs = build_group(raw, f"groups[{gi}]", ctx)
         if g.name in names:
             raise SceneError(f"groups[{gi}].name: duplicate group name {g.name!r}")
         names.add(g.name)
         groups.append(g)
         states.append(gs)
-        start += g.size
-    if (kappa_2 > 0 or mm.has("L")) and len(groups) == 1:
-        notes.append("one group: the inter-group potential (kappa_2, L) has nothing to act on and is not modelled")
-        kappa_2 = 0.0
+        ctx.start += g.size
+    # communication graphs: core.graph parses and validates the scene's and each group's `graph`
+    for gi, (raw, g) in enumerate(zip(raw_groups, groups)):
+        spec = raw.get("graph") if isinstance(raw, dict) else None
+        if (spec if spec is not None else top.raw("graph")) not in (None, "complete"):
+            # adjacency, Laplacian and its eigenmodes are dense N x N (a few copies)
+            budget.charge(f"groups[{gi}].graph", 4.0 * FLOAT * float(g.size) ** 2,
+                          f"a {g.size} x {g.size} graph Laplacian and its eigenmodes")
+    graphs = graph.group_graphs(top.raw("graph"), raw_groups, [g.size for g in groups],
+                                [gs.x for gs in states])
+    groups = [replace(g, graph=gr) for g, gr in zip(groups, graphs)]
+    if (params["kappa_2"] > 0 or params["has_L"]) and len(groups) == 1:
+        ctx.notes.append("one group: the inter-group potential (kappa_2, L) has nothing to act on "
+                         "and is not modelled")
+        params["kappa_2"] = 0.0
+    return groups, states, ctx
 
-    centroids = mm.raw("centroids", "exact")
-    if centroids not in ("exact", "integrated"):
-        raise SceneError(f"model.centroids: expected exact or integrated, got {centroids!r}")
-    model = Model(dim=dim, order=order, kappa=kappa, gamma=gamma, mass=mass, groups=tuple(groups),
-                  rotations=rotations, kappa_2=kappa_2, L=L, centroids=centroids)
-    validate_model(model)
 
-    all_x = np.concatenate([gs.x for gs in states])
-    origin = all_x.mean(axis=0)
-    for gs in states:
-        gs.x = gs.x - origin
-    initial = State(0.0, tuple(states))
+def model_rates(model):
+    """(name, 1/s) of the linearisation at consensus: coupling, damping, F-1 weights, F-2."""
+    m, gamma, k = model.mass, model.gamma, model.kappa
+    weight = max([1.0] + [float(np.mean(g.scales) / np.min(g.scales))
+                          for g in model.groups if g.scales is not None])
+    fastest = k * weight + model.kappa_2
+    if model.order == 1:
+        return [("(kappa * max s_k/s_i + kappa_2) / gamma", fastest / gamma)]
+    return [("(kappa * max s_k/s_i + kappa_2) / m", fastest / m), ("gamma / m", gamma / m)]
 
-    tm = Map(top.raw("time", {}), "time", ("t_end", "samples"))
-    t_end = tm.number("t_end", 20.0, positive=True)
-    samples = _samples(tm.raw("samples"), "time.samples", t_end)
-    im = Map(top.raw("integrator", {}), "integrator", ("method", "dt", "tolerance", "max_steps"))
-    method = im.raw("method", "auto")
-    if not isinstance(method, str):
-        raise SceneError(f"integrator.method: expected a name, got {method!r}")
-    dt = im.number("dt", 0.0, positive=False) if im.has("dt") else None
-    if dt is not None and not dt > 0:
-        raise SceneError(f"integrator.dt: must be > 0, got {dt}")
-    tol = im.number("tolerance", 0.0) if im.has("tolerance") else None
-    if tol is not None and not 0 < tol < 1:
-        raise SceneError(f"integrator.tolerance: must be in (0, 1), got {tol}")
+
+def _integrator_spec(im, t_end):
+    method = im.text("method", "auto")
+    if method not in ("auto", "adaptive") and method not in METHODS:
+        raise SceneError(f"integrator.method: unknown integrator {method!r}; known: auto, "
+                         f"adaptive, {', '.join(sorted(METHODS))}")
+    dt = im.number("dt", 0.0, positive=True) if im.has("dt") else None
+    tol = tolerance_value(im.raw("tolerance"), "integrator.tolerance") \
+        if im.has("tolerance") else None
     max_steps = im.number("max_steps", 10_000_000, integer=True, minimum=1)
-    cm = Map(top.raw("convergence", {}), "convergence", ("tolerance", "expected"))
-    conv_tol = cm.number("tolerance", 1e-6, positive=True)
-    expected = cm.raw("expected", True)
-    if not isinstance(expected, bool):
-        raise SceneError(f"convergence.expected: expected true or false, got {expected!r}")
-    fm = Map(top.raw("figure", {}), "figure", ("snapshots",))
-    snaps = fm.raw("snapshots", [0, 3, 6, 12])
-    snapshots = tuple(float(t) for t in vector(snaps, "figure.snapshots") if t <= t_end)
-    name = top.raw("name", "scene")
-    return Scene(name=str(name), description=str(top.raw("description", "")), model=model,
-                 initial=initial, origin=origin,
-                 integrator=IntegratorSpec(method, dt, tol, max_steps), t_end=t_end,
-                 samples=samples, snapshots=snapshots, tolerance=conv_tol,
-                 expect_convergence=expected, seed=seed, notes=notes)
+    if method == "adaptive" and dt is not None:
+        raise SceneError("integrator.dt: the adaptive method chooses its own steps; give "
+                         "integrator.tolerance, or a fixed-step method for dt")
+    if method in METHODS and tol is not None:
+        raise SceneError(f"integrator.tolerance: {method} takes fixed steps (integrator.dt); "
+                         f"a tolerance needs method: adaptive")
+    if method in METHODS or dt is not None:
+        check_step_count(t_end, dt or DEFAULT_DT, max_steps, "integrator.dt" if dt else
+                         "integrator.method")
+    return IntegratorSpec(method, dt, tol, max_steps)
 
 
-def _samples(raw, path, t_end):
+def tolerance_value(value, path):
+    """An adaptive tolerance: relative, in [MIN_RELATIVE_TOLERANCE, 1)."""
+    tol = number(value, path)
+    if not 0 < tol < 1:
+        raise SceneError(f"{path}: must be in (0, 1), got {tol:g}")
+    if tol < MIN_RELATIVE_TOLERANCE:
+        raise SceneError(f"{path}: {tol:g} is below {MIN_RELATIVE_TOLERANCE:g}, which double "
+                         f"precision cannot attain (round-off alone is ~1e-16 per step)")
+    return tol
+
+
+def check_step_count(t_end, dt, max_steps, path):
+    """Refuse a fixed-step run whose step count exceeds integrator.max_steps."""
+    steps = math.ceil(min(t_end / min(dt, t_end), 1e308) - 1e-9)
+    if steps > max_steps:
+        raise SceneError(f"{path}: dt = {dt:g} over t_end = {t_end:g} takes {float(steps):.3g} "
+                         f"steps, more than integrator.max_steps = {max_steps}")
+    return steps
+
+
+def _samples(tm, t_end):
+    """Sample times in [0, t_end], both ends included; times closer than 1e-9 max(1, t_end)
+    are merged so no integrator is asked for a step of round-off size."""
+    times = _sample_times(tm, t_end)
+    gap = 1e-9 * max(1.0, t_end)
+    kept = times[np.insert(np.diff(times) > gap, 0, True)]
+    kept[-1] = t_end if len(kept) > 1 else kept[-1]
+    return kept if len(kept) > 1 else np.array([0.0, t_end])
+
+
+def _sample_times(tm, t_end):
+    path = tm.at("samples")
+    raw = tm.raw("samples")
     if raw is None:
         return np.linspace(0.0, t_end, 101)
     if isinstance(raw, dict):
@@ -221,101 +320,18 @@ def _samples(raw, path, t_end):
             raise SceneError(f"{path}: give exactly one of 'every' or 'count'")
         if sm.has("every"):
             every = sm.number("every", positive=True)
-            n = int(math.floor(t_end / every + 1e-9))
-            times = every * np.arange(n + 1)
+            n = t_end / every
+            if not n <= MAX_SAMPLES:
+                raise SceneError(f"{sm.at('every')}: every {every:g} over t_end = {t_end:g} is "
+                                 f"{n:.3g} samples, more than {MAX_SAMPLES}")
+            times = every * np.arange(int(math.floor(n + 1e-9)) + 1)
             return np.unique(np.append(times[times <= t_end], t_end))
-        count = sm.number("count", integer=True, minimum=2)
+        count = sm.number("count", integer=True, minimum=2, maximum=MAX_SAMPLES)
         return np.linspace(0.0, t_end, count)
+    if not isinstance(raw, list):
+        raise SceneError(f"{path}: expected {{every: dt}}, {{count: n}} or a list of times, "
+                         f"got {describe(raw)}")
     times = vector(raw, path)
     if np.any(times < 0) or np.any(times > t_end):
         raise SceneError(f"{path}: sample times must lie in [0, t_end = {t_end}]")
     return np.unique(np.concatenate([[0.0], times, [t_end]]))
-
-
-def _build_group(raw, path, dim, order, rng, rotations, start, notes):
-    gm = Map(raw, path, ("name", "shape", "size", "count", "centroids", "rotations", "scales",
-                          "velocities", "agents", "similar"))
-    name = str(gm.raw("name", f"group{start}"))
-    explicit = gm.has("agents")
-    if explicit:
-        for key in ("count", "centroids", "rotations", "scales"):
-            if gm.has(key):
-                raise SceneError(f"{gm.at(key)}: not allowed together with 'agents' (explicit vertices)")
-    similar = gm.raw("similar", gm.has("scales"))
-    if not isinstance(similar, bool):
-        raise SceneError(f"{gm.at('similar')}: expected true or false")
-    size = gm.number("size", 1.0, positive=True)
-
-    if gm.has("shape"):
-        shape = make_shape(gm.raw("shape"), gm.at("shape"))
-        if shape.dim > dim:
-            raise SceneError(f"{gm.at('shape')}: shape {shape.name!r} lives in R^{shape.dim}, "
-                             f"the scene has dimension {dim}")
-        shape = shape.embedded(dim).scaled(size)
-    elif not explicit:
-        raise SceneError(f"{gm.at('shape')}: required (or give explicit 'agents' with vertices)")
-    else:
-        shape = None
-
-    if explicit:
-        agents = gm.raw("agents")
-        if not isinstance(agents, list) or not agents:
-            raise SceneError(f"{gm.at('agents')}: expected a non-empty list of {{vertices: ...}}")
-        verts, vels, omegas = [], [], []
-        for ai, a in enumerate(agents):
-            am = Map(a, f"{gm.at('agents')}[{ai}]", ("vertices", "velocity", "angular_velocity"))
-            if not am.has("vertices"):
-                raise SceneError(f"{am.at('vertices')}: required")
-            verts.append(am.raw("vertices"))
-            vels.append(am.raw("velocity"))
-            omegas.append(am.raw("angular_velocity"))
-        if shape is None:
-            first = np.array(verts[0], dtype=float)
-            shape = make_shape({"vertices": first.tolist()}, f"{gm.at('agents')}[0].vertices")
-        ref = shape.vertices
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", RotationNotUniqueWarning)
-            cents, mats, scales = decompose(verts, ref, similar=similar,
-                                            label=f"{gm.at('agents')}: polytope")
-        notes.extend(str(w.message) for w in caught)
-        if similar:
-            s0 = scales.mean()
-            ref, scales = ref * s0, scales / s0
-            shape = type(shape)(shape.name, ref, shape.edges)
-        count = len(verts)
-        rot = rotations.from_matrices(mats)
-        v = initial.explicit_vectors(vels, f"{gm.at('agents')}", "velocity", dim, order)
-        w = initial.explicit_omegas(omegas, f"{gm.at('agents')}", dim, order, rotations)
-        group = Group(name, count, shape.vertices, shape.edges,
-                      scales if similar else None, start)
-        if order == 1 and (v is not None or w is not None):
-            raise SceneError(f"{gm.at('agents')}: velocities are only meaningful for model.order = 2")
-        v = np.zeros((count, dim)) if (order == 2 and v is None) else v
-        w = rotations.algebra_zeros(count) if (order == 2 and w is None) else w
-        return group, GroupState(cents, rot, v if order == 2 else None, w if order == 2 else None)
-
-    count = gm.number("count", integer=True, minimum=1)
-    if shape.rank < dim:
-        notes.append(f"{path}: shape {shape.name!r} spans {shape.rank} of {dim} dimensions "
-                     f"(Lemma 3.2 assumes {dim}); "
-                     + ("its rotation is still unique (det +1 fixes the normal)"
-                        if shape.rank == dim - 1 else
-                        "rotations that differ only in the complement leave its vertices in place"))
-    cents = initial.centroids(gm.raw("centroids", {"box": [-5.0, 5.0]}), gm.at("centroids"), dim, count, rng)
-    mats = initial.rotations(gm.raw("rotations", "uniform"), gm.at("rotations"), dim, count, rng)
-    scales = None
-    if similar:
-        if not gm.has("scales"):
-            raise SceneError(f"{gm.at('scales')}: required when similar is true")
-        scales = initial.scales(gm.raw("scales"), gm.at("scales"), count, rng)
-    vel = gm.raw("velocities")
-    if order == 1 and vel is not None:
-        raise SceneError(f"{gm.at('velocities')}: only meaningful for model.order = 2")
-    v = w = None
-    if order == 2:
-        v, wm = initial.velocities(vel or {}, gm.at("velocities"), dim, count, rng)
-        w = rotations.algebra_from_skew(wm)
-    group = Group(name, count, shape.vertices, shape.edges, scales, start)
-    return group, GroupState(cents, rotations.from_matrices(mats), v, w)
-
-

@@ -11,7 +11,9 @@ from itertools import combinations, product
 
 import numpy as np
 
+from .checks import describe, matrix_rows, number
 from .errors import SceneError
+from .limits import MAX_LENGTH, MAX_VERTICES, count_text, shape_vertex_count
 
 
 @dataclass(frozen=True)
@@ -52,19 +54,19 @@ def _centred(vertices):
     return v - v.mean(axis=0)
 
 
-def polygon(n):
+def polygon(n, path="shape"):
     """Regular n-gon in R^2, circumradius 1, first vertex on the +y axis."""
     if n < 3:
-        raise SceneError(f"shape.polygon: a polygon needs at least 3 sides, got {n}")
+        raise SceneError(f"{path}.polygon: a polygon needs at least 3 sides, got {n}")
     ang = np.pi / 2 + 2 * np.pi * np.arange(n) / n
     v = np.stack([np.cos(ang), np.sin(ang)], axis=1)
     return Shape(f"polygon{n}", _centred(v), tuple((a, (a + 1) % n) for a in range(n)))
 
 
-def simplex(k):
+def simplex(k, path="shape"):
     """Regular k-simplex in R^k (k + 1 vertices), circumradius 1."""
     if k < 1:
-        raise SceneError(f"shape.simplex: dimension must be >= 1, got {k}")
+        raise SceneError(f"{path}.simplex: dimension must be >= 1, got {k}")
     e = np.eye(k + 1) - 1.0 / (k + 1)        # centred standard basis of R^{k+1}
     _, _, vt = np.linalg.svd(e)
     v = e @ vt[:k].T                         # coordinates in the hyperplane sum = 0
@@ -72,15 +74,15 @@ def simplex(k):
     return Shape(f"simplex{k}", _centred(v), tuple(combinations(range(k + 1), 2)))
 
 
-def hypercube(k):
-    """Cube [-1, 1]^k scaled to circumradius 1 (square for k = 2)."""
+def hypercube(k, path="shape"):
+    """Cube [-1, 1]^k scaled to circumradius 1 (square for k = 2); edges flip one coordinate."""
     v = np.array(list(product((-1.0, 1.0), repeat=k)))
-    edges = tuple((a, b) for a, b in combinations(range(len(v)), 2)
-                  if np.sum(v[a] != v[b]) == 1)
-    return Shape(f"hypercube{k}", v / np.sqrt(k), edges)
+    n = len(v)
+    edges = tuple((a, a ^ (1 << bit)) for a in range(n) for bit in range(k) if a < a ^ (1 << bit))
+    return Shape(f"hypercube{k}", v / np.sqrt(k), tuple(sorted(edges)))
 
 
-def cross_polytope(k):
+def cross_polytope(k, path="shape"):
     """The 2k points +-e_i in R^k (octahedron for k = 3)."""
     v = np.vstack([np.eye(k), -np.eye(k)])
     edges = tuple((a, b) for a, b in combinations(range(2 * k), 2) if abs(a - b) != k)
@@ -102,15 +104,17 @@ _FAMILIES = {"polygon": polygon, "simplex": simplex,
 
 
 def shape_names():
-    return sorted(_NAMED) + [f"{{{k}: n}}" for k in sorted(_FAMILIES)] + ["{vertices: [...], edges: [...]}"]
+    return (sorted(_NAMED) + [f"{{{k}: n}}" for k in sorted(_FAMILIES)]
+            + ["{vertices: [...], edges: [...]}"])
 
 
-def make_shape(spec, path="shape"):
+def make_shape(spec, path="shape", max_dim=None):
     """Build a Shape from a scene entry.
 
     ``spec`` is a name ("triangle", "tetrahedron", ...), ``{polygon: 5}``,
     ``{simplex: 4}``, ``{hypercube: 3}``, ``{cross_polytope: 4}``, or
-    ``{vertices: [[...], ...], edges: [[0, 1], ...]}`` (edges optional).
+    ``{vertices: [[...], ...], edges: [[0, 1], ...]}`` (edges optional).  Sizes are
+    checked (MAX_VERTICES, ``max_dim``) before anything is built.
     """
     if isinstance(spec, str):
         if spec not in _NAMED:
@@ -118,53 +122,74 @@ def make_shape(spec, path="shape"):
         shape = _NAMED[spec]()
         return Shape(spec, shape.vertices, shape.edges)
     if not isinstance(spec, dict) or not spec:
-        raise SceneError(f"{path}: expected a shape name or a mapping, got {spec!r}")
+        raise SceneError(f"{path}: expected a shape name or a mapping, got {describe(spec)}")
     if "vertices" in spec:
-        extra = set(spec) - {"vertices", "edges", "name"}
-        if extra:
-            raise SceneError(f"{path}.{sorted(extra)[0]}: unknown key")
-        v = check_vertex_array(spec["vertices"], f"{path}.vertices")
-        n = v.shape[0]
-        edges = spec.get("edges")
-        if edges is None:
-            edges = tuple((a, (a + 1) % n) for a in range(n)) if n > 2 else ((0, 1),)
-        else:
-            try:
-                edges = tuple((int(a), int(b)) for a, b in edges)
-            except (TypeError, ValueError):
-                raise SceneError(f"{path}.edges: expected a list of [a, b] vertex index pairs") from None
-            bad = [e for e in edges if not (0 <= e[0] < n and 0 <= e[1] < n)]
-            if bad:
-                raise SceneError(f"{path}.edges: edge {list(bad[0])} refers to a vertex outside 0..{n - 1}")
-        shape = Shape(str(spec.get("name", "custom")), _centred(v), edges)
-        check_distinct_vertices(shape.vertices, path)
-        return shape
+        return _custom_shape(spec, path, max_dim)
     if len(spec) != 1:
-        raise SceneError(f"{path}: expected one of {sorted(_FAMILIES)} or 'vertices', got keys {sorted(spec)}")
+        raise SceneError(f"{path}: expected one of {sorted(_FAMILIES)} or 'vertices', "
+                         f"got keys {sorted(map(str, spec))}")
     (family, n), = spec.items()
     if family not in _FAMILIES:
-        raise SceneError(f"{path}: unknown shape family {family!r}; known: {', '.join(sorted(_FAMILIES))}, vertices")
-    if isinstance(n, bool) or not isinstance(n, int):
-        raise SceneError(f"{path}.{family}: expected an integer, got {n!r}")
-    if family != "polygon" and n < 1:
-        raise SceneError(f"{path}.{family}: dimension must be >= 1, got {n}")
-    return _FAMILIES[family](n)
+        raise SceneError(f"{path}: unknown shape family {family!r}; known: "
+                         f"{', '.join(sorted(_FAMILIES))}, vertices")
+    p = f"{path}.{family}"
+    n = number(n, p, integer=True, minimum=3 if family == "polygon" else 1)
+    shape_dim = 2 if family == "polygon" else n
+    if max_dim is not None and shape_dim > max_dim:
+        raise SceneError(f"{p}: a {family} of dimension {shape_dim} does not fit the scene's "
+                         f"dimension {max_dim}")
+    vertices, _ = shape_vertex_count(family, n)
+    if vertices > MAX_VERTICES:
+        raise SceneError(f"{p}: {count_text(vertices)} vertices; a polytope may have at most "
+                         f"{MAX_VERTICES}")
+    return _FAMILIES[family](n, path)
 
 
-def check_vertex_array(value, path):
-    """A finite (n, k) float array with n >= 2, or a SceneError naming ``path``."""
-    try:
-        v = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise SceneError(f"{path}: expected a list of coordinate lists of equal length") from None
-    if v.ndim != 2 or v.shape[1] < 1:
-        raise SceneError(f"{path}: expected a list of coordinate lists of equal length")
+def _custom_shape(spec, path, max_dim):
+    extra = set(spec) - {"vertices", "edges", "name"}
+    if extra:
+        raise SceneError(f"{path}.{sorted(map(str, extra))[0]}: unknown key")
+    v = check_vertex_array(spec["vertices"], f"{path}.vertices", max_dim=max_dim)
+    n = v.shape[0]
+    edges = spec.get("edges")
+    if edges is None:
+        edges = tuple((a, (a + 1) % n) for a in range(n)) if n > 2 else ((0, 1),)
+    else:
+        rows = len(edges) if isinstance(edges, list) else 0
+        pairs = matrix_rows(edges, f"{path}.edges", rows, 2)
+        if np.any(pairs != np.round(pairs)) or np.any(pairs < 0) or np.any(pairs >= n):
+            raise SceneError(f"{path}.edges: expected pairs [a, b] of vertex indices 0..{n - 1}")
+        edges = tuple((int(a), int(b)) for a, b in pairs)
+    name = spec.get("name", "custom")
+    if not isinstance(name, str):
+        raise SceneError(f"{path}.name: expected text, got {describe(name)}")
+    shape = Shape(name, _centred(v), edges)
+    check_distinct_vertices(shape.vertices, f"{path}.vertices")
+    return shape
+
+
+def check_vertex_array(value, path, dim=None, *, max_dim=None):
+    """A finite (n, k) array, 2 <= n <= MAX_VERTICES, k == dim, k <= max_dim; or SceneError."""
+    want = "a list of vertices, each a list of coordinates of the same length"
+    if not isinstance(value, (list, np.ndarray)) or len(value) == 0:
+        raise SceneError(f"{path}: expected {want}, got {describe(value)}")
+    rows = value.tolist() if isinstance(value, np.ndarray) else value
+    for a, row in enumerate(rows):
+        if not isinstance(row, (list, tuple)) or not row:
+            raise SceneError(f"{path}[{a}]: expected a list of coordinates, got {describe(row)}")
+        if len(row) != len(rows[0]):
+            raise SceneError(f"{path}[{a}]: vertex {a} has {len(row)} coordinate(s), vertex 0 "
+                             f"has {len(rows[0])}")
+    k = len(rows[0])
+    if (dim is not None and k != dim) or (max_dim is not None and k > max_dim):
+        raise SceneError(f"{path}: vertices have {k} coordinates, the scene has dimension "
+                         f"{dim or max_dim}")
+    if len(rows) > MAX_VERTICES:
+        raise SceneError(f"{path}: {len(rows)} vertices; a polytope may have at most "
+                         f"{MAX_VERTICES}")
+    v = matrix_rows(rows, path, len(rows), len(rows[0]), bound=MAX_LENGTH)
     if v.shape[0] < 2:
         raise SceneError(f"{path}: a polytope needs at least 2 vertices, got {v.shape[0]}")
-    bad = np.argwhere(~np.isfinite(v))
-    if bad.size:
-        a, c = bad[0]
-        raise SceneError(f"{path}[{a}][{c}]: coordinate is not finite ({v[a, c]})")
     return v
 
 
@@ -173,9 +198,11 @@ def check_distinct_vertices(v, path, error=SceneError):
     size = np.max(np.linalg.norm(v - v.mean(axis=0), axis=1))
     if size == 0.0:
         raise error(f"{path}: all {len(v)} vertices coincide")
-    diff = np.linalg.norm(v[:, None, :] - v[None, :, :], axis=2)
-    diff[np.diag_indices(len(v))] = np.inf
-    a, b = np.unravel_index(np.argmin(diff), diff.shape)
-    if diff[a, b] <= 1e-12 * size:
+    from scipy.spatial import cKDTree  # O(n log n): a polytope may have thousands of vertices
+    dist, idx = cKDTree(v).query(v, k=2)
+    a = int(np.argmin(dist[:, 1]))
+    b = int(idx[a, 1]) if idx[a, 1] != a else int(idx[a, 0])
+    gap = dist[a, 1]
+    if gap <= 1e-12 * size:
         raise error(f"{path}: vertices {min(a, b)} and {max(a, b)} coincide "
-                         f"(distance {diff[a, b]:.3g}, polytope size {size:.3g})")
+                         f"(distance {gap:.3g}, polytope size {size:.3g})")

@@ -107,15 +107,24 @@ def plan(scene: Scene, method: str | None = None, dt: float | None = None,
         raise PolymatchError(f"dt must be a positive number, got {step}")
     if step > scene.t_end:
         warnings.warn(f"dt = {step:g} is larger than t_end = {scene.t_end:g}: "
-                      "taking one step of t_end")
+                      "taking one step of t_end", stacklevel=2)
         step = scene.t_end
     if check:
         check_stability(meth, scene.model, step)
     return Plan(meth, step, None, reason)
 
 
-def prepare(scene: Scene, plan_: Plan) -> Scene:
-    """Scene in the representation the method needs (projection baselines work on matrices)."""
+def prepare(scene: Scene, plan_: Plan, distributed: bool = False) -> Scene:
+    """Scene in the representation the method needs (projection baselines work on matrices).
+
+    ``distributed`` on a communication graph: the centroids are integrated with the stages
+    (``model.centroids: integrated``).  The exact flow of Prop 2.1 on a graph is a global
+    linear map that reads every agent's centroid at each step; integrated, every exchange
+    stays between in-neighbours (the same model; the two differ by the integrator's error).
+    """
+    m = scene.model
+    if distributed and m.centroids_exact and any(g.graph is not None for g in m.groups):
+        scene = replace(scene, model=replace(m, centroids="integrated"))
     if plan_.method.info.family == "projection" and scene.model.rotations.name == "angle":
         return with_representation(scene, "matrix")
     return scene
@@ -176,7 +185,7 @@ def simulate(scene: Scene, method: str | None = None, dt: float | None = None,
              tolerance: float | None = None, *, samples: Sequence[float] | None = None,
              keep_states: bool = True, progress: Callable[[float, float], None] | None = None,
              stop_when_converged: bool = False, check_stability: bool = True,
-             metrics: bool = True) -> "Trajectory":
+             metrics: bool = True) -> Trajectory:
     """Run the scene centralised; return a ``Trajectory`` with metrics at the sample times.
 
     Fixed-step runs take steps of dt (the last one clipped to t_end); sample times
@@ -224,16 +233,8 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
         kind = "similar (F-1: torque weights s_k/s_i)" if g.scales is not None else \
             "congruent (no scale weights)"
         lines.append(f"group {g.name!r}: {g.size} x {len(g.reference)}-vertex polytope, {kind}")
-    if m.inter_group:
-        lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; "
-                     "centroids integrated "
-                     "with the method's stages (the inter-group force is nonlinear)")
-    elif m.centroids_exact:
-        lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential)")
-    else:
-        lines.append("centroids: integrated with the method's stages "
-                     "(model.centroids = integrated; "
-                     "the exact flow would be cheaper and exact)")
+        lines.append(f"group {g.name!r} graph: {_graph_line(g)}")
+    lines.append(_centroid_line(m, distributed))
     rep = m.rotations
     rep_text = {"angle": "angles (SO(2) is abelian: the first-order model is Kuramoto, "
                          "exp is addition)",
@@ -262,17 +263,64 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
     return lines
 
 
+def _centroid_line(m, distributed: bool) -> str:
+    """How the centroids advance: exact flow (Prop. 2.1) or with the method's stages."""
+    if m.inter_group:
+        return (f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; "
+                "centroids integrated "
+                "with the method's stages (the inter-group force is nonlinear)")
+    if distributed and m.centroids_exact and any(g.graph is not None for g in m.groups):
+        return ("centroids: integrated with the method's stages in a distributed run on a "
+                "graph (the exact Laplacian flow reads every agent; stages keep the "
+                "exchange between in-neighbours)")
+    if m.centroids_exact and any(g.graph is not None for g in m.groups):
+        return ("centroids: exact linear flow of Proposition 2.1 (no inter-group potential);"
+                " on graphs mode by mode of the Laplacian (eigh once, O(N^3); O(N^2 d) "
+                "per step)")
+    if m.centroids_exact:
+        return "centroids: exact linear flow of Proposition 2.1 (no inter-group potential)"
+    if m.centroids == "exact":
+        return ("centroids: integrated with the method's stages (a directed graph: "
+                "its Laplacian is not symmetric; stages keep the exchange between "
+                "in-neighbours)")
+    return ("centroids: integrated with the method's stages (model.centroids = integrated; "
+            "the exact flow would be cheaper and exact)")
+
+
+def _graph_line(g) -> str:
+    """Which graph a group couples on and what an evaluation costs there."""
+    if g.graph is None:
+        return "complete (the paper's mean field S = sum_k O_k: O(N d^3) per evaluation)"
+    text = g.graph.describe()
+    if g.graph.allow_disconnected and g.graph.components.max(initial=0) > 0:
+        text += (f"; {int(g.graph.components.max()) + 1} components (allow_disconnected): "
+                 "the metrics report each one's diameter")
+    return text
+
+
 def convergence_verdict(scene: Scene, diameter: float, converged_at: float | None,
-                        stationarity: float | None = None) -> tuple[int, str]:
-    """(exit code, message) for the end of a run."""
+                        stationarity: float | None = None,
+                        metrics: EnsembleMetrics | None = None) -> tuple[int, str]:
+    """(exit code, message) for the end of a run.
+
+    ``metrics`` (the last sample's) adds the per-component diameters of disconnected graphs.
+    """
     if converged_at is not None:
         return 0, f"converged: matching diameter < {scene.tolerance:g} from t = {converged_at:g}"
     msg = (f"did not converge: matching diameter {diameter:.3e} >= tolerance "
            f"{scene.tolerance:g} at t_end")
+    components = None if metrics is None else metrics.component_diameters
+    for g, diameters in zip(scene.model.groups, components or ()):
+        if diameters is not None:
+            parts = ", ".join(f"{d:.3e}" for d in diameters)
+            msg += f"; group {g.name!r} is disconnected, component diameters [{parts}]"
     if stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
+        graphs = any(g.graph is not None for g in scene.model.groups)
         msg += ("; the rotations sit at an equilibrium that is not consensus "
                 f"(|W| = {stationarity:.1e}),"
-                " e.g. antipodal or splay states of the Lohe model")
+                + (" e.g. a twisted state theta_i = 2 pi q i / N of a ring (stable on graphs"
+                   " where the complete graph has none), antipodal or splay states" if graphs
+                   else " e.g. antipodal or splay states of the Lohe model"))
     if not scene.expect_convergence:
         return 0, msg + " (the scene expects this: convergence.expected = false)"
     return EXIT_NOT_CONVERGED, msg

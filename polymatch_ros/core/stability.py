@@ -32,16 +32,24 @@ def test_matrices(model: Model) -> list[tuple[str, np.ndarray, str]]:
 
     Rotations in algebra coordinates xi: first order xi' = -k xi / gamma, second order
     m xi'' = -gamma xi' - k xi, with k = kappa * max_i(mean s / s_i) (F-1 weights; 1 if
-    congruent).  Integrated (F-2) centroids add k = kappa + kappa_2.  The mean mode (k = 0)
-    carries the pure damping -gamma/m.  Exactly solved centroids contribute nothing.
+    congruent).  On a communication graph k = kappa * max |lambda| of its Laplacian with the
+    F-1 weights (``Graph.coupling_rate``; 1 for the complete graph).  Integrated (F-2)
+    centroids add k = kappa * rate + kappa_2.  The mean mode (k = 0) carries the pure damping
+    -gamma/m.  Exactly solved centroids contribute nothing.
     """
     out = []
     m, gamma = model.mass, model.gamma
+    centroid_rate = 0.0
     for g in model.groups:
-        w = 1.0 if g.scales is None else float(np.mean(g.scales) / np.min(g.scales))
+        centroid_rate = max(centroid_rate, 1.0 if g.graph is None else g.graph.coupling_rate())
+        if g.graph is not None:
+            w = g.graph.coupling_rate(g.scales)
+            weights = f" on the {g.graph.kind} graph (Laplacian spectral radius {w:.3g})"
+        else:
+            w = 1.0 if g.scales is None else float(np.mean(g.scales) / np.min(g.scales))
+            weights = (f"; scale ratios make the torque weights s_k/s_i up to {w:.3g}"
+                       if w > 1.0 + RATIO_SLACK else "")
         k = model.kappa * w
-        weights = (f"; scale ratios make the torque weights s_k/s_i up to {w:.3g}"
-                   if w > 1.0 + RATIO_SLACK else "")
         if model.order == 1:
             out.append(("rotations", np.array([[-k / gamma]]),
                         f"the coupling sets the rate kappa/gamma = {k / gamma:.3g}{weights}"))
@@ -54,7 +62,7 @@ def test_matrices(model: Model) -> list[tuple[str, np.ndarray, str]]:
                         f"{np.sqrt(k / m - (gamma / (2 * m)) ** 2):.3g} rad/s")
             out.append(("rotations", a, what + weights))
     if not model.centroids_exact:
-        k = model.kappa + model.kappa_2
+        k = model.kappa * centroid_rate + model.kappa_2
         a = (np.array([[-k / gamma]]) if model.order == 1
              else np.array([[0.0, 1.0], [-k / m, -gamma / m]]))
         out.append(("centroids", a, f"the centroid coupling kappa + kappa_2 = {k:.3g}"))

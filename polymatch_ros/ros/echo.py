@@ -12,11 +12,12 @@ topic still prints its last value.  It runs in the caller's ROS environment
 """
 
 import importlib
+import os
 import sys
 import time
 
 from ..core.errors import ParameterError, PolymatchError
-from .ros_env import teardown_watchdog
+from .process import ros_main
 
 
 def message_to_lines(msg, indent=""):
@@ -27,7 +28,9 @@ def message_to_lines(msg, indent=""):
         if hasattr(value, "get_fields_and_field_types"):
             lines.append(f"{indent}{name}:")
             lines.extend(message_to_lines(value, indent + "  "))
-        elif isinstance(value, (list, tuple)) or (hasattr(value, "__len__") and not isinstance(value, str)):
+        elif isinstance(value, (list, tuple)) or (
+            hasattr(value, "__len__") and not isinstance(value, str)
+        ):
             items = list(value)
             if items and hasattr(items[0], "get_fields_and_field_types"):
                 lines.append(f"{indent}{name}:")
@@ -36,7 +39,9 @@ def message_to_lines(msg, indent=""):
                     lines.append(f"{indent}- {sub[0].strip()}" if sub else f"{indent}-")
                     lines.extend(sub[1:])
             else:
-                shown = ", ".join(repr(float(v)) if isinstance(v, float) else str(v) for v in items[:16])
+                shown = ", ".join(
+                    repr(float(v)) if isinstance(v, float) else str(v) for v in items[:16]
+                )
                 more = ", ..." if len(items) > 16 else ""
                 lines.append(f"{indent}{name}: [{shown}{more}]")
         elif isinstance(value, float):
@@ -52,52 +57,79 @@ def message_class(type_name):
     return getattr(importlib.import_module(f"{pkg}.msg"), cls)
 
 
-def echo(topic, count=None, until_below=None, timeout=None, stream=sys.stdout):
-    import rclpy
-    from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    rclpy.init()
-    node = Node("polymatch_echo")
-    code = 1
-    try:
-        deadline = None if timeout is None else time.monotonic() + timeout
+class Echo:
+    """Print every message of ``topic`` until --count, --until-below or --timeout (exit 1)."""
+
+    def __init__(self, topic, count=None, until_below=None, timeout=None, stream=sys.stdout):
+        from rclpy.node import Node
+
+        self.node = Node(f"echo_{os.getpid()}")
+        self.topic, self.count, self.until_below, self.timeout = topic, count, until_below, timeout
+        self.stream = stream
+        self.deadline = None if timeout is None else time.monotonic() + timeout
+        self.seen = 0
+        self.done = False
+
+    def _spin(self):
+        import rclpy
+
+        rclpy.spin_once(self.node, timeout_sec=0.1)
+
+    def _qos(self):
+        """The publishers' type, and a QoS that matches them (a latched topic's last value too)."""
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
         infos = []
         while not infos:
-            infos = node.get_publishers_info_by_topic(topic)
-            if deadline is not None and time.monotonic() > deadline:
-                raise PolymatchError(f"no publisher on {topic} within {timeout:g} s")
-            rclpy.spin_once(node, timeout_sec=0.1)
-        cls = message_class(infos[0].topic_type)
+            infos = self.node.get_publishers_info_by_topic(self.topic)
+            if self.deadline is not None and time.monotonic() > self.deadline:
+                raise PolymatchError(f"no publisher on {self.topic} within {self.timeout:g} s")
+            self._spin()
         latched = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
         reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
-        qos = QoSProfile(depth=10,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-                         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT)
-        seen = [0]
-        done = [False]
+        qos = QoSProfile(
+            depth=10,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        )
+        return message_class(infos[0].topic_type), qos
 
-        def receive(msg):
-            seen[0] += 1
-            stream.write("\n".join(message_to_lines(msg)) + "\n---\n")
-            stream.flush()
-            if count is not None and seen[0] >= count:
-                done[0] = True
-            if until_below is not None and hasattr(msg, "data") and float(msg.data) < until_below:
-                done[0] = True
+    def _receive(self, msg):
+        self.seen += 1
+        self.stream.write("\n".join(message_to_lines(msg)) + "\n---\n")
+        self.stream.flush()
+        if self.count is not None and self.seen >= self.count:
+            self.done = True
+        if (
+            self.until_below is not None
+            and hasattr(msg, "data")
+            and float(msg.data) < self.until_below
+        ):
+            self.done = True
 
-        node.create_subscription(cls, topic, receive, qos)
-        while not done[0]:
-            if deadline is not None and time.monotonic() > deadline:
-                raise PolymatchError(f"{topic}: stopped after {timeout:g} s and {seen[0]} message(s)"
-                                     + (f", none below {until_below:g}" if until_below is not None else ""))
-            rclpy.spin_once(node, timeout_sec=0.1)
-        code = 0
-    finally:
-        with teardown_watchdog():
-            node.destroy_node()
-            if rclpy.ok():
-                rclpy.shutdown()
-    return code
+    def run(self):
+        cls, qos = self._qos()
+        self.node.create_subscription(cls, self.topic, self._receive, qos)
+        while not self.done:
+            if self.deadline is not None and time.monotonic() > self.deadline:
+                below = (
+                    f", none below {self.until_below:g}" if self.until_below is not None else ""
+                )
+                raise PolymatchError(
+                    f"{self.topic}: stopped after {self.timeout:g} s and "
+                    f"{self.seen} message(s){below}"
+                )
+            self._spin()
+        return 0
+
+    def destroy(self):
+        self.node.destroy_node()
+
+
+def echo(topic, count=None, until_below=None, timeout=None, stream=sys.stdout):
+    return ros_main(
+        lambda argv: Echo(topic, count, until_below, timeout, stream), "polymatch", ["polymatch"]
+    )
 
 
 def cmd_echo(args):
@@ -110,6 +142,8 @@ def add_parser(sub):
     p = sub.add_parser("echo", help="print messages of a topic (stand-in for `ros2 topic echo`)")
     p.add_argument("topic")
     p.add_argument("--count", type=int, help="exit after this many messages")
-    p.add_argument("--until-below", type=float, metavar="X", help="exit 0 once a Float64 value is below X")
+    p.add_argument(
+        "--until-below", type=float, metavar="X", help="exit 0 once a Float64 value is below X"
+    )
     p.add_argument("--timeout", type=float, help="give up after this many seconds (exit 1)")
     p.set_defaults(func=cmd_echo)

@@ -8,9 +8,10 @@ the user has set them.  The shipped Fast DDS profile shortens discovery.
 
 import contextlib
 import os
-import re
 
-PROFILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "resources", "fastdds_profile.xml")
+PROFILE = os.path.join(
+    os.path.dirname(os.path.abspath(__file__)), "resources", "fastdds_profile.xml"
+)
 
 
 # Realtime ensembles run over UDP (on loopback) only.  Fast DDS 2.14's shared-memory transport
@@ -49,6 +50,7 @@ def reserved_domain_id():
         yield int(os.environ["ROS_DOMAIN_ID"])
         return
     from domain_coordinator import domain_id
+
     with domain_id() as dom:
         yield dom
 
@@ -56,8 +58,7 @@ def reserved_domain_id():
 # -- bounded teardown ----------------------------------------------------------------------
 
 TEARDOWN_SECONDS = 10.0
-TEARDOWN_MARK = "Timeout ("        # the first line faulthandler writes when the watchdog fires
-FINAL_LINE = re.compile(r"^(agent [0-9,]+|monitor): (?!error)")
+TEARDOWN_MARK = "Timeout ("  # the first line faulthandler writes when the watchdog fires
 
 
 @contextlib.contextmanager
@@ -71,6 +72,7 @@ def teardown_watchdog(seconds=TEARDOWN_SECONDS):
     Enter it after the work is done and reported, around the teardown only.
     """
     import faulthandler
+
     faulthandler.dump_traceback_later(seconds, exit=True)
     try:
         yield
@@ -79,6 +81,11 @@ def teardown_watchdog(seconds=TEARDOWN_SECONDS):
 
 
 def hung_in_teardown(code, lines):
-    """True when a child reported its final line, then was ended by the teardown watchdog."""
-    return (code == 1 and any(line.startswith(TEARDOWN_MARK) for line in lines)
-            and any(FINAL_LINE.match(line) for line in lines))
+    """True when a child printed its final run record, then was ended by the teardown watchdog."""
+    from .wire import run_records
+
+    return (
+        code == 1
+        and any(line.startswith(TEARDOWN_MARK) for line in lines)
+        and any(rec.finished for rec in run_records(lines))
+    )

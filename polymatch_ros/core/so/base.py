@@ -1,14 +1,14 @@
 """The interface of the batched SO(d) representations, and the polar factor they share."""
 
 from collections.abc import Sequence
-from typing import Union
 
 import numpy as np
 
 #: a batch of N rotations, or of N so(d) elements, in a representation's own layout
 Array = np.ndarray
-#: S = sum_k w_k O_k: a complex number for angles, a (d, d) matrix otherwise
-MeanField = Union[complex, np.ndarray]
+#: S = sum_k w_k O_k: a complex number for angles, a (d, d) matrix otherwise; on a graph one
+#: field per agent, S_i = sum_k w_ik O_k (``neighbour_fields``), in the rotations' own layout
+MeanField = complex | np.ndarray
 
 
 class RotationGroup:
@@ -97,9 +97,17 @@ class RotationGroup:
         """S = sum_k w_k O_k (representation-specific)."""
         raise NotImplementedError
 
+    def neighbour_fields(self, g: Array, weights) -> MeanField:
+        """S_i = sum_k w_ik O_k for every row i of a sparse (n, N) matrix w: one product w @ O.
+
+        The per-agent fields of a communication graph (``core.graph``), O(|E| d^2).
+        """
+        raise NotImplementedError
+
     def coupling(self, g: Array, s: MeanField) -> Array:
         """The skew kernel S O_i^T - O_i S^T of the Lohe torque (A-1, A-2), as an algebra array.
 
+        ``s`` is one mean field for all rows or one field per row (``neighbour_fields``).
         Only ``model.lohe_torque`` calls it: that is where gains and F-1 weights are applied.
         """
         raise NotImplementedError

@@ -93,6 +93,10 @@ class SO2(RotationGroup):
             return complex(_add(c), _add(s))      # more than summing a few angles
         return complex(c @ weights, s @ weights)
 
+    def neighbour_fields(self, g: Array, weights) -> MeanField:
+        c, s = self._cos_sin(g)
+        return weights @ (c + 1j * s)            # complex per row: the same formula below
+
     def coupling(self, g: Array, s: MeanField) -> Array:
         # S R(theta)^T - R(theta) S^T = 2 Im(Z e^{-i theta}) J
         c, sn = self._cos_sin(g)

@@ -141,7 +141,14 @@ class SO3(RotationGroup):
         s = flat.sum(axis=1) if weights is None else flat @ weights
         return s.reshape(3, 3)
 
+    def neighbour_fields(self, g: Array, weights) -> MeanField:
+        flat = g.reshape(9, -1)
+        return np.ascontiguousarray((weights @ flat.T).T).reshape(3, 3, -1)    # (3, 3, n) SoA
+
     def coupling(self, g: Array, s: MeanField) -> Array:
+        if np.ndim(s) == 3:                      # one field per row: (S_n O_n^T)[:, c] per n
+            a0, a1, a2 = (np.einsum("ijn,jn->in", s, g[c]) for c in range(3))
+            return np.array([a1[2] - a2[1], a2[0] - a0[2], a0[1] - a1[0]])
         # column c of S O_n^T is S (row c of O_n): three (3x3)(3xN) BLAS products
         a0, a1, a2 = s @ g[0], s @ g[1], s @ g[2]
         return np.array([a1[2] - a2[1], a2[0] - a0[2], a0[1] - a1[0]])

@@ -123,8 +123,15 @@ class SOn(RotationGroup):
         w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
         return (w @ g.reshape(n, -1)).reshape(self.dim, self.dim)
 
+    def neighbour_fields(self, g: Array, weights) -> MeanField:
+        d = self.dim
+        return np.asarray(weights @ g.reshape(len(g), d * d)).reshape(-1, d, d)
+
     def coupling(self, g: Array, s: MeanField) -> Array:
         d = self.dim
+        if np.ndim(s) == 3:                      # one field per row
+            b = g @ np.swapaxes(s, 1, 2)
+            return np.swapaxes(b, 1, 2) - b
         b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T)).reshape(-1, d, d)  # O S^T
         return np.swapaxes(b, 1, 2) - b
 

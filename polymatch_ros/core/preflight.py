@@ -1,0 +1,77 @@
+"""Before a run: refuse options that would be ignored and runs that would not fit.
+
+``check_run`` resolves the integrator as ``simulate.plan`` will (explicit choice > scene
+file > recommendation) and then refuses, with one line naming the option:
+
+- ``--dt`` for the adaptive integrator, ``--tolerance`` for a fixed-step one (a scene's own
+  ``integrator.dt``/``tolerance`` that ``method: auto`` does not use gives a warning);
+- a fixed-step run of more than ``integrator.max_steps`` steps;
+- a run whose estimated memory (agents x vertices, kept samples, the step grid) exceeds
+  the limit (``--memory-limit``).
+"""
+
+import warnings
+from dataclasses import replace
+
+from .errors import ParameterError, SceneError
+from .limits import FLOAT, Budget
+from .scene import DEFAULT_DT, check_step_count
+
+
+def resolve_method(scene, method=None, tolerance=None, distributed=False):
+    """(name, how it was chosen) exactly as ``simulate.plan`` resolves it."""
+    from .simulate import recommend
+    name = method or scene.integrator.method
+    if name != "auto":
+        return name, "chosen explicitly" if method else "from the scene file"
+    if tolerance is not None:
+        scene = replace(scene, integrator=replace(scene.integrator, tolerance=tolerance))
+    name, reason = recommend(scene, distributed)
+    return name, f"auto picked it: {reason}"
+
+
+def check_run(scene, method=None, dt=None, tolerance=None, *, distributed=False,
+              kept_samples=0, limits=None):
+    """Refuse (ParameterError/SceneError) or warn before any step is taken; return the steps."""
+    name, why = resolve_method(scene, method, tolerance, distributed)
+    spec = scene.integrator
+    if name == "adaptive":
+        if dt is not None:
+            raise ParameterError(f"--dt: the adaptive integrator chooses its own steps ({why}); "
+                                 f"use --tolerance, or pick a fixed-step method with -i")
+        if spec.dt is not None:
+            warnings.warn(f"integrator.dt = {spec.dt:g} is not used: the adaptive integrator "
+                          f"runs ({why})", stacklevel=2)
+        steps = 0
+    else:
+        if tolerance is not None:
+            raise ParameterError(f"--tolerance: {name} takes fixed steps ({why}); use --dt, or "
+                                 f"-i adaptive for a tolerance")
+        if spec.tolerance is not None:
+            warnings.warn(f"integrator.tolerance = {spec.tolerance:g} is not used: {name} takes "
+                          f"fixed steps ({why})", stacklevel=2)
+        step = dt if dt is not None else (spec.dt or DEFAULT_DT)
+        where = "--dt" if dt is not None else "integrator.dt"
+        try:
+            steps = check_step_count(scene.t_end, step, spec.max_steps, where)
+        except SceneError as exc:
+            if dt is None:
+                raise
+            raise ParameterError(str(exc)) from None
+    _check_memory(scene, steps, kept_samples, limits)
+    return steps
+
+
+def _check_memory(scene, steps, kept_samples, limits):
+    budget = Budget(limits)
+    model = scene.model
+    for gi, g in enumerate(model.groups):
+        budget.charge_agents(f"groups[{gi}]", g.size, len(g.reference), model.dim, model.order)
+    budget.charge("time.samples", len(scene.samples) * 2048,
+                  f"metrics at {len(scene.samples)} samples")
+    if kept_samples:
+        per_state = model.n_agents * (model.dim + model.dim ** 2) * model.order * FLOAT
+        budget.charge("time.samples", 3.0 * kept_samples * per_state,
+                      f"{kept_samples} states kept for --save/--figure")
+    if steps:
+        budget.charge("integrator.dt", 3.0 * steps * FLOAT, f"a grid of {steps} steps")

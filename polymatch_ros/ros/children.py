@@ -1,0 +1,303 @@
+"""The runner's processes: supervised children, the partition of agents into processes, and
+the DDS participant limit of LOCALHOST discovery."""
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import deque
+
+from ..core.errors import ParameterError, PolymatchError
+from . import wire
+from .ros_env import hung_in_teardown
+
+
+def _die_with_parent():
+    """In the child, before exec: SIGTERM when the runner dies (Linux): nothing outlives it."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+class Child:
+    """A supervised process: last lines of output kept (shown on failure); ended by its PID."""
+
+    def __init__(self, name, argv, env):
+        self.name = name
+        self.proc = subprocess.Popen(
+            argv,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+            text=True,
+            bufsize=1,
+            preexec_fn=_die_with_parent,
+        )
+        self.lines = deque(maxlen=200)
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    @property
+    def pid(self):
+        return self.proc.pid
+
+    def poll(self):
+        return self.proc.poll()
+
+    def stop(self, grace=3.0):
+        """SIGINT, then SIGTERM, then SIGKILL — each to this child's PID only."""
+        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
+            if self.proc.poll() is not None:
+                break
+            try:
+                os.kill(self.proc.pid, sig)
+            except ProcessLookupError:
+                break
+            try:
+                self.proc.wait(timeout=wait)
+            except subprocess.TimeoutExpired:
+                continue
+        self.thread.join(timeout=1.0)
+        return self.proc.poll()
+
+    def tail(self, n=5):
+        return list(self.lines)[-n:]
+
+    def hung_in_teardown(self):
+        """Reported its final line, then its DDS teardown hung and its watchdog ended it."""
+        return hung_in_teardown(self.proc.poll(), list(self.lines))
+
+    def ended_well(self):
+        return self.proc.poll() == 0 or self.hung_in_teardown()
+
+    def records(self):
+        """The run records this child printed (``wire.run_records``)."""
+        return wire.run_records(list(self.lines))
+
+
+def partition(agents, k):
+    """The agents (a count, or a list of indices) in consecutive processes of at most ``k``."""
+    agents = list(range(agents)) if isinstance(agents, int) else list(agents)
+    return [agents[s : s + k] for s in range(0, len(agents), k)]
+
+
+def parse_only(text, n_agents):
+    """``--only 0-7,12`` -> the sorted agent indices it names, each in 0..n_agents-1.
+
+    Raises ParameterError (one line) for anything else.
+    """
+    spec = (text or "").strip()
+    chosen = set()
+    for part in spec.split(","):
+        first, dash, last = (piece.strip() for piece in part.partition("-"))
+        if not _index(first) or (dash and not _index(last)):
+            raise ParameterError(
+                f"--only {spec!r}: list agent indices and ranges, e.g. --only 0-7,12"
+            )
+        low, high = int(first), int(last) if dash else int(first)
+        if low > high:
+            raise ParameterError(f"--only {spec!r}: the range {part.strip()} runs backwards")
+        if high >= n_agents:
+            raise ParameterError(
+                f"--only {spec!r}: agent {high} is not in 0..{n_agents - 1} "
+                f"(the scene has {n_agents} agents)"
+            )
+        chosen.update(range(low, high + 1))
+    return sorted(chosen)
+
+
+def _index(text):
+    return text.isascii() and text.isdigit()
+
+
+def describe_agents(agents):
+    """[0, 1, 2, 3, 12] -> '0-3,12' (the --only form)."""
+    runs, start = [], None
+    for position, agent in enumerate(agents):
+        start = agent if start is None else start
+        if position + 1 == len(agents) or agents[position + 1] != agent + 1:
+            runs.append(f"{start}" if start == agent else f"{start}-{agent}")
+            start = None
+    return ",".join(runs)
+
+
+# rmw_fastrtps, under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, probes the first 32 participant
+# ports on 127.0.0.1 (its UDP maxInitialPeersRange): two participants beyond that never meet.
+LOCALHOST_PARTICIPANTS = 32
+
+
+def fewest_agents_per_process(n_agents, own):
+    """Agents per process that keep ``own`` + the agent processes within LOCALHOST_PARTICIPANTS."""
+    return -(-n_agents // (LOCALHOST_PARTICIPANTS - own))
+
+
+def _agents_per_process(args, n_agents, localhost):
+    """-k as given (checked against the participant limit), else 1 if it fits, else the fewest."""
+    own = 1 + (1 if args.monitor else 0)  # the runner's node, the monitor
+    need = fewest_agents_per_process(n_agents, own)
+    if args.agents_per_process is None:
+        if localhost and need > 1:
+            if not args.quiet:
+                print(
+                    f"polymatch run: {n_agents} agents + {own} own processes exceed the "
+                    f"{LOCALHOST_PARTICIPANTS} DDS participants LOCALHOST discovery reaches: "
+                    f"{need} agents per process (-k {need})",
+                    file=sys.stderr,
+                )
+            return need
+        return 1
+    procs = -(-n_agents // args.agents_per_process)
+    if localhost and procs + own > LOCALHOST_PARTICIPANTS:
+        raise PolymatchError(
+            f"{procs} agent processes + {own} own = {procs + own} DDS participants, but LOCALHOST "
+            f"discovery reaches {LOCALHOST_PARTICIPANTS} per domain (rmw_fastrtps' initial-peer "
+            f"range); use -k {need} or more"
+        )
+    return args.agents_per_process
+
+
+def stop_all(children, monitor, watcher):
+    """End every child by its PID; the monitor last, after the watcher heard its last reports."""
+    for c in children:
+        c.stop()
+    if monitor is not None:
+        t0 = time.monotonic()
+        while watcher is not None and time.monotonic() - t0 < 0.5:
+            watcher.spin(0.05)
+        monitor.stop()
+
+
+# How long the host that prints the summary waits, after its own agents ended, for the latched
+# final poses: of its own agents (in flight), of the agents on other hosts (still finishing).
+FINAL_POSE_SECONDS = 3.0
+REMOTE_FINAL_POSE_SECONDS = 30.0
+
+
+class Supervision:
+    """The runner's loop: progress, start (realtime), stop on convergence, failures, the end.
+
+    ``args.lead`` (this host runs the monitor or every agent) starts a realtime ensemble and
+    waits for the final poses of all agents; ``args.agents`` are the agents of this host.
+    """
+
+    def __init__(self, args, scene, the_plan, watcher, children, monitor, progress):
+        self.args, self.scene, self.plan = args, scene, the_plan
+        self.watcher, self.children, self.monitor, self.progress = (
+            watcher,
+            children,
+            monitor,
+            progress,
+        )
+        self.rounds_per_step = (
+            1 if args.mode == "realtime" else max(1, the_plan.method.info.rounds)
+        )
+        self.rate_mark, self.rps = None, 0.0
+        self.below_since, self.stop_sent = None, 0.0
+        self.graph_checked = False
+
+    def failure(self):
+        """The first child that ended badly, as (code, message), or None."""
+        failed = [c for c in self.children if not c.ended_well() and c.poll() is not None]
+        if (
+            self.monitor is not None
+            and not self.monitor.ended_well()
+            and self.monitor.poll() is not None
+        ):
+            failed.append(self.monitor)
+        if not failed:
+            return None
+        c = failed[0]
+        detail = " | ".join(line for line in c.tail(3) if line.strip())
+        return 1, f"{c.name} (pid {c.pid}) exited with code {c.poll()}: {detail}"
+
+    def check_graph(self):
+        """Once every agent is up: its node and the monitor are in the ensemble's namespace."""
+        if self.graph_checked or not self.watcher.agents_up():
+            return
+        names = [c.name for c in self.children] + (["monitor"] if self.monitor is not None else [])
+        self.graph_checked = self.watcher.check_graph(names)
+
+    def start_clock(self):
+        """Realtime: once every agent is up, 'start <epoch>' for all; repeated (same epoch) each
+        second while an agent has not begun stepping - one whose control reader matched late
+        would otherwise wait forever (agents take the first 'start' only)."""
+        now = time.monotonic()
+        if self.epoch is None:
+            if self.watcher.agents_up():
+                self.epoch, self.start_sent = time.time() + 0.5, now
+                self.watcher.start(self.epoch)
+        elif now - self.start_sent > 1.0 and any(
+            r.steps == 0 and not r.finished for r in self.watcher.agents.values()
+        ):
+            self.start_sent = now
+            self.watcher.start(self.epoch)
+
+    def watch(self, interrupted, start):
+        watcher, args = self.watcher, self.args
+        self.epoch, self.start_sent = None, 0.0
+        while True:
+            watcher.spin(0.05)
+            if args.mode == "realtime" and args.lead:
+                self.start_clock()
+            self.check_graph()
+            if interrupted:
+                self.progress.done()
+                return 130, "interrupted: stopped every process"
+            failed = self.failure()
+            if failed:
+                self.progress.done()
+                return failed
+            if all(c.ended_well() for c in self.children):
+                return self.await_final_poses()
+            if time.monotonic() > start + args.timeout:
+                self.progress.done()
+                return 1, f"timed out after {args.timeout:g} s (raise --timeout)"
+            self.show_progress()
+
+    def await_final_poses(self):
+        """(0, "") once the lead host has every agent's final pose (other hosts: at once)."""
+        if not self.args.lead:
+            return 0, ""
+        remote = len(self.args.agents) < self.scene.model.n_agents
+        seconds = REMOTE_FINAL_POSE_SECONDS if remote else FINAL_POSE_SECONDS
+        drain = time.monotonic() + seconds
+        while time.monotonic() < drain and not self.watcher.have_final():
+            self.watcher.spin(0.05)
+        if remote and not self.watcher.have_final():
+            missing = sorted(set(range(self.scene.model.n_agents)) - set(self.watcher.poses))
+            return 1, (
+                f"no final pose from agents {describe_agents(missing) or '(velocities)'} "
+                f"within {seconds:g} s after the agents of this host ended"
+            )
+        return 0, ""
+
+    def show_progress(self):
+        t, d = self.watcher.ensemble_time(), self.watcher.diameter
+        if t is None or d is None:
+            return
+        now = time.monotonic()
+        if self.rate_mark is None or t < self.rate_mark[1]:
+            self.rate_mark = (now, t)  # (re)start the rate where the ensemble's time is
+        elif now - self.rate_mark[0] > 1.0:
+            steps = (t - self.rate_mark[1]) / max(self.plan.dt, 1e-12)
+            self.rps = steps * self.rounds_per_step / (now - self.rate_mark[0])
+            self.rate_mark = (now, t)
+        self.progress(t, d, f"  {self.rps:7.1f} rounds/s")
+        if d < self.scene.tolerance and self.watcher.all_heard():
+            self.below_since = t if self.below_since is None else self.below_since
+            if t - self.below_since >= self.args.hold and now - self.stop_sent > 0.5:
+                self.watcher.stop()
+                self.stop_sent = now
+        else:
+            self.below_since = None

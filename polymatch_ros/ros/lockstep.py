@@ -1,0 +1,273 @@
+"""Lockstep: agents advance in rounds and exchange exactly what the integrator's stages need.
+
+Every stage of every step is one round: each process publishes its agents' stage values
+and waits for every peer's of the same round, so the distributed trajectory equals the
+centralised simulator's for the same method and step, to round-off (Theorems 4.1/4.2 are
+then the simulator's).
+"""
+
+import time
+from collections import defaultdict
+
+from ..core.simulate import drive, step_grid
+from . import wire
+from .agent_node import AgentBase
+from .exchange import RoundTimeout, lean_node, quiet_events
+
+
+class LockstepExchange:
+    """Stage rounds: publish the local stage rows, wait for every peer's message of the same round.
+
+    Runs on its own lean node and executor (``lean_node``); ``spin_once`` waits on nothing but
+    the peers' stage topics, whose names the agent node (``resolver``) resolves.
+    """
+
+    def __init__(self, resolver, layout, run_id, rot_tol, drops, t_max):
+        from std_msgs.msg import Float64MultiArray
+
+        self.node, self.executor = lean_node(
+            resolver.get_name() + "_stages", resolver.get_namespace()
+        )
+        self.layout, self.run_id, self.drops = layout, int(run_id), drops
+        self.model = layout.model
+        self.grp = self.model.rotations
+        self.rot_tol, self.t_max = rot_tol, t_max
+        pub_events, sub_events = quiet_events()
+        self.pubs = {
+            a: wire.publisher(
+                self.node, "stage", agent=a, resolver=resolver, event_callbacks=pub_events
+            )
+            for a in layout.local
+        }
+        self._out = {
+            a: Float64MultiArray() for a in layout.local
+        }  # reused: rclpy copies on publish
+        self.inbox = defaultdict(dict)  # agent -> {(step, stage): Stage}
+        self.current = (0, 0)
+        self.stop_step = None  # graph runs: the step after which every agent stops
+        self.subs = [
+            wire.subscription(
+                self.node,
+                "stage",
+                self._callback(a),
+                agent=a,
+                resolver=resolver,
+                event_callbacks=sub_events,
+            )
+            for a in layout.peers
+        ]
+        self.publish_time = 0.0  # seconds spent publishing stages (for the diagnostics)
+        self.wait_time = 0.0  # seconds spent waiting for (and taking) the peers' stages
+
+    def _callback(self, agent):
+        def receive(msg):
+            stage, reason = wire.decode_stage(
+                msg, self.grp, self.model.dim, self.run_id, agent, self.rot_tol, self.t_max
+            )
+            if stage is None:
+                self.drops(f"agent {agent}", reason)
+                return
+            key = (stage.step, stage.stage)
+            if key < self.current:
+                self.drops(f"agent {agent}", "stale round (a stamp from the past)")
+                return
+            self.inbox[agent][key] = stage
+
+        return receive
+
+    def matched(self):
+        """All peers' publishers matched, and all expected remote subscribers matched."""
+        subs_ok = all(s.get_publisher_count() >= 1 for s in self.subs)
+        pubs_ok = all(
+            p.get_subscription_count() >= self.layout.expected_subscribers(a)
+            for a, p in self.pubs.items()
+        )
+        return subs_ok and pubs_ok
+
+    def missing_peers(self):
+        return [a for a, s in zip(self.layout.peers, self.subs) if s.get_publisher_count() < 1]
+
+    def _stop_flags(self, stop_flag):
+        """Header flags: FLAG_STOP, on a graph with the agreed stop step in the bits above it."""
+        if not self.layout.sparse:
+            return wire.FLAG_STOP if stop_flag else 0
+        return 0 if self.stop_step is None else wire.FLAG_STOP | (self.stop_step << 1)
+
+    def _agree_stop(self, key, stop_flag):
+        """On a graph a stop spreads one hop per round: min-consensus on a step far enough
+        ahead (n_agents + 1 steps) that every agent knows it before reaching it.
+
+        True from that step on."""
+        step = key[0]
+        targets = [step + self.model.n_agents + 1] if stop_flag else []
+        for a in self.layout.peers:
+            flags = self.inbox[a][key].flags
+            if flags & wire.FLAG_STOP:
+                targets.append(flags >> 1)
+        if self.stop_step is not None:
+            targets.append(self.stop_step)
+        self.stop_step = min(targets, default=None)
+        return self.stop_step is not None and step >= self.stop_step
+
+    def publish(self, step, stage, request, stop_flag):
+        flags = self._stop_flags(stop_flag)
+        st = request.stage
+        for gi in self.layout.local_groups:
+            gs = st.groups[gi]
+            g = self.model.groups[gi]
+            for r, row in enumerate(self.layout.rows[gi]):
+                fields = {"rot": wire.rot_values(self.grp, self.grp.take(gs.rot, [r]))}
+                if "x" in request.fields:
+                    fields["x"] = gs.x[r].tolist()
+                if "v" in request.fields and gs.v is not None:
+                    fields["v"] = gs.v[r].tolist()
+                a = g.start + row
+                wire.encode_stage(self._out[a], self.run_id, a, step, stage, flags, st.t, fields)
+                self.pubs[a].publish(self._out[a])
+
+    def spin_once(self, timeout):
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def round(self, step, stage, request, stop_flag, timeout):
+        """Publish, wait, assemble: returns (ensemble, stop requested by anyone)."""
+        key = (step, stage)
+        self.current = key
+        t0 = time.perf_counter()
+        self.publish(step, stage, request, stop_flag)
+        t1 = time.perf_counter()
+        self.publish_time += t1 - t0
+        deadline = time.monotonic() + timeout
+        waiting = [a for a in self.layout.peers if key not in self.inbox[a]]
+        while waiting:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise RoundTimeout(
+                    f"lockstep round (step {step}, stage {stage}) timed out after "
+                    f"{timeout:g} s waiting for agent(s) {', '.join(map(str, waiting))}"
+                )
+            self.executor.spin_once(timeout_sec=min(left, 0.5))
+            waiting = [a for a in waiting if key not in self.inbox[a]]
+        self.wait_time += time.perf_counter() - t1
+        if self.layout.sparse:
+            stop = self._agree_stop(key, stop_flag)
+        else:
+            stop = stop_flag or any(
+                self.inbox[a][key].flags & wire.FLAG_STOP for a in self.layout.peers
+            )
+        return self._assemble(key, request), stop
+
+    def _assemble(self, key, request):
+        """Per group the peers' stage rows and the local ones (None for groups not needed)."""
+        model, out = self.model, []
+        with_v = "v" in request.fields and model.order == 2
+        for gi, g in enumerate(model.groups):
+            if gi not in self.layout.groups_needed:
+                out.append(None)
+                continue
+            own = gi in self.layout.local_groups  # other groups: only centroids are used (F-2)
+            rows = {
+                a - g.start: wire.Row(m.x if m.x is not None else 0.0, m.rot, m.v)
+                for a in g.indices
+                if (m := self.inbox[a].get(key)) is not None
+            }
+            local = (self.layout.rows[gi], request.stage.groups[gi]) if own else None
+            # on a graph only the in-neighbours' rows are present (``index`` names them)
+            full = not self.layout.sparse
+            e = wire.assemble(
+                self.grp, model.dim, rows, local, with_rot=own, with_v=with_v, full=full
+            )
+            out.append(e)
+        for a in self.layout.peers:
+            self.inbox[a].pop(key, None)
+        return tuple(out)
+
+    def flush(self, timeout=5.0):
+        """Wait until every stage message this process sent has been acknowledged."""
+        from rclpy.duration import Duration
+
+        for p in self.pubs.values():
+            p.wait_for_all_acked(Duration(seconds=timeout))
+
+    def destroy(self):
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+
+
+class LockstepAgent(AgentBase):
+    """Rounds with the group's stages; the trajectory equals the centralised simulator's."""
+
+    mode = "lockstep"
+
+    def __init__(self, node, params):
+        super().__init__(node, params)
+        projection = self.plan.method.info.family == "projection"
+        rot_tol = wire.PROJECTION_STAGE_TOL if projection else wire.ROTATION_TOL
+        self.exchange = LockstepExchange(
+            node, self.layout, params["run_id"], rot_tol, self.drops, self.scene.t_end
+        )
+
+    def step_size(self, p):
+        return p["dt"] or None
+
+    def time_split(self):
+        ex = self.exchange
+        if self.rounds == 0:
+            return {}
+        pub, wait = ex.publish_time / self.rounds * 1e3, ex.wait_time / self.rounds * 1e3
+        rest = max(0.0, self.round_time / self.rounds * 1e3 - pub - wait)
+        return {"publish": pub, "wait": wait, "other": rest}
+
+    def stage_subscriptions(self):
+        return len(list(self.exchange.node.subscriptions))
+
+    def _discover(self):
+        ex = self.exchange
+
+        def matched():
+            ex.spin_once(0.0)
+            return ex.matched()
+
+        self.wait_for_discovery(matched, ex.missing_peers)
+
+    def loop(self):
+        self._discover()
+        self.publish_state()
+        grid = step_grid(self.scene.t_end, self.plan.dt)
+        timeout = self.params["round_timeout"]
+        # matching is not simultaneous: a peer that matched us may still be matching others and
+        # start later, and its lag reaches us through every peer that waits for it in the next
+        # rounds: the first two steps also allow the peers' discovery time
+        first_wait = timeout + self.params["discovery_timeout"]
+        start = last_spin = time.monotonic()
+        prev = 0.0
+        for k, t_next in enumerate(grid):
+            stop = False
+
+            def answer(request, stage, k=k):
+                nonlocal stop
+                wait = first_wait if k <= 1 else timeout
+                ensemble, stop_seen = self.exchange.round(
+                    k, stage, request, self.stop_requested, wait
+                )
+                stop = stop or (request.boundary and stop_seen)
+                self.rounds += 1
+                return ensemble
+
+            self.state = drive(self.plan.method, self.system, self.state, t_next - prev, answer)
+            self.state.t = prev = t_next
+            self.steps += 1
+            now = time.monotonic()
+            self.round_time = now - start
+            self.publish_state()
+            # the node's own entities (control topic, parameter services) cost a full wait-set
+            # rebuild per spin: serve them a few times a second, not every step
+            if now - last_spin > 0.1:
+                self.spin_once(0.0)
+                last_spin = now
+            if stop:
+                break
+        self.exchange.flush()
+
+    def destroy(self):
+        self.exchange.destroy()
+        super().destroy()

@@ -1,0 +1,220 @@
+"""ROS parameters of the agent and the monitor: declared with descriptors and ranges, checked.
+
+``check`` is pure (no ROS): the nodes call it on the declared values before they create
+any publisher or subscription, and the tests call it directly.  A bad value is a
+``ParameterError`` (one line, exit code 2).
+"""
+
+import math
+from dataclasses import dataclass
+
+from ..core.errors import ParameterError
+
+MODES = ("lockstep", "realtime")
+
+
+@dataclass(frozen=True)
+class Param:
+    """A parameter: default (its type: str, bool, int, float; None = integer array),
+    description, (min, max) bounds or None, allowed string values or None."""
+
+    name: str
+    default: object
+    text: str
+    bounds: tuple = None
+    choices: tuple = None
+
+
+AGENT = (
+    Param("scene", "", "scene file (YAML) or shipped scene name; required"),
+    Param(
+        "agent",
+        0,
+        "index of the agent this process hosts (0-based over all groups)",
+        (0, 1_000_000),
+    ),
+    Param("agents", None, "indices of the agents this process hosts (overrides 'agent')"),
+    Param(
+        "agents_per_process",
+        1,
+        "K of the runner's partition: process p hosts agents [pK, (p+1)K)",
+        (1, 1_000_000),
+    ),
+    Param("mode", "lockstep", "lockstep | realtime", choices=MODES),
+    Param("integrator", "", "integrator name ('' = the scene's, see `polymatch integrators`)"),
+    Param("dt", 0.0, "lockstep step size (0 = the scene's)", (0.0, 1e6)),
+    Param("t_end", 0.0, "end time (0 = the scene's)", (0.0, 1e12)),
+    Param("rate", 50.0, "realtime: steps per wall-clock second", (0.01, 100000.0)),
+    Param("time_scale", 1.0, "realtime: simulated seconds per wall-clock second", (1e-6, 1e6)),
+    Param(
+        "start_time",
+        0.0,
+        "realtime: wall-clock time (s since the epoch) of t = 0; 0 = when this "
+        "agent starts; -1 = wait for 'start <epoch>' on the control topic",
+        (-1.0, 1e12),
+    ),
+    Param(
+        "peer_timeout",
+        1.0,
+        "realtime: seconds of silence after which a peer is dropped from the sums",
+        (0.001, 1e6),
+    ),
+    Param(
+        "delay",
+        0.0,
+        "realtime: injected transport delay (s) before a peer's pose is used",
+        (0.0, 1e6),
+    ),
+    Param(
+        "round_timeout",
+        10.0,
+        "lockstep: seconds to wait for a round before giving up (the first "
+        "round: plus discovery_timeout)",
+        (0.001, 1e6),
+    ),
+    Param("discovery_timeout", 30.0, "seconds to wait until every peer is matched", (0.0, 1e6)),
+    Param(
+        "pose_subscribers",
+        0,
+        "do not start before this many subscribers listen to the poses",
+        (0, 100000),
+    ),
+    Param("frame_id", "world", "frame_id of published poses"),
+    Param(
+        "run_id",
+        0,
+        "run identifier shared by the ensemble; stage messages with another are dropped",
+        (0, 2**31 - 1),
+    ),
+)
+
+MONITOR = (
+    Param("scene", "", "scene file (YAML) or shipped scene name; required"),
+    Param(
+        "mode",
+        "lockstep",
+        "lockstep: report each simulated time once all agents reached it; "
+        "realtime: report at 'rate' Hz from the latest poses",
+        choices=MODES,
+    ),
+    Param("rate", 10.0, "realtime: reports per second", (0.01, 10000.0)),
+    Param(
+        "peer_timeout",
+        1.0,
+        "realtime: ignore agents silent this long (s); also the markers' lifetime",
+        (0.001, 1e6),
+    ),
+    Param("frame_id", "world", "expected frame_id of poses and frame of the markers"),
+    Param("markers", True, "publish visualization_msgs/MarkerArray"),
+    Param(
+        "t_end", 0.0, "end time (0 = the scene's); poses stamped later are refused", (0.0, 1e12)
+    ),
+)
+
+
+def _kind(value):
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    return "a list of integers"
+
+
+def _typed(p, value):
+    """``value`` as the parameter's type (an integer is a number), or ParameterError."""
+    d = p.default
+    if value is None:
+        return None
+    if isinstance(d, bool) or isinstance(d, str):
+        ok = isinstance(value, type(d))
+    elif isinstance(d, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif isinstance(d, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        value = float(value) if ok else value
+        ok = ok and math.isfinite(value)
+    else:
+        ok = isinstance(value, (list, tuple)) and all(
+            isinstance(v, int) and not isinstance(v, bool) for v in value
+        )
+    if not ok:
+        raise ParameterError(f"parameter {p.name!r}: expected {_kind(d)}, got {value!r}")
+    return value
+
+
+def check(spec, values):
+    """Check {name: raw value} against ``spec`` (types, ranges, choices); the typed values."""
+    out = {}
+    for p in spec:
+        value = _typed(p, values.get(p.name, p.default))
+        if p.bounds is not None and value is not None and not p.bounds[0] <= value <= p.bounds[1]:
+            raise ParameterError(
+                f"parameter {p.name!r}: {value:g} is out of range "
+                f"[{p.bounds[0]:g}, {p.bounds[1]:g}]"
+            )
+        if p.choices is not None and value not in p.choices:
+            raise ParameterError(
+                f"parameter {p.name!r}: expected {' or '.join(p.choices)}, got {value!r}"
+            )
+        if isinstance(value, (list, tuple)) and any(v < 0 for v in value):
+            raise ParameterError(f"parameter {p.name!r}: indices must be >= 0, got {list(value)}")
+        out[p.name] = list(value) if isinstance(value, (list, tuple)) else value
+    if "scene" in out and not out["scene"]:
+        raise ParameterError("parameter 'scene' is required (a scene file)")
+    return out
+
+
+def _descriptor(p):
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+    # dynamic typing: `check` gives the one-line error for a wrong type (and takes `t_end:=2`
+    # for a float); the ranges are there for `ros2 param describe`
+    desc = ParameterDescriptor(
+        description=p.text, read_only=True, dynamic_typing=p.default is not None
+    )
+    if p.choices:
+        desc.additional_constraints = "one of: " + ", ".join(p.choices)
+    if p.bounds is not None and isinstance(p.default, float):
+        desc.floating_point_range = [
+            FloatingPointRange(
+                from_value=float(p.bounds[0]), to_value=float(p.bounds[1]), step=0.0
+            )
+        ]
+    elif p.bounds is not None:
+        desc.integer_range = [
+            IntegerRange(from_value=int(p.bounds[0]), to_value=int(p.bounds[1]), step=1)
+        ]
+    return desc
+
+
+def declare(node, spec):
+    """Declare ``spec`` on ``node`` (descriptors, ranges) and return the checked values."""
+    from rclpy.exceptions import (
+        InvalidParameterTypeException,
+        InvalidParameterValueException,
+        ParameterUninitializedException,
+    )
+    from rclpy.parameter import Parameter
+
+    raw = {}
+    for p in spec:
+        initial = Parameter.Type.INTEGER_ARRAY if p.default is None else p.default
+        try:
+            node.declare_parameter(p.name, initial, _descriptor(p))
+            raw[p.name] = node.get_parameter(p.name).value
+        except ParameterUninitializedException:
+            raw[p.name] = None
+        except InvalidParameterValueException:
+            lo, hi = p.bounds if p.bounds else (None, None)
+            raise ParameterError(
+                f"parameter {p.name!r}: out of range [{lo:g}, {hi:g}]"
+                if p.bounds
+                else f"parameter {p.name!r}: invalid value"
+            ) from None
+        except InvalidParameterTypeException as exc:
+            raise ParameterError(f"parameter {p.name!r}: {str(exc).splitlines()[0]}") from None
+    return check(spec, raw)

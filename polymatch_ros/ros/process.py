@@ -1,0 +1,45 @@
+"""The one main of every ROS process polymatch starts: agent, monitor, echo.
+
+``ros_main(factory)`` initialises rclpy with the process's arguments (so ``--ros-args``
+remaps and parameters apply), builds the application, runs it, turns a
+``PolymatchError`` into one ``<label>: error: ...`` line and its exit code, lets the
+application print its final lines, and bounds the DDS teardown (``teardown_watchdog``).
+"""
+
+import sys
+
+from ..core.errors import PolymatchError
+from .ros_env import teardown_watchdog
+
+
+def ros_main(factory, label, argv=None):
+    """Run ``factory(argv).run()``; return the exit code.
+
+    The application may define ``report()`` (final lines, printed also after an
+    interruption), ``destroy()`` and ``interrupted_exit`` (the code for Ctrl-C; 130).
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    argv = sys.argv if argv is None else argv
+    rclpy.init(args=argv)
+    app = None
+    code = 0
+    try:
+        app = factory(argv)
+        code = app.run()
+    except PolymatchError as exc:
+        print(f"{label}: error: {exc}", file=sys.stderr, flush=True)
+        code = exc.exit_code
+    except (KeyboardInterrupt, ExternalShutdownException):
+        code = getattr(app, "interrupted_exit", 130)
+    finally:
+        if app is not None and hasattr(app, "report"):
+            app.report()
+        sys.stdout.flush()
+        with teardown_watchdog():
+            if app is not None and hasattr(app, "destroy"):
+                app.destroy()
+            if rclpy.ok():
+                rclpy.shutdown()
+    return code

@@ -1,0 +1,250 @@
+"""Realtime: each agent steps on its own wall-clock timer with the latest pose of each peer.
+
+Peers that fall silent longer than ``peer_timeout`` are dropped from the sums of
+(A-1)/(A-2) and re-admitted when they speak again (Theorem 4.2 under delays and churn).
+"""
+
+import time
+from collections import defaultdict
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..core.simulate import drive
+from . import wire
+from .agent_node import AgentBase
+
+
+class PeerTable:
+    """The latest pose (and velocity) heard from each peer, and who is still alive."""
+
+    def __init__(self, node, layout, frame_id, timeout, drops, origin, delay, t_max):
+        self.node, self.layout, self.drops = node, layout, drops
+        self.delay = float(
+            delay
+        )  # injected transport delay (s): a pose is used this long after arrival
+        self.pending = defaultdict(list)  # agent -> [(arrival, kind, values)] not yet delivered
+        self.origin = np.asarray(
+            origin, dtype=float
+        )  # poses are absolute; the core works in offsets
+        self.model = layout.model
+        self.grp = self.model.rotations
+        self.frame_id, self.timeout, self.t_max = frame_id, timeout, t_max
+        self.latest = {}  # agent -> SimpleNamespace(t, x, rot, v, heard)
+        self.silent = set()
+        dim = self.model.dim
+        self.subs = []
+        want_v = self.model.order == 2 and self.model.centroids_exact
+        for a in layout.peers:
+            self.subs.append(
+                wire.subscription(node, "pose", self._pose_cb(a), dim, a, mode="realtime")
+            )
+            if want_v and self.layout.owner[a][0] in layout.local_groups:
+                self.subs.append(
+                    wire.subscription(node, "twist", self._twist_cb(a), dim, a, mode="realtime")
+                )
+
+    def _entry(self, agent):
+        return self.latest.setdefault(
+            agent, SimpleNamespace(t=-np.inf, x=None, rot=None, v=None, heard=0.0)
+        )
+
+    def _pose_cb(self, agent):
+        def receive(msg):
+            got, reason = wire.decode_pose_msg(
+                msg, self.grp, self.model.dim, self.frame_id, self.t_max
+            )
+            if got is None:
+                self.drops(f"agent {agent}", reason)
+                return
+            self.pending[agent].append(
+                (time.monotonic(), "pose", (got.t, got.vec - self.origin, got.rot))
+            )
+
+        return receive
+
+    def _twist_cb(self, agent):
+        def receive(msg):
+            got, reason = wire.decode_twist_msg(
+                msg, self.grp, self.model.dim, self.frame_id, self.t_max
+            )
+            if got is None:
+                self.drops(f"agent {agent}", reason)
+                return
+            self.pending[agent].append((time.monotonic(), "twist", got.vec))
+
+        return receive
+
+    def _deliver(self, now):
+        """Move every pose and velocity that has waited ``delay`` into the table."""
+        for agent, queue in self.pending.items():
+            keep = []
+            for arrival, kind, values in queue:
+                if now - arrival < self.delay:
+                    keep.append((arrival, kind, values))
+                    continue
+                e = self._entry(agent)
+                if kind == "twist":
+                    e.v = values
+                    continue
+                t, x, rot = values
+                if t < e.t and agent not in self.silent:
+                    self.drops(f"agent {agent}", "out-of-order pose")
+                    continue
+                # an older stamp from a peer that had fallen silent is a restarted peer: a new
+                # incarnation, admitted from its own clock
+                e.t, e.x, e.rot, e.heard = t, x, rot, arrival + self.delay
+                if agent in self.silent:
+                    self.silent.discard(agent)
+                    self.node.get_logger().info(f"agent {agent} is back: re-admitted to the sums")
+            queue[:] = keep
+
+    def newest_time(self):
+        """The newest simulated time heard from any peer (None if none): the ensemble's clock."""
+        self._deliver(time.monotonic())
+        times = [e.t for e in self.latest.values() if e.x is not None and np.isfinite(e.t)]
+        return max(times) if times else None
+
+    def active(self):
+        """Peers heard within the timeout; logs once when one falls silent."""
+        now = time.monotonic()
+        self._deliver(now)
+        alive = []
+        for a in self.layout.peers:
+            e = self.latest.get(a)
+            if e is None or e.x is None:
+                continue
+            if now - e.heard > self.timeout:
+                if a not in self.silent:
+                    self.silent.add(a)
+                    self.node.get_logger().warning(
+                        f"agent {a} silent for {self.timeout:g} s: dropped from the sums"
+                    )
+                continue
+            alive.append(a)
+        return alive
+
+    def ensemble(self, request, alive):
+        """Frozen peers + the local stage rows, per needed group, ``index`` = the rows present."""
+        model, out, alive = self.model, [], set(alive)
+        with_v = model.order == 2 and "v" in request.fields
+        for gi, g in enumerate(model.groups):
+            if gi not in self.layout.groups_needed:
+                out.append(None)
+                continue
+            rows = {}
+            for a in g.indices:
+                if a in alive:
+                    p = self.latest[a]
+                    rows[a - g.start] = wire.Row(p.x, p.rot, p.v)
+            own = len(self.layout.rows[gi]) > 0
+            local = (self.layout.rows[gi], request.stage.groups[gi]) if own else None
+            out.append(
+                wire.assemble(self.grp, model.dim, rows, local, with_rot=own, with_v=with_v)
+            )
+        return tuple(out)
+
+
+class RealtimeAgent(AgentBase):
+    """Steps on a wall-clock timer (``rate`` Hz, ``time_scale`` simulated s per s) with the newest
+    peer poses; starts on the runner's ``start <epoch>`` (start_time -1) or at ``start_time``."""
+
+    mode = "realtime"
+
+    def __init__(self, node, params):
+        super().__init__(node, params)
+        self.peers = PeerTable(
+            node,
+            self.layout,
+            params["frame_id"],
+            params["peer_timeout"],
+            self.drops,
+            self.scene.origin,
+            params["delay"],
+            self.scene.t_end,
+        )
+
+    def step_size(self, p):
+        return p["time_scale"] / p["rate"]
+
+    def _start_epoch(self):
+        """Wall-clock time of t = 0: the runner's 'start', or the start_time parameter."""
+        if self.params["start_time"] >= 0:
+            return self.params["start_time"] or time.time()
+        last = 0.0
+        while self.start_epoch is None and not self.stop_requested:
+            self.spin_once(0.05)
+            if time.monotonic() - last > 0.5:  # keep announcing the initial pose
+                self.publish_state()
+                self._maybe_diagnostics(force=True)  # the runner counts agents that are up
+                last = time.monotonic()
+        return self.start_epoch if self.start_epoch is not None else time.time()
+
+    def _wait_tick(self, next_tick, period):
+        while True:
+            left = next_tick - time.monotonic()
+            if left <= 0 or self.stop_requested:
+                break
+            self.spin_once(min(left, 0.05))
+        if time.monotonic() - next_tick > period:  # behind schedule: the CPU is short
+            self.late_ticks += 1
+        for _ in range(len(self.peers.subs) + 2):  # drain what is ready
+            self.spin_once(0.0)
+
+    def loop(self):
+        self.wait_for_discovery()
+        self.publish_state()
+        start = self._start_epoch()
+        while time.time() < start and not self.stop_requested:  # the ensemble starts together
+            self.spin_once(min(0.05, max(0.0, start - time.time())))
+        h, period = self.plan.dt, 1.0 / self.params["rate"]
+        next_tick = self._join_clock(start, period, h)
+        t0 = time.monotonic()
+        while self.state.t < self.scene.t_end - 1e-12 and not self.stop_requested:
+            next_tick += period
+            self._wait_tick(next_tick, period)
+            alive = self.peers.active()
+            self.state.coupling = None
+            t = self.state.t
+            self.state = drive(
+                self.plan.method,
+                self.system,
+                self.state,
+                h,
+                lambda request, stage, alive=alive: self.peers.ensemble(request, alive),
+            )
+            self.state.t = t + h
+            self.steps += 1
+            self.rounds += 1
+            self.round_time = time.monotonic() - t0
+            self.publish_state()
+
+    def _join_clock(self, start, period, h):
+        """Set the initial simulated time of a realtime run; return the monotonic time of tick 0.
+
+        Tick k is due at ``start + k * period`` on every agent, and an agent a little late (a
+        loaded CPU) catches up tick by tick.  An agent (re)joining a running ensemble - later
+        than the peer timeout - starts from its initial state on the ensemble's clock instead of
+        replaying the past: the newest simulated time its peers publish, so that it agrees with
+        an ensemble that runs behind the wall-clock schedule (a CPU short of the rate), or the
+        wall-clock schedule when it hears no peer within the peer timeout.
+        """
+        behind = max(0.0, time.time() - start)
+        if behind <= self.params["peer_timeout"]:
+            self.state.t = 0.0
+            return time.monotonic() - behind
+        heard_by = time.monotonic() + self.params["peer_timeout"]
+        while (
+            self.peers.newest_time() is None
+            and time.monotonic() < heard_by
+            and not self.stop_requested
+        ):
+            self.spin_once(0.05)
+        newest = self.peers.newest_time()
+        skipped = int(round(newest / h)) if newest is not None else int(behind / period)
+        self.state.t = skipped * h
+        return (
+            time.monotonic()
+            if newest is not None
+            else time.monotonic() - (behind - skipped * period)
+        )

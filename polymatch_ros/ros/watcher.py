@@ -1,0 +1,137 @@
+"""The runner's own small node: progress, control, the agents' final poses, the graph check."""
+
+from ..core.errors import PolymatchError
+from ..core.model import GroupState, State
+from . import wire
+
+
+class Watcher:
+    """Lives in the ensemble's namespace (``/<ensemble>/runner``; ``runner_<first agent>`` on
+    a host that runs some of the agents).
+
+    It hears the headline diameter and every process's run record (``status``: progress,
+    agents up), publishes the control topic, and takes each agent's *final* pose from its
+    latched ``final_pose``/``final_twist`` topics for the summary - not the per-step poses,
+    so supervising a run adds no load to the lockstep rounds.
+    """
+
+    def __init__(self, scene, ensemble, name="runner"):
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        self.node = Node(name, namespace=wire.namespace(ensemble))
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+        self.scene, self.model = scene, scene.model
+        self.grp = self.model.rotations
+        self.diameter = None
+        self.monitor = None  # the monitor's latest run record
+        self.agents = {}  # agents tuple -> latest run record of that process
+        self.poses, self.velocities = {}, {}
+        node, dim = self.node, self.model.dim
+        wire.subscription(node, "diameter", self._diam)
+        wire.subscription(node, "status", self._status)
+        self.control = wire.publisher(node, "control")
+        for a in range(self.model.n_agents):
+            wire.subscription(node, "final_pose", self._pose(a), dim, a)
+            if self.model.order == 2:
+                wire.subscription(node, "final_twist", self._twist(a), dim, a)
+
+    def _diam(self, msg):
+        self.diameter = float(msg.data)
+
+    def _status(self, msg):
+        rec = wire.RunRecord.from_json(msg.data)
+        if rec is None:
+            return
+        if rec.role == "monitor":
+            self.monitor = rec
+        elif rec.agents not in self.agents or rec.t >= self.agents[rec.agents].t:
+            self.agents[rec.agents] = rec
+
+    def _pose(self, agent):
+        def receive(msg):
+            got, _ = wire.decode_pose_msg(msg, self.grp, self.model.dim, t_max=self.scene.t_end)
+            if got is not None:
+                self.poses[agent] = (got.t, wire.Row(got.vec - self.scene.origin, got.rot))
+
+        return receive
+
+    def _twist(self, agent):
+        def receive(msg):
+            got, _ = wire.decode_twist_msg(msg, self.grp, self.model.dim, t_max=self.scene.t_end)
+            if got is not None:
+                self.velocities[agent] = (got.vec, got.rot)
+
+        return receive
+
+    def spin(self, timeout):
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def agent_time(self):
+        """{agent: simulated time} from the agents' run records."""
+        return {a: rec.t for agents, rec in self.agents.items() for a in agents}
+
+    def agents_up(self):
+        return len(self.agent_time()) >= self.model.n_agents
+
+    def ensemble_time(self):
+        """Simulated time of the ensemble: the monitor's last report, else the slowest agent's."""
+        if self.monitor is not None:
+            return self.monitor.t
+        times = self.agent_time()
+        return min(times.values()) if len(times) >= self.model.n_agents else None
+
+    def all_heard(self):
+        """The monitor's last report covered every agent."""
+        return self.monitor is not None and self.monitor.agents_heard >= self.model.n_agents
+
+    def check_graph(self, names):
+        """Every node of ``names`` is in the ensemble's namespace, and no name is taken twice."""
+        ns = self.node.get_namespace()
+        found = [n for n, space in self.node.get_node_names_and_namespaces() if space == ns]
+        twice = sorted({n for n in found if found.count(n) > 1})
+        if twice:
+            raise PolymatchError(
+                f"node name {ns}/{twice[0]} is taken twice: another ensemble named "
+                f"{ns.strip('/')!r} runs in this ROS domain (use --ensemble)"
+            )
+        return not set(names) - set(found)
+
+    def pose_times(self):
+        """Simulated time of every agent's final pose."""
+        return {a: p[0] for a, p in self.poses.items()}
+
+    def have_final(self):
+        return len(self.poses) >= self.model.n_agents and (
+            self.model.order == 1 or len(self.velocities) >= self.model.n_agents
+        )
+
+    def stop(self):
+        from std_msgs.msg import String
+
+        self.control.publish(String(data="stop"))
+
+    def start(self, epoch):
+        from std_msgs.msg import String
+
+        self.control.publish(String(data=f"start {epoch!r}"))
+
+    def final_state(self):
+        """The final pose of every agent as a core State (None if some agent never reported)."""
+        if len(self.poses) < self.model.n_agents:
+            return None
+        groups = []
+        for g in self.model.groups:
+            rows = {a - g.start: self.poses[a][1] for a in g.indices}
+            with_v = self.model.order == 2 and all(a in self.velocities for a in g.indices)
+            if with_v:
+                for a in g.indices:
+                    rows[a - g.start].v, rows[a - g.start].w = self.velocities[a]
+            e = wire.assemble(self.grp, self.model.dim, rows, with_v=with_v, with_w=with_v)
+            groups.append(GroupState(e.x, e.rot, e.v, e.w))
+        return State(min(p[0] for p in self.poses.values()), tuple(groups))
+
+    def destroy(self):
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()

@@ -1,0 +1,56 @@
+"""Per-agent records -> one group's arrays: what every reader of poses or stages assembles."""
+
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+
+
+@dataclass
+class Row:
+    """One agent's values as heard: centroid x, one-row rotation, velocity v, algebra row w."""
+
+    x: np.ndarray
+    rot: np.ndarray = None
+    v: np.ndarray = None
+    w: np.ndarray = None
+
+
+def assemble(grp, dim, rows, local=None, with_rot=True, with_v=False, with_w=False, full=False):
+    """Group arrays (x, rot, v, w, index) in row order from ``rows`` {group row: Row}.
+
+    ``local`` = (rows, GroupState): the process's own rows at their current (stage) values,
+    put in with whole-array writes.  ``index`` lists the rows present (None with ``full``:
+    every row of the group is).  A missing velocity is zero; ``with_w`` needs every row's w.
+    The core computes the mean field of (A-1)/(A-2) from these arrays as the centralised
+    simulator does, so the numbers are identical.
+    """
+    local_rows = [] if local is None else [int(r) for r in local[0]]
+    index = np.array(sorted(set(rows) | set(local_rows)), dtype=int)
+    pos = {row: k for k, row in enumerate(index.tolist())}
+    n = len(index)
+    out = SimpleNamespace(
+        x=np.zeros((n, dim)),
+        rot=grp.identity(n) if with_rot else None,
+        v=np.zeros((n, dim)) if with_v else None,
+        w=None,
+        index=None if full else index,
+    )
+    for row, rec in rows.items():
+        k = pos[row]
+        out.x[k] = rec.x
+        if with_rot:
+            grp.put(out.rot, [k], rec.rot)
+        if with_v and rec.v is not None:
+            out.v[k] = rec.v
+    if local_rows:
+        gs = local[1]
+        at = [pos[r] for r in local_rows]
+        out.x[at] = gs.x
+        if with_v:
+            out.v[at] = gs.v
+        if with_rot:
+            grp.put(out.rot, at, gs.rot)
+    if with_w:
+        out.w = grp.algebra_concat([rows[r].w for r in index.tolist()])
+    return out

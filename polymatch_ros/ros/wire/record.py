@@ -1,0 +1,121 @@
+"""Results as data: the run record every agent process and the monitor emit.
+
+A ``RunRecord`` travels as one JSON line: the last line a process prints on stdout,
+and, latched, on the ensemble's ``status`` topic while it runs.  Whoever reads
+results (the runner, the benchmarks, the tests) reads them with ``run_records``;
+``describe()`` is the human-readable line printed above it.
+"""
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, fields
+
+RECORD_KEY = "polymatch_run_record"
+RECORD_VERSION = 1
+
+
+def drop_summary(counts):
+    """'no messages dropped' or 'dropped N messages (reason: n, ...)'."""
+    if not counts:
+        return "no messages dropped"
+    parts = ", ".join(f"{r}: {n}" for r, n in sorted(counts.items()))
+    return f"dropped {sum(counts.values())} messages ({parts})"
+
+
+@dataclass
+class RunRecord:
+    """What one process did: ``role`` agent (hosting ``agents``) or monitor.
+
+    ``t`` simulated time reached; ``steps`` integrator steps and ``rounds`` stage rounds
+    (lockstep; a realtime tick is one round); ``rounds_per_second`` over the run's wall time;
+    ``ms_per_round`` publish/wait/other split (lockstep); ``late_ticks`` realtime ticks started
+    more than one period late; ``dropped`` counts per reason; ``peers`` the agents whose
+    messages the process needs and ``stage_subscriptions`` its stage-topic subscriptions
+    (lockstep; on a communication graph only the in-neighbours); monitor: ``diameter`` of its last
+    report, ``agents_heard`` in it, ``reports`` published.
+    """
+
+    role: str
+    mode: str
+    t: float
+    agents: tuple = ()
+    finished: bool = False
+    steps: int = 0
+    rounds: int = 0
+    rounds_per_second: float = 0.0
+    ms_per_round: dict = field(default_factory=dict)
+    late_ticks: int = 0
+    matched_after: float = None
+    dropped: dict = field(default_factory=dict)
+    diameter: float = None
+    agents_heard: int = 0
+    reports: int = 0
+    peers: tuple = ()
+    stage_subscriptions: int = 0
+
+    @property
+    def dropped_total(self):
+        return sum(self.dropped.values())
+
+    def to_json(self):
+        data = asdict(self)
+        data["agents"] = list(self.agents)
+        data["peers"] = list(self.peers)
+        return json.dumps({RECORD_KEY: RECORD_VERSION, **data})
+
+    @classmethod
+    def from_json(cls, text):
+        """The record of a JSON line, or None for any other line (never raises)."""
+        text = text.strip()
+        if not text.startswith("{"):
+            return None
+        try:
+            data = json.loads(text)
+            if not isinstance(data, dict) or data.pop(RECORD_KEY, None) != RECORD_VERSION:
+                return None
+            known = {f.name for f in fields(cls)}
+            rec = cls(**{k: v for k, v in data.items() if k in known})
+            rec.agents = tuple(int(a) for a in rec.agents)
+            rec.peers = tuple(int(a) for a in rec.peers)
+            rec.stage_subscriptions = int(rec.stage_subscriptions)
+            rec.dropped = {str(k): int(v) for k, v in dict(rec.dropped).items()}
+            rec.t = float(rec.t)
+            return rec if math.isfinite(rec.t) else None
+        except (TypeError, ValueError, AttributeError):
+            return None
+
+    def name(self):
+        return "monitor" if self.role == "monitor" else "agent " + ",".join(map(str, self.agents))
+
+    def describe(self):
+        """The line for people (README: `polymatch run -v` shows the agents')."""
+        if self.role == "monitor":
+            return (
+                f"monitor: last report t = {self.t:.6g}, matching diameter {self.diameter:.3e}, "
+                f"{self.agents_heard} agents heard, {self.reports} reports; "
+                f"{drop_summary(self.dropped)}"
+            )
+        if self.mode == "lockstep":
+            split = ", ".join(f"{k} {v:.2f}" for k, v in self.ms_per_round.items())
+            text = (
+                f"finished at t = {self.t:.6g} after {self.steps} steps ({self.rounds} rounds, "
+                f"{self.rounds_per_second:.1f} rounds/s; ms per round: {split})"
+            )
+        else:
+            text = (
+                f"finished at t = {self.t:.6g} after {self.steps} realtime steps, "
+                f"{self.late_ticks} started more than one period late"
+            )
+        if self.matched_after is not None:
+            text += f"; peers matched after {self.matched_after:.2f} s"
+        return f"{self.name()}: {text}; {drop_summary(self.dropped)}"
+
+
+def run_records(lines):
+    """Every run record among ``lines`` (text lines, e.g. a process's output), in order."""
+    out = []
+    for line in lines:
+        rec = RunRecord.from_json(line)
+        if rec is not None:
+            out.append(rec)
+    return out

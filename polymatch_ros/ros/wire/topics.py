@@ -1,0 +1,176 @@
+"""Every topic of an ensemble: its name, message type and QoS, in one table.
+
+Names are relative: they resolve in the node's namespace, which is the ensemble
+(``-r __ns:=/polymatch``, the default), so ``agent_3/pose`` is
+``/polymatch/agent_3/pose`` and ``--ros-args -r`` remaps apply.  ``/diagnostics``
+is the ROS-wide aggregate topic and stays absolute.
+"""
+
+from dataclasses import dataclass
+
+DEFAULT_ENSEMBLE = "polymatch"
+
+
+@dataclass(frozen=True)
+class Topic:
+    """name: relative pattern ({agent} filled in); kind: message kind (see ``message_type``);
+    qos: the writers' profile; reader_qos: the readers' profile per mode (None = qos)."""
+
+    name: str
+    kind: str
+    qos: str
+    realtime_reader_qos: str = None
+    reader_qos: str = None
+
+
+TOPICS = {
+    # d <= 3: geometry_msgs/PoseStamped and TwistStamped; d >= 4: std_msgs/Float64MultiArray
+    "pose": Topic("agent_{agent}/pose", "pose", "pose", realtime_reader_qos="latest"),
+    "twist": Topic("agent_{agent}/twist", "twist", "pose", realtime_reader_qos="latest"),
+    # the final state, latched, for whoever supervises the run (the runner's summary)
+    "final_pose": Topic("agent_{agent}/final_pose", "pose", "latched"),
+    "final_twist": Topic("agent_{agent}/final_twist", "twist", "latched"),
+    "stage": Topic("agent_{agent}/stage", "array", "stage", reader_qos="stage_in"),
+    "control": Topic("control", "string", "control"),
+    # RunRecord JSON of every agent process and the monitor (wire.record), latched per writer
+    "status": Topic("status", "string", "status", reader_qos="status_in"),
+    "diameter": Topic("diameter", "float64", "latched"),
+    "diameter_centroid": Topic("diameter/centroid", "float64", "latched"),
+    "diameter_rotation": Topic("diameter/rotation", "float64", "latched"),
+    "markers": Topic("markers", "markers", "markers"),
+    "diagnostics": Topic("/diagnostics", "diagnostics", "diagnostics"),
+}
+
+
+def message_type(kind, dim=None):
+    """The message class of a topic kind; the one d <= 3 / d >= 4 switch of poses and twists."""
+    if kind in ("pose", "twist") and dim is not None and dim <= 3:
+        from geometry_msgs.msg import PoseStamped, TwistStamped
+
+        return PoseStamped if kind == "pose" else TwistStamped
+    if kind in ("pose", "twist", "array"):
+        from std_msgs.msg import Float64MultiArray
+
+        return Float64MultiArray
+    if kind == "string":
+        from std_msgs.msg import String
+
+        return String
+    if kind == "float64":
+        from std_msgs.msg import Float64
+
+        return Float64
+    if kind == "markers":
+        from visualization_msgs.msg import MarkerArray
+
+        return MarkerArray
+    if kind == "diagnostics":
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        return DiagnosticArray
+    raise KeyError(kind)
+
+
+def topic_name(key, agent=None):
+    """The relative (or, for /diagnostics, absolute) name of a topic of the table."""
+    name = TOPICS[key].name
+    return name.format(agent=agent) if "{agent}" in name else name
+
+
+def full_name(ensemble, key, agent=None):
+    """The name as resolved in namespace /<ensemble> (without remaps): what users see."""
+    name = topic_name(key, agent)
+    return name if name.startswith("/") else f"/{ensemble.strip('/')}/{name}"
+
+
+def namespace(ensemble):
+    return "/" + ensemble.strip("/")
+
+
+def _resolve(node, name, resolver):
+    """Names for a node that does not share the process's remap rules: resolved by ``resolver``."""
+    return name if resolver is None else resolver.resolve_topic_name(name)
+
+
+def publisher(node, key, dim=None, agent=None, resolver=None, **kwargs):
+    t = TOPICS[key]
+    return node.create_publisher(
+        message_type(t.kind, dim),
+        _resolve(node, topic_name(key, agent), resolver),
+        qos_profiles()[t.qos],
+        **kwargs,
+    )
+
+
+def subscription(
+    node, key, callback, dim=None, agent=None, mode="lockstep", resolver=None, **kwargs
+):
+    t = TOPICS[key]
+    qos = t.reader_qos or (t.realtime_reader_qos if mode == "realtime" else None) or t.qos
+    return node.create_subscription(
+        message_type(t.kind, dim),
+        _resolve(node, topic_name(key, agent), resolver),
+        callback,
+        qos_profiles()[qos],
+        **kwargs,
+    )
+
+
+def qos_profiles():
+    """QoS used on each kind of topic (imported lazily: rclpy is only needed here)."""
+    from rclpy.qos import (
+        DurabilityPolicy as D,
+    )
+    from rclpy.qos import (
+        HistoryPolicy as H,
+    )
+    from rclpy.qos import (
+        QoSProfile,
+    )
+    from rclpy.qos import (
+        ReliabilityPolicy as R,
+    )
+
+    return {
+        # every lockstep stage must arrive.  VOLATILE: agents start only once their writers
+        # have matched every expected reader (TRANSIENT_LOCAL halves the round rate here)
+        "stage": QoSProfile(
+            history=H.KEEP_LAST, depth=16, reliability=R.RELIABLE, durability=D.VOLATILE
+        ),
+        # stage readers keep every sample: a flood on a peer's topic can then never evict the
+        # peer's real message before it is taken (it only blocks the flooding writer)
+        "stage_in": QoSProfile(history=H.KEEP_ALL, reliability=R.RELIABLE, durability=D.VOLATILE),
+        # poses: the monitor must see every lockstep pose; echo and RViz match RELIABLE/VOLATILE
+        "pose": QoSProfile(
+            history=H.KEEP_LAST, depth=100, reliability=R.RELIABLE, durability=D.VOLATILE
+        ),
+        # realtime peers: only the newest pose matters; a deeper queue would feed stale poses.
+        # BEST_EFFORT (as sensor data): a lost pose is replaced by the next one, whereas a
+        # RELIABLE reader holds every later pose back until the lost one is repaired (seconds
+        # on a loaded machine, where loopback UDP drops datagrams)
+        "latest": QoSProfile(
+            history=H.KEEP_LAST, depth=1, reliability=R.BEST_EFFORT, durability=D.VOLATILE
+        ),
+        # headline values: a late `ros2 topic echo` still gets the last one
+        "latched": QoSProfile(
+            history=H.KEEP_LAST, depth=1, reliability=R.RELIABLE, durability=D.TRANSIENT_LOCAL
+        ),
+        # run records: each writer keeps its last (latched); one reader's history holds every
+        # writer's (a topic without keys is one instance: depth is shared by all writers)
+        "status": QoSProfile(
+            history=H.KEEP_LAST, depth=1, reliability=R.RELIABLE, durability=D.TRANSIENT_LOCAL
+        ),
+        "status_in": QoSProfile(
+            history=H.KEEP_LAST, depth=1000, reliability=R.RELIABLE, durability=D.TRANSIENT_LOCAL
+        ),
+        # commands are not replayed to agents that join later (a restarted agent must not stop)
+        "control": QoSProfile(
+            history=H.KEEP_LAST, depth=10, reliability=R.RELIABLE, durability=D.VOLATILE
+        ),
+        "markers": QoSProfile(
+            history=H.KEEP_LAST, depth=10, reliability=R.RELIABLE, durability=D.VOLATILE
+        ),
+        "diagnostics": QoSProfile(
+            history=H.KEEP_LAST, depth=10, reliability=R.RELIABLE, durability=D.VOLATILE
+        ),
+    }

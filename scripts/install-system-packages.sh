@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# System tools the multi-host tests use: iproute2 (network namespaces), nftables (packet loss),
+# tcpdump (proof that no DDS packet leaves the namespaces).  Idempotent: installs with apt-get
+# only what is missing, only as root; prints one line saying what it did.
+set -euo pipefail
+
+wanted=(iproute2 nftables tcpdump)
+missing=()
+for pkg in "${wanted[@]}"; do
+    if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
+        missing+=("$pkg")
+    fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+    echo "system packages: ${wanted[*]} already installed"
+    exit 0
+fi
+if [ "$(id -u)" -ne 0 ] || ! command -v apt-get >/dev/null 2>&1; then
+    echo "system packages: missing ${missing[*]} (not installed: needs root and apt-get;" \
+         "the multi-host tests will skip)"
+    exit 0
+fi
+log=$(mktemp)
+if timeout 600 apt-get update -qq >"$log" 2>&1 \
+   && DEBIAN_FRONTEND=noninteractive timeout 600 \
+      apt-get install -y -qq --no-install-recommends "${missing[@]}" >>"$log" 2>&1; then
+    echo "system packages: installed ${missing[*]}"
+    rm -f "$log"
+else
+    echo "system packages: apt-get failed to install ${missing[*]} (log: $log)" >&2
+    exit 1
+fi

@@ -1,0 +1,169 @@
+"""`polymatch run` across hosts: --only, --no-monitor, --discovery.
+
+The three-host case runs one lockstep ensemble of 12 agents split 4/4/4 over three network
+namespace hosts (netns_hosts.py) with multicast discovery on their private subnet, data over
+UDPv4 only (shared memory would bypass the network between the namespaces).  The host with the
+monitor prints the summary from the final poses of all 12 agents; its lockstep deviation and
+the saved poses must match the centralised simulation to 1e-9, and tcpdump on the root
+namespace must see no DDS packet.  The one-host case runs through a discovery server that the
+runner starts on 127.0.0.1 and ends by PID.
+"""
+
+import os
+import re
+import subprocess
+import sys
+
+import pytest
+from netns_hosts import Capture, NetnsHosts, root_interfaces, unavailable_reason
+from proc_group import Processes
+from ros_harness import needs_ros, scene_path
+from test_ros_lockstep import central_vertices, received_vertices
+
+from polymatch_ros.core.errors import ParameterError
+from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.simulate import plan
+from polymatch_ros.ros.children import describe_agents, parse_only
+
+SCENE = "mixed_triangles_tetrahedra"        # 12 agents (6 triangles, 6 tetrahedra)
+T_END = 1.0
+DEVIATION = re.compile(r"max vertex deviation (\S+)")
+
+
+# -- --only --------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("text,n,expected", [
+    ("0-7,12", 16, [0, 1, 2, 3, 4, 5, 6, 7, 12]),
+    (" 3 ", 4, [3]),
+    ("0-3,2-5", 8, [0, 1, 2, 3, 4, 5]),
+    ("11, 0 - 1", 12, [0, 1, 11]),
+    ("5-5", 6, [5]),
+])
+def test_only_names_agents(text, n, expected):
+    assert parse_only(text, n) == expected
+    assert parse_only(describe_agents(expected), n) == expected
+
+
+@pytest.mark.parametrize("text,words", [
+    ("", "e.g. --only 0-7,12"), ("a", "e.g."), ("1-", "e.g."), ("-1", "e.g."),
+    ("0,,2", "e.g."), ("0-2-4", "e.g."), ("\u0663", "e.g."), ("1.5", "e.g."),
+    ("3-1", "runs backwards"), ("0-12", "agent 12 is not in 0..11"), ("99", "not in 0..11"),
+])
+def test_malformed_or_out_of_range_only_is_one_line(text, words):
+    with pytest.raises(ParameterError) as raised:
+        parse_only(text, 12)
+    assert words in str(raised.value) and "\n" not in str(raised.value)
+
+
+def test_describe_agents():
+    assert describe_agents([0, 1, 2, 3, 12]) == "0-3,12"
+    assert describe_agents([4]) == "4"
+    assert describe_agents([]) == ""
+
+
+def _cli(*argv, env=None):
+    return subprocess.run([sys.executable, "-m", "polymatch_ros.cli", "run"] + list(argv),
+                          capture_output=True, text=True, timeout=60, env=env,
+                          stdin=subprocess.DEVNULL)
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["--only", "0-8"], "agent 8 is not in 0..7"),
+    (["--only", "x"], "--only 'x'"),
+    (["--only", "0-3"], "set the same ROS_DOMAIN_ID on every host"),
+    (["--discovery", "multicast"], "the kind must be one of"),
+    (["--discovery", "server:127.0.0.1:0"], "port '0'"),
+])
+def test_bad_host_options_exit_2_with_one_line(argv, words):
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
+    out = _cli("congruent_triangles", *argv, env=env)
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.startswith("polymatch: error: ") and words in out.stderr, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
+
+
+# -- one host, a discovery server of the run -------------------------------------------------
+
+def _server_processes(port):
+    found = []
+    for cmdline in os.listdir("/proc"):
+        if not cmdline.isdigit():
+            continue
+        try:
+            with open(f"/proc/{cmdline}/cmdline", "rb") as fh:
+                argv = fh.read().split(b"\0")
+        except OSError:
+            continue
+        if b"polymatch_ros.ros.discovery_server" in argv and str(port).encode() in argv:
+            found.append(int(cmdline))
+    return found
+
+
+@needs_ros
+def test_run_through_its_own_discovery_server_converges(ros):
+    proc = ros.start([sys.executable, "-m", "polymatch_ros.cli", "run", "congruent_triangles",
+                      "--discovery", "server", "--timeout", "100"], timeout=120)
+    rc = ros.wait(proc, 130)
+    text = ros.output(proc)
+    assert rc == 0, text[-3000:]
+    assert "converged: matching diameter < " in text, text[-2000:]
+    server = re.search(r"discovery server:127\.0\.0\.1:(\d+)", text)
+    assert server, text[:2000]
+    assert _server_processes(int(server.group(1))) == []
+
+
+# -- three namespace hosts -----------------------------------------------------------------------
+
+@pytest.fixture
+def net():
+    reason = unavailable_reason(("tcpdump",))
+    if reason:
+        pytest.skip(reason)
+    hosts = NetnsHosts(3)
+    try:
+        hosts.create()
+        yield hosts
+    finally:
+        hosts.close()
+        assert hosts.left_over() == []
+
+
+def _host_argv(only, lead, out):
+    argv = [sys.executable, "-m", "polymatch_ros.cli", "run", SCENE, "--t-end", str(T_END),
+            "--only", only, "--discovery", "subnet", "-k", "2", "--timeout", "100"]
+    return argv + (["--save", str(out)] if lead else ["--no-monitor"])
+
+
+@needs_ros
+def test_twelve_agents_on_three_hosts_equal_the_centralised_run(net, tmp_path):
+    from domain_coordinator import domain_id
+    procs, out = Processes(str(tmp_path)), tmp_path / "final.npz"
+    with domain_id() as domain, Capture(str(tmp_path), root_interfaces()) as root:
+        env = {k: v for k, v in os.environ.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}
+        env.update(ROS_DOMAIN_ID=str(domain), FASTDDS_BUILTIN_TRANSPORTS="UDPv4",
+                   PYTHONUNBUFFERED="1")
+        try:
+            hosts = [procs.start(_host_argv(only, lead, out), env, 120, f"h{i}",
+                                 prefix=net.prefix(i))
+                     for i, (only, lead) in enumerate([("0-3", False), ("4-7", False),
+                                                       ("8-11", True)])]
+            for proc in hosts:
+                proc.wait(timeout=130)
+            texts = [procs.output(proc) for proc in hosts]
+        finally:
+            procs.close()
+    for proc, text in zip(hosts, texts):
+        assert proc.returncode in (0, 3), f"{proc.name}:\n{text[-3000:]}"
+    for text, only in zip(texts[:2], ("0-3", "4-7")):
+        assert f"agents {only} ended at t = " in text and "max vertex deviation" not in text
+    lead = texts[2]
+    assert "12 of 12 agents" not in lead and "4 of 12 agents (8-11)" in lead
+    deviation = DEVIATION.search(lead)
+    assert deviation and float(deviation.group(1)) <= 1e-9, lead[-3000:]
+    scene = load_scene(scene_path(SCENE))
+    t, got = received_vertices(scene, out)
+    assert t > 0.0
+    want = central_vertices(scene, plan(scene, None, None, distributed=True).name, t)
+    dev = max(float(abs(a - b).max()) for a, b in zip(got, want))
+    assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
+    assert root.packets() == [], "DDS packets reached the root namespace"

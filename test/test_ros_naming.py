@@ -1,0 +1,75 @@
+"""ROS naming: every node lives in its ensemble's namespace (`/polymatch/agent_3`,
+`/polymatch/monitor`), and two ensembles with different names run side by side in one
+domain without a duplicate node name (seen through rclpy's graph API from a test node)."""
+
+import json
+import textwrap
+
+from ros_harness import PY, needs_ros, scene_path
+
+pytestmark = needs_ros
+
+PROBE = textwrap.dedent("""
+    import json, sys
+    import rclpy
+    from rclpy.node import Node
+    want = set(json.loads(sys.argv[1]))
+    rclpy.init()
+    node = Node("graph_probe")
+    union, twice, missing = set(), set(), None
+    while not want <= union:              # every node seen at least once (the runs overlap)
+        rclpy.spin_once(node, timeout_sec=0.2)
+        names = [ns.rstrip("/") + "/" + n for n, ns in node.get_node_names_and_namespaces()]
+        union.update(names)
+        twice.update(n for n in names if names.count(n) > 1)
+        if want - union != missing:
+            missing = want - union
+            print("missing " + " ".join(sorted(missing)), flush=True)
+    print("GRAPH " + json.dumps({"seen": sorted(union), "twice": sorted(twice)}), flush=True)
+    node.destroy_node()
+    rclpy.shutdown()
+""")
+
+
+def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
+    first = [f"/polymatch/agent_{i}" for i in range(8)] + [
+        "/polymatch/monitor",
+        "/polymatch/runner",
+    ]
+    second = ["/second/agents_0_3", "/second/agents_4_7", "/second/monitor", "/second/runner"]
+    probe = ros.start([PY, "-c", PROBE, json.dumps(first + second)], timeout=200)
+    runs = [
+        ros.start(
+            [
+                PY,
+                "-m",
+                "polymatch_ros.cli",
+                "run",
+                scene_path("congruent_triangles"),
+                "-q",
+                "--ensemble",
+                name,
+                "-k",
+                k,
+                "--timeout",
+                "180",
+                "--no-compare",
+                "--round-timeout",
+                "60",
+            ],
+            timeout=200,
+        )  # two ensembles on 2 cores
+        for name, k in (("polymatch", "1"), ("second", "4"))
+    ]
+    for run in runs:
+        rc = ros.wait(run, 210)
+        assert rc in (0, 3), ros.output(run)
+        assert "taken twice" not in ros.output(run)
+    assert ros.wait(probe, 30) == 0, ros.output(probe)
+    line = [x for x in ros.output(probe).splitlines() if x.startswith("GRAPH ")][-1]
+    graph = json.loads(line[len("GRAPH ") :])
+    assert set(first + second) <= set(graph["seen"]), graph
+    assert graph["twice"] == [], graph  # no duplicate node name
+    assert not [n for n in graph["seen"] if n.count("/") == 1 and "agent" in n], (
+        graph
+    )  # none at the root

@@ -1,0 +1,273 @@
+"""Never poisoned from the wire: every decoder of ``wire`` either accepts a message - and then
+its values are finite, bounded and its rotation is in SO(d) (Lemma 2.1) - or drops it with a
+counted reason.  It never raises.  Messages are built directly (no DDS)."""
+
+import math
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from ros_harness import needs_ros
+
+pytestmark = needs_ros
+
+SETTINGS = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+T_MAX = 30.0
+RUN_ID = 77
+
+
+def _group(dim, angle=False):
+    """The core's rotation representations: an angle (d = 2), SO(3), a d x d matrix."""
+    from polymatch_ros.core.so import SO2, SO3, SOn
+
+    if angle and dim == 2:
+        return SO2()
+    return SO3() if dim == 3 else SOn(dim)
+
+
+_matrix_group = _group
+
+
+floats = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True, width=64),
+    st.sampled_from(
+        [
+            0.0,
+            -0.0,
+            5e-324,
+            -5e-324,
+            1e-310,
+            1e308,
+            -1e308,
+            1.0,
+            -1.0,
+            0.5,
+            math.nan,
+            math.inf,
+            -math.inf,
+            1e101,
+            0.7071067811865476,
+        ]
+    ),
+)
+
+
+class Counter:
+    def __init__(self):
+        self.reasons = {}
+
+    def __call__(self, reason):
+        assert isinstance(reason, str) and reason
+        self.reasons[reason] = self.reasons.get(reason, 0) + 1
+
+
+def _check_rotation(grp, rot):
+    mats = grp.to_matrices(rot)
+    assert np.all(np.isfinite(mats))
+    for m in mats:
+        assert np.max(np.abs(m.T @ m - np.eye(len(m)))) < 1e-8 and np.linalg.det(m) > 0
+
+
+def _accepted_or_counted(result, counter, check):
+    value, reason = result
+    if value is None:
+        counter(reason)
+    else:
+        assert reason is None
+        check(value)
+
+
+def _check_received(grp, dim, rotation):
+    from polymatch_ros.ros import wire
+
+    def check(got):
+        assert 0.0 <= got.t <= T_MAX + wire.STAMP_SLACK
+        assert got.vec.shape == (dim,) and np.all(np.isfinite(got.vec))
+        assert np.max(np.abs(got.vec)) <= wire.MAX_ABS
+        if rotation:
+            _check_rotation(grp, got.rot)
+        else:
+            assert np.all(np.isfinite(grp.algebra_to_skew(got.rot)))
+
+    return check
+
+
+stamps = st.tuples(
+    st.integers(0, 2**31 - 1) | st.sampled_from([0, 1, 29, 30, 31, 10**9]),
+    st.integers(0, 2**32 - 1) | st.sampled_from([0, 999_999_999, 10**9]),
+)
+frames = st.sampled_from(["world", "world", "map", "", "World"])
+
+
+@SETTINGS
+@given(
+    dim=st.sampled_from([2, 3]),
+    pos=st.lists(floats, min_size=3, max_size=3),
+    quat=st.one_of(
+        st.lists(floats, min_size=4, max_size=4),
+        st.lists(st.floats(-1, 1), min_size=4, max_size=4),
+    ),
+    stamp=stamps,
+    frame=frames,
+)
+def test_pose_stamped_is_accepted_valid_or_dropped(dim, pos, quat, stamp, frame):
+    from geometry_msgs.msg import PoseStamped
+
+    from polymatch_ros.ros import wire
+
+    grp = _matrix_group(dim)
+    msg = PoseStamped()
+    msg.header.frame_id = frame
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp[0], min(stamp[1], 2**32 - 1)
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z = pos
+    o.x, o.y, o.z, o.w = quat
+    counter = Counter()
+    _accepted_or_counted(
+        wire.decode_pose_msg(msg, grp, dim, "world", T_MAX),
+        counter,
+        _check_received(grp, dim, rotation=True),
+    )
+
+
+@SETTINGS
+@given(
+    dim=st.sampled_from([2, 3]),
+    lin=st.lists(floats, min_size=3, max_size=3),
+    ang=st.lists(floats, min_size=3, max_size=3),
+    stamp=stamps,
+    frame=frames,
+)
+def test_twist_stamped_is_accepted_valid_or_dropped(dim, lin, ang, stamp, frame):
+    from geometry_msgs.msg import TwistStamped
+
+    from polymatch_ros.ros import wire
+
+    grp = _matrix_group(dim)
+    msg = TwistStamped()
+    msg.header.frame_id = frame
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
+    msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = lin
+    msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z = ang
+    counter = Counter()
+    _accepted_or_counted(
+        wire.decode_twist_msg(msg, grp, dim, "world", T_MAX),
+        counter,
+        _check_received(grp, dim, rotation=False),
+    )
+
+
+def _array(data, dims):
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+    msg = Float64MultiArray()
+    msg.layout.dim = [
+        MultiArrayDimension(label=label, size=size, stride=size) for label, size in dims
+    ]
+    msg.data = data
+    return msg
+
+
+@SETTINGS
+@given(
+    dim=st.sampled_from([4, 5]),
+    data=st.lists(floats, max_size=40),
+    ndims=st.integers(0, 4),
+    valid_rotation=st.booleans(),
+    seed=st.integers(0, 2**16),
+    kind=st.sampled_from(["pose", "twist"]),
+)
+def test_float64_multiarray_poses_are_accepted_valid_or_dropped(
+    dim, data, ndims, valid_rotation, seed, kind
+):
+    from scipy.stats import special_ortho_group
+
+    from polymatch_ros.ros import wire
+
+    grp = _matrix_group(dim)
+    if valid_rotation:  # a well-formed message, perturbed by the fuzzed values
+        mat = special_ortho_group.rvs(dim, random_state=seed)
+        if kind == "twist":
+            mat = mat - mat.T
+        head = (data + [0.0] * (1 + dim))[: 1 + dim]
+        data = head + mat.ravel().tolist()
+    msg = _array(data, [("t", 1), ("v", dim), ("m", dim * dim), ("x", 1)][:ndims])
+    counter = Counter()
+    decode = wire.decode_pose_msg if kind == "pose" else wire.decode_twist_msg
+    _accepted_or_counted(
+        decode(msg, grp, dim, None, T_MAX),
+        counter,
+        _check_received(grp, dim, rotation=kind == "pose"),
+    )
+
+
+@SETTINGS
+@given(
+    dim=st.sampled_from([2, 3]),
+    angle=st.booleans(),
+    header=st.lists(
+        floats | st.sampled_from([2.0, float(RUN_ID), 3.0, 4.0, 7.0, 5.0, -1.0, 2.5]),
+        min_size=8,
+        max_size=8,
+    ),
+    body=st.lists(floats, max_size=14),
+    mask=st.sampled_from([None, 4, 5, 7, 6, 3, 12, 4.5]),
+    well_formed=st.booleans(),
+)
+def test_stage_messages_are_accepted_valid_or_dropped(dim, angle, header, body, mask, well_formed):
+    from std_msgs.msg import Float64MultiArray
+
+    from polymatch_ros.ros import wire
+
+    grp = _group(dim, angle)
+    if well_formed:
+        header[:3] = [2.0, float(RUN_ID), 3.0]
+    if mask is not None:
+        header[7] = float(mask)
+    msg = Float64MultiArray()
+    msg.data = header + body
+    counter = Counter()
+
+    def check(stage):
+        assert stage.agent == 3 and stage.step >= 0 and stage.stage >= 0
+        assert 0.0 <= stage.t <= T_MAX + wire.STAMP_SLACK
+        for v in (stage.x, stage.v):
+            assert v is None or (v.shape == (dim,) and np.all(np.isfinite(v)))
+        _check_rotation(grp, stage.rot)
+
+    _accepted_or_counted(
+        wire.decode_stage(msg, grp, dim, RUN_ID, 3, wire.ROTATION_TOL, T_MAX), counter, check
+    )
+
+
+def test_a_valid_message_of_each_kind_is_accepted():
+    """The decoders are not simply refusing everything: an agent's own messages pass."""
+    from std_msgs.msg import Float64MultiArray
+
+    from polymatch_ros.ros import wire
+
+    for dim in (2, 3, 4):
+        grp = _matrix_group(dim)
+        rot = grp.from_matrices(np.eye(dim)[None])
+        x = np.arange(dim, dtype=float)
+        got, reason = wire.decode_pose_msg(
+            wire.pose_message(grp, 1.5, x, rot, "world"), grp, dim, "world", T_MAX
+        )
+        assert reason is None and got.t == 1.5 and np.allclose(got.vec, x)
+        w = grp.algebra_take(grp.algebra_zeros(1), [0])
+        got, reason = wire.decode_twist_msg(
+            wire.twist_message(grp, 1.5, x, w, "world"), grp, dim, "world", T_MAX
+        )
+        assert reason is None and np.allclose(got.vec, x)
+        msg = wire.encode_stage(
+            Float64MultiArray(),
+            RUN_ID,
+            3,
+            4,
+            1,
+            0,
+            1.25,
+            {"x": x.tolist(), "rot": wire.rot_values(grp, rot)},
+        )
+        stage, reason = wire.decode_stage(msg, grp, dim, RUN_ID, 3, wire.ROTATION_TOL, T_MAX)
+        assert reason is None and (stage.step, stage.stage, stage.t) == (4, 1, 1.25)
