@@ -352,30 +352,16 @@ def run(args, log):
 
     def draw_wp(plt):
         fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+        curves = (("err_own", "wall_end", "o-", "B: final state only"),
+                  ("err", "wall", "x:", f"A: {n_samples} outputs"))
         for k, label in enumerate(solvers):
             rs = [r for r in results if r["solver"] == label]
             col = f"C{k}"
-            axes[0].loglog(
-                [r["err_own"] for r in rs],
-                [r["wall_end"] * 1e3 for r in rs],
-                "o-",
-                color=col,
-                label=f"{label}, B: final state only",
-            )
-            axes[0].loglog(
-                [r["err"] for r in rs],
-                [r["wall"] * 1e3 for r in rs],
-                "x:",
-                color=col,
-                label=f"{label}, A: {n_samples} outputs",
-            )
-            axes[1].loglog(
-                [r["tol"] for r in rs],
-                [max(r["orth"], 1e-17) for r in rs],
-                "o-",
-                color=col,
-                label=label,
-            )
+            for err_key, wall_key, style, what in curves:
+                axes[0].loglog([r[err_key] for r in rs], [r[wall_key] * 1e3 for r in rs], style,
+                               color=col, label=f"{label}, {what}")
+            axes[1].loglog([r["tol"] for r in rs], [max(r["orth"], 1e-17) for r in rs], "o-",
+                           color=col, label=label)
         axes[0].axvline(target, color="r", ls="--", lw=1, label=f"target {target:.0e}")
         axes[0].set_xlabel("max vertex error over time")
         axes[0].set_ylabel(f"wall ms (best of {repeats})")

@@ -122,6 +122,31 @@ class RotationGroup:
         raise NotImplementedError
 
 
+
+class RowsFirstGroup(RotationGroup):
+    """A representation whose group and algebra arrays hold rotation i in row i (axis 0).
+
+    Angles (N,) and matrices (N, d, d) share this layout, and with it the row bookkeeping.
+    """
+
+    def count(self, g: Array) -> int:
+        return g.shape[0]
+
+    def take(self, g: Array, idx) -> Array:
+        return g[idx]
+
+    def put(self, g: Array, idx, values: Array) -> None:
+        g[idx] = values
+
+    def concat(self, parts: Sequence[Array]) -> Array:
+        return np.concatenate(parts, axis=0)
+
+    def algebra_take(self, a: Array, idx) -> Array:
+        return a[idx]
+
+    def algebra_concat(self, parts: Sequence[Array]) -> Array:
+        return np.concatenate(parts, axis=0)
+
 #: multiply-adds below which OpenBLAS runs a product on one thread (2^18); a threaded product
 #: of a long, thin matrix stalls whenever the machine's cores are busy
 ONE_THREAD_PRODUCT = 1 << 18

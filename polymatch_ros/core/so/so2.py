@@ -1,15 +1,14 @@
 """SO(2) as angles: exp is addition, the first-order model (A-2) is Kuramoto."""
 
-from collections.abc import Sequence
 
 import numpy as np
 
-from .base import Array, MeanField, RotationGroup
+from .base import Array, MeanField, RowsFirstGroup
 
 _add = np.add.reduce
 
 
-class SO2(RotationGroup):
+class SO2(RowsFirstGroup):
     """SO(2) as angles; exp is addition, so every Lie method is a classical RK method on angles."""
 
     dim = 2
@@ -32,30 +31,12 @@ class SO2(RotationGroup):
         c, s = np.cos(g), np.sin(g)
         return np.stack([c, -s, s, c], axis=1)
 
-    def count(self, g: Array) -> int:
-        return g.shape[0]
-
-    def take(self, g: Array, idx) -> Array:
-        return g[idx]
-
-    def put(self, g: Array, idx, values: Array) -> None:
-        g[idx] = values
-
-    def concat(self, parts: Sequence[Array]) -> Array:
-        return np.concatenate(parts)
-
     def rotate(self, g: Array, r: np.ndarray) -> np.ndarray:
         c, s = np.cos(g), np.sin(g)
         return np.stack([c * r[0] - s * r[1], s * r[0] + c * r[1]], axis=1)
 
     def algebra_zeros(self, n: int) -> Array:
         return np.zeros(n)
-
-    def algebra_take(self, a: Array, idx) -> Array:
-        return a[idx]
-
-    def algebra_concat(self, parts: Sequence[Array]) -> Array:
-        return np.concatenate(parts)
 
     def algebra_from_skew(self, w: np.ndarray) -> Array:
         return np.asarray(w, dtype=float)[:, 1, 0].copy()

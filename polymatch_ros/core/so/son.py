@@ -1,15 +1,14 @@
 """SO(d) for any d >= 2 as (N, d, d) matrices with the Cayley map (exp for d = 2)."""
 
-from collections.abc import Sequence
 
 import numpy as np
 
-from .base import Array, MeanField, RotationGroup, polar_newton_schulz, rows_product
+from .base import Array, MeanField, RowsFirstGroup, polar_newton_schulz, rows_product
 from .cayley import cayley_series
 from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split
 
 
-class SOn(RotationGroup):
+class SOn(RowsFirstGroup):
     """SO(d) for any d >= 2 as (N, d, d) matrices, with the Cayley map (exp for d = 2).
 
     cay(W) = (I - W/2)^{-1} (I + W/2),   dcay^{-1}_W(A) = (I - W/2) A (I + W/2).
@@ -43,29 +42,11 @@ class SOn(RotationGroup):
     def to_matrices(self, g: Array) -> np.ndarray:
         return g
 
-    def count(self, g: Array) -> int:
-        return g.shape[0]
-
-    def take(self, g: Array, idx) -> Array:
-        return g[idx]
-
-    def put(self, g: Array, idx, values: Array) -> None:
-        g[idx] = values
-
-    def concat(self, parts: Sequence[Array]) -> Array:
-        return np.concatenate(parts, axis=0)
-
     def rotate(self, g: Array, r: np.ndarray) -> np.ndarray:
         return g @ r
 
     def algebra_zeros(self, n: int) -> Array:
         return np.zeros((n, self.dim, self.dim))
-
-    def algebra_take(self, a: Array, idx) -> Array:
-        return a[idx]
-
-    def algebra_concat(self, parts: Sequence[Array]) -> Array:
-        return np.concatenate(parts, axis=0)
 
     def algebra_from_skew(self, w: np.ndarray) -> Array:
         return np.array(w, dtype=float)
