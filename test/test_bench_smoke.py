@@ -13,12 +13,14 @@ from polymatch_ros.bench import families
 # headers the shipped families must print (families added later are only checked for a table)
 EXPECTED = {
     "step": ["| model", "| method", "best ms", "median ms", "rkmk4", "lie_euler", "rk4_proj",
-             "so3 (exp/Rodrigues, SoA)", "matrix (Cayley", "| d: representation", "N = 1,000"],
+             "so3 (exp/Rodrigues, SoA)", "matrix (Cayley", "| d: representation", "N = 1,000",
+             "best / previous d", "dimensions interleaved"],
     "meanfield": ["mean field best ms", "naive µs/agent (sample)", "naive total, scaled",
                   "speed-up", "max abs diff"],
     "dop853": ["| solver", "rtol=atol", "A: max err", "B: max err (own steps)", "orth. defect",
                "ours (angle)", "ours (matrix, Cayley)", "scipy DOP853",
-               "Cheapest run with max error"],
+               "Cheapest run with max error", "A: ours/scipy", "B: ours/scipy",
+               "target max error"],
     "precision": ["| method", "h or tol", "max error", "rhs evals", "orth. defect", "rkmk4",
                   "lie_verlet", "adaptive (ours)", "RK45", "DOP853", "observed order", "Frontier",
                   "cheapest (best wall)"],

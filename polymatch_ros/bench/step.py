@@ -14,8 +14,10 @@ follow the exact linear flow of Proposition 2.1 and cost O(N d) per step.
 
 Representations compared at d = 3: "so3" (default: 3x3 matrices in
 structure-of-arrays layout, Cayley map in closed form), "so3-exp" (same
-layout, Rodrigues' exp) and "matrix" (N x d x d arrays, Cayley map by
-batched solves, the representation used for d >= 4).  ``lie_euler`` (1
+layout, Rodrigues' exp) and "matrix" (N x d x d arrays, the representation
+used for d >= 4: the Cayley map in closed form through so(4) = so(3) + so(3)
+for d = 4, by batched matrix products otherwise).  A table times d = 3, 4, 10
+side by side at one N and reports each cost against the previous d's.  ``lie_euler`` (1
 evaluation) and ``rk4_proj`` (classical RK4 in R^{dxd} + polar projection)
 are shown for comparison.  Each repeat starts from a fresh copy of the
 initial state, so no cached mean field is reused.
@@ -44,6 +46,9 @@ def add_arguments(p):
                    help="skip N x d cells whose step is predicted to take longer (default 1.5)")
     p.add_argument("--dt", type=at_least(1e-300, float), default=0.05,
                    help="step size (does not change the cost)")
+    p.add_argument("--ratio-dims", type=int_list(2), default=[3, 4, 10],
+                   help="d values timed side by side at --n for the cost ratios between "
+                        "dimensions (default 3,4,10)")
 
 
 def _stepper(meth, scene, dt):
@@ -223,6 +228,41 @@ def headline(args, log, report):
     return configs, n, dim
 
 
+def dimension_ratios(args, log, report):
+    """rkmk4 at one N for several d, interleaved: each d's cost against the previous d's."""
+    from ..core import METHODS
+    from .scenes import representation_label, timing_scene
+    from .timing import fmt_ms, measure_interleaved
+
+    n = 500 if args.quick else args.n
+    dims = [2, 3, 4] if args.quick else args.ratio_dims
+    repeats = args.repeats or (3 if args.quick else 15)
+    scenes = [timing_scene(n, d, args.grid_order) for d in dims]
+    log(f"step: dimension ratios at N = {n}: d = {dims}, {repeats} interleaved repeats")
+    steppers = [_stepper(METHODS["rkmk4"], sc, args.dt) for sc in scenes]
+    timings = measure_interleaved(steppers, repeats)
+    rows = []
+    for k, (d, sc, t) in enumerate(zip(dims, scenes, timings)):
+        row = [d, representation_label(sc.model.rotations), fmt_ms(t.best), fmt_ms(t.median)]
+        if k == 0:
+            row += ["-", "-", "-"]
+        else:
+            prev_d, prev_t = dims[k - 1], timings[k - 1]
+            row += [f"{t.best / prev_t.best:.2f}", f"{t.median / prev_t.median:.2f}",
+                    f"{(d / prev_d) ** 3:.1f}"]
+        rows.append(row)
+    report.table(["d", "representation", "best ms", "median ms", "best / previous d",
+                  "median / previous d", "(d / previous d)^3"], rows,
+                 caption=f"rkmk4, one step at N = {n:,}, "
+                         f"{'first' if args.grid_order == 1 else 'second'}-order model, "
+                         f"dimensions interleaved ({repeats} repeats each)")
+    report.text("- A step costs O(N d^3): the ratio to the previous dimension should stay near "
+                "or below (d / previous d)^3; d = 3 (closed-form SoA) to d = 4 (matrices, "
+                "closed-form Cayley through so(4) = so(3) + so(3)) is the change of "
+                "representation.")
+    return dict(zip(dims, timings))
+
+
 def grid(args, log, report):
     from ..core import METHODS
     from .scenes import representation_label, timing_scene
@@ -278,8 +318,8 @@ def grid(args, log, report):
         )
     notes.append(
         "The cost is O(N d^3) per evaluation: d = 2 uses angles (SO(2) is abelian), d = 3 the "
-        "structure-of-arrays Cayley map, d >= 4 N x d x d matrices with batched Cayley "
-        "solves."
+        "structure-of-arrays Cayley map, d >= 4 N x d x d matrices with the Cayley map in "
+        "closed form (d = 4) or by batched matrix products (d >= 5), no per-matrix solves."
     )
     report.text(*notes)
     return results, sizes, dims
@@ -290,6 +330,7 @@ def run(args, log):
 
     report = Report(NAME, "One integrator step (`polymatch bench step`)")
     configs, n, dim = headline(args, log, report)
+    dimension_ratios(args, log, report)
     results, sizes, dims = grid(args, log, report)
 
     def draw_bars(plt):

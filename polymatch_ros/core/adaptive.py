@@ -27,9 +27,10 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.integrate import DOP853
 
+from .adaptive_chart import Chart
+from .centroids import CentroidFlow
 from .errors import PolymatchError, StepLimitError
 from .model import GroupState, Model, State, System
-from .rk import rk_stability
 from .solver import FINISHED, RUNNING, MethodInfo, exact_centroids, with_centroids
 from .stability import test_matrices
 
@@ -43,73 +44,9 @@ END_RTOL = 1e-13
 CAP_FRACTION = 0.9
 #: the smallest tolerance worth asking for in double precision (scipy's floor for rtol)
 TOLERANCE_FLOOR = 100 * np.finfo(float).eps
-
-
-class _Chart:
-    """Flat increment coordinates centred at the state y: per group rot, [x, v,] [w]."""
-
-    def __init__(self, system, y):
-        self.system, self.y = system, y
-        grp, model = system.group, system.model
-        self.parts = []
-        pos = 0
-        base, is_rot = [], []
-        for gi, gs in enumerate(y.groups):
-            if gs is None or grp.count(gs.rot) == 0:
-                continue
-            fields = [("rot", grp.algebra_zeros(grp.count(gs.rot)))]
-            if not model.centroids_exact:
-                fields.append(("x", gs.x))
-                if model.order == 2:
-                    fields.append(("v", gs.v))
-            if model.order == 2:
-                fields.append(("w", gs.w))
-            for kind, value in fields:
-                size = value.size
-                self.parts.append((gi, kind, value.shape, slice(pos, pos + size)))
-                base.append(np.ravel(value))
-                is_rot.append(np.full(size, kind == "rot"))
-                pos += size
-        self.n = pos
-        self.base = np.concatenate(base) if base else np.zeros(0)        # 0 in the rotation slots
-        self.is_rot = np.concatenate(is_rot) if is_rot else np.zeros(0, dtype=bool)
-        self.base_size = np.where(self.is_rot, 1.0, np.abs(self.base))   # rotations have unit size
-
-    def state(self, vec):
-        """(State at psi(vec) . y, per-group Theta): the stage the right-hand side sees."""
-        grp = self.system.group
-        groups = list(self.y.groups)
-        thetas = [None] * len(groups)
-        if len(self.parts) == 1:                      # one group, rotations only (first order)
-            gi, _, shape, _ = self.parts[0]
-            gs = groups[gi]
-            thetas[gi] = theta = vec.reshape(shape)
-            groups[gi] = GroupState(gs.x, grp.retract(theta, gs.rot), gs.v, gs.w)
-            return State(self.y.t, tuple(groups)), thetas
-        for gi, kind, shape, sl in self.parts:
-            piece = vec[sl].reshape(shape)
-            gs = groups[gi]
-            if kind == "rot":
-                thetas[gi] = piece
-                groups[gi] = GroupState(gs.x, grp.retract(piece, gs.rot), gs.v, gs.w)
-            elif kind == "x":
-                groups[gi] = GroupState(self.y.groups[gi].x + piece, gs.rot, gs.v, gs.w)
-            elif kind == "v":
-                groups[gi] = GroupState(gs.x, gs.rot, self.y.groups[gi].v + piece, gs.w)
-            else:
-                groups[gi] = GroupState(gs.x, gs.rot, gs.v, self.y.groups[gi].w + piece)
-        return State(self.y.t, tuple(groups)), thetas
-
-    _INDEX = {"rot": 0, "x": 1, "v": 2, "w": 3}
-
-    def pack(self, rates):
-        if len(self.parts) == 1:                      # one group, rotations only: no copy needed
-            gi, kind, _, _ = self.parts[0]
-            return rates[gi][self._INDEX[kind]].reshape(-1)
-        out = np.empty(self.n)
-        for gi, kind, _shape, sl in self.parts:
-            out[sl] = rates[gi][self._INDEX[kind]].reshape(-1)
-        return out
+N_DENSE = N_STAGES + 1 + len(DOP853.C_EXTRA)
+#: step caps by test matrices (``AdaptiveLie.step_cap``)
+_CAPS: dict = {}
 
 
 class AdaptiveLie:
@@ -127,6 +64,14 @@ class AdaptiveLie:
         self.A, self.B = DOP853.A[:N_STAGES, :N_STAGES], DOP853.B
         self.rows = [np.ascontiguousarray(self.A[s, :s]) for s in range(1, N_STAGES)]
         self.E3, self.E5 = DOP853.E3, DOP853.E5
+        # R(z) = 1 + sum_k z^k b^T A^(k-1) 1 (an explicit tableau: a polynomial), highest first
+        coefs, vec = [1.0], np.ones(N_STAGES)
+        for _ in range(N_STAGES):
+            coefs.append(float(self.B @ vec))
+            vec = self.A @ vec
+        self.stability_poly = np.array(coefs[::-1])
+        # the continuous extension: Horner coefficients in the order _dense applies them
+        self.dense_extra = list(zip(DOP853.A_EXTRA, DOP853.C_EXTRA))
 
     @property
     def name(self) -> str:
@@ -138,10 +83,20 @@ class AdaptiveLie:
         Near consensus the error estimate lets the step grow until it hovers at the
         stability boundary, which keeps a converged ensemble from staying converged;
         no step beyond the cap can be accurate anyway.  Returns (cap, binding cause).
+        The cap depends on the test matrices only: it is computed once per distinct set.
         """
-        a, b = self.A, self.B
+        tests = test_matrices(model)
+        key = tuple((np.atleast_2d(mat).tobytes(), np.shape(mat), cause)
+                    for _, mat, cause in tests)
+        if key not in _CAPS:
+            if len(_CAPS) >= 64:
+                _CAPS.pop(next(iter(_CAPS)))
+            _CAPS[key] = self._bisect_caps(tests)
+        return _CAPS[key]
+
+    def _bisect_caps(self, tests) -> tuple[float, str]:
         best = (np.inf, "")
-        for _, mat, cause in test_matrices(model):
+        for _, mat, cause in tests:
             lam = np.linalg.eigvals(np.atleast_2d(mat))
             rate = float(np.max(np.abs(lam)))
             if rate == 0.0:
@@ -149,7 +104,7 @@ class AdaptiveLie:
             lo, hi = 0.0, 20.0 / rate
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
-                if np.all(np.abs(rk_stability(a, b, mid * lam)) <= 1.0):
+                if np.all(np.abs(np.polyval(self.stability_poly, mid * lam)) <= 1.0):
                     lo = mid
                 else:
                     hi = mid
@@ -170,15 +125,20 @@ class AdaptiveSolver:
                  samples: Sequence[float] = ()):
         self.method, self.system, self.state = method, system, state
         times = np.union1d(np.asarray(samples, dtype=float), [float(t_end)])
-        self.pending = [float(t) for t in times if t > state.t]
+        #: output times still ahead, sorted; ``self.next_sample`` indexes the first one
+        self.pending = times[times > state.t]
+        self.next_sample = 0
         self.nsteps = self.nfev = self.nrejected = 0
-        self.status = RUNNING if self.pending else FINISHED
-        if not self.pending:
+        self.status = RUNNING if len(self.pending) else FINISHED
+        if not len(self.pending):
             return
-        self.t_end = self.pending[-1]
+        self.t_end = float(self.pending[-1])
         self.cap = self._check_stiffness()
         self.coupling = system.couple(state.groups)
-        self.chart = _Chart(system, state)
+        self.chart = Chart(system, state)
+        # stage slopes, reused by every attempt; the last rows hold the dense-output stages
+        self.K = np.empty((N_DENSE, self.chart.n))
+        self.rotation_scale = np.full(self.chart.n, method.atol + method.rtol * 1.0)
         self.k0 = self.chart.pack(system.rates(state, self.coupling))
         self.nfev += 1
         with np.errstate(over="ignore", invalid="ignore"):
@@ -229,15 +189,18 @@ class AdaptiveSolver:
         return abs(h) * n5 / math.sqrt((n5 + 0.01 * n3) * len(scale))
 
     def _attempt(self, chart, h, k0):
-        K = np.empty((N_STAGES + 1, chart.n))
+        meth, K = self.method, self.K
         K[0] = k0
-        for s, row in enumerate(self.method.rows, start=1):
+        for s, row in enumerate(meth.rows, start=1):
             K[s] = self._fun(chart, (row @ K[:s]) * h)[0]
-        theta = (K[:N_STAGES].T @ self.method.B) * h
+        theta = (K[:N_STAGES].T @ meth.B) * h
         K[N_STAGES], raw_new, y_new = self._fun(chart, theta)
-        new_size = np.where(chart.is_rot, 1.0, np.abs(chart.base + theta))
-        scale = self.method.atol + self.method.rtol * np.maximum(chart.base_size, new_size)
-        return theta, K, raw_new, y_new, self._error_norm(K, h, scale)
+        if chart.rotations_only:                     # rotations have unit size: a fixed scale
+            scale = self.rotation_scale
+        else:
+            new_size = np.where(chart.is_rot, 1.0, np.abs(chart.base + theta))
+            scale = meth.atol + meth.rtol * np.maximum(chart.base_size, new_size)
+        return theta, raw_new, y_new, self._error_norm(K[:N_STAGES + 1], h, scale)
 
     def _initial_step(self, chart, k0, span):
         scale = self.method.atol + self.method.rtol * chart.base_size
@@ -253,27 +216,58 @@ class AdaptiveSolver:
             h1 = (0.01 / max(d1, d2)) ** (1.0 / (DOP853.order + 1))
         return min(100 * h0, h1, span)
 
-    def _dense(self, K, h, theta, times):
-        """States at ``times`` inside the step (DOP853's continuous extension in the chart)."""
-        chart, y = self.chart, self.state
-        Kx = np.empty((N_STAGES + 1 + len(DOP853.C_EXTRA), chart.n))
-        Kx[:N_STAGES + 1] = K
-        for s, (a, _c) in enumerate(zip(DOP853.A_EXTRA, DOP853.C_EXTRA), start=N_STAGES + 1):
-            Kx[s] = self._fun(chart, (Kx[:s].T @ a[:s]) * h)[0]
+    def _dense(self, h, theta, times):
+        """States at ``times`` inside the step (DOP853's continuous extension in the chart).
+
+        The three extra stages fill the last rows of ``self.K``; the polynomial is evaluated
+        for all the step's sample times at once, in the same order of operations as scipy's.
+        """
+        chart, y, K = self.chart, self.state, self.K
+        for s, (a, _c) in enumerate(self.method.dense_extra, start=N_STAGES + 1):
+            K[s] = self._fun(chart, (K[:s].T @ a[:s]) * h)[0]
         F = np.empty((DOP853.D.shape[0] + 3, chart.n))
         F[0] = theta
-        F[1] = h * Kx[0] - theta
-        F[2] = 2 * theta - h * (K[N_STAGES] + Kx[0])
-        F[3:] = h * (DOP853.D @ Kx)
+        F[1] = h * K[0] - theta
+        F[2] = 2 * theta - h * (K[N_STAGES] + K[0])
+        F[3:] = h * (DOP853.D @ K)
+        x = ((times - y.t) / h)[:, None]
+        factors = (x, 1 - x)
+        vals = np.zeros((len(times), chart.n))
+        for i, f in enumerate(reversed(F)):
+            vals += f
+            vals *= factors[i % 2]
+        return self._sample_states(times.tolist(), vals)
+
+    def _sample_states(self, times, vals):
+        """States at ``times`` from their chart coordinates (rows of ``vals``)."""
+        chart, y, system = self.chart, self.state, self.system
+        if not (chart.single_part and system.model.centroids_exact):
+            return [self._with_exact_centroids(chart.state(val)[0], t - y.t, t)
+                    for t, val in zip(times, vals)]
+        gi, _, shape, _ = chart.parts[0]           # one group, rotations only: no chart states
+        gs, grp, groups = y.groups[gi], system.group, list(y.groups)
+        dts = [t - y.t for t in times]
+        all_to_all = isinstance(system.flows[gi], CentroidFlow)
+        cents = self._first_order_centroids(gi, gs, dts) if system.model.order == 1 and \
+            all_to_all else [system.exact_centroids(gi, gs, self.coupling, dt) for dt in dts]
+        rots = grp.retract_each(vals.reshape((len(vals),) + shape), gs.rot)
         out = []
-        for t in times:
-            x = (t - y.t) / h
-            val = np.zeros(chart.n)
-            for i, f in enumerate(reversed(F)):
-                val += f
-                val *= x if i % 2 == 0 else 1 - x
-            out.append(self._with_exact_centroids(chart.state(val)[0], t - y.t, t))
+        for t, rot, (x, v) in zip(times, rots, cents):
+            groups[gi] = GroupState(x, rot, v, gs.w)
+            out.append(State(t, tuple(groups)))
         return out
+
+    def _first_order_centroids(self, gi, gs, dts):
+        """``CentroidFlow.advance`` of (A-2)'s all-to-all centroids for every dt at once.
+
+        Proposition 2.1 with m = 0 (graph flows go mode by mode, ``GraphCentroidFlow``).
+
+        x(dt) = mean + p(dt) (x - mean) with the flow's own propagator p(dt).
+        """
+        flow, mean_x = self.system.flows[gi], self.coupling.groups[gi].mean_x
+        decay = np.array([flow.propagator(dt)[1] for dt in dts])[:, None, None]
+        xs = mean_x + decay * (gs.x - mean_x)
+        return [(x, None) for x in xs]
 
     def _with_exact_centroids(self, st, dt, t):
         """``st`` at time t with decoupled centroids on their exact flow over dt (Prop. 2.1)."""
@@ -311,20 +305,21 @@ class AdaptiveSolver:
     def step(self) -> list[State]:
         """Take one accepted step; return the states at the sample times it reached."""
         y = self.state
-        step, (theta, K, raw_new, y_new, _), factor = self._accepted_attempt()
+        step, (theta, raw_new, y_new, _), factor = self._accepted_attempt()
         self.nsteps += 1
         near_end = self.t_end - END_RTOL * max(1.0, abs(self.t_end))
         reached = self.t_end if y.t + step >= near_end else y.t + step
-        inside = [t for t in self.pending if t < reached]
-        self.pending = [t for t in self.pending if t >= reached]
-        out = self._dense(K, step, theta, inside) if inside else []
+        first = self.next_sample
+        stop = int(np.searchsorted(self.pending, reached, side="left"))   # pending < reached
+        out = self._dense(step, theta, self.pending[first:stop]) if stop > first else []
+        self.next_sample = stop
         self.state = y = self._with_exact_centroids(y_new, step, reached)
         self.coupling = self.system.couple(y.groups)
-        self.chart = _Chart(self.system, y)
+        self.chart = self.chart.at(y)
         self.k0 = self.chart.pack(raw_new)       # FSAL: raw rates at y_new are the new chart's k0
         self.h = min(step * factor, self.cap)
-        if self.pending and self.pending[0] == reached:
-            self.pending.pop(0)
+        if stop < len(self.pending) and self.pending[stop] == reached:
+            self.next_sample += 1
             out.append(y)
         if reached >= self.t_end:
             self.status = FINISHED

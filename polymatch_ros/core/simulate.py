@@ -234,33 +234,12 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
             "congruent (no scale weights)"
         lines.append(f"group {g.name!r}: {g.size} x {len(g.reference)}-vertex polytope, {kind}")
         lines.append(f"group {g.name!r} graph: {_graph_line(g)}")
-    if m.inter_group:
-        lines.append(f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; "
-                     "centroids integrated "
-                     "with the method's stages (the inter-group force is nonlinear)")
-    elif distributed and m.centroids_exact and any(g.graph is not None for g in m.groups):
-        lines.append("centroids: integrated with the method's stages in a distributed run on a "
-                     "graph (the exact Laplacian flow reads every agent; stages keep the "
-                     "exchange between in-neighbours)")
-    elif m.centroids_exact and any(g.graph is not None for g in m.groups):
-        lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential);"
-                     " on graphs mode by mode of the Laplacian (eigh once, O(N^3); O(N^2 d) "
-                     "per step)")
-    elif m.centroids_exact:
-        lines.append("centroids: exact linear flow of Proposition 2.1 (no inter-group potential)")
-    elif m.centroids == "exact":
-        lines.append("centroids: integrated with the method's stages (a directed graph: "
-                     "its Laplacian is not symmetric; stages keep the exchange between "
-                     "in-neighbours)")
-    else:
-        lines.append("centroids: integrated with the method's stages "
-                     "(model.centroids = integrated; "
-                     "the exact flow would be cheaper and exact)")
+    lines.append(_centroid_line(m, distributed))
     rep = m.rotations
     rep_text = {"angle": "angles (SO(2) is abelian: the first-order model is Kuramoto, "
                          "exp is addition)",
                 "so3": f"3x3 matrices, structure-of-arrays, {rep.retraction} map in closed form",
-                "matrix": f"{m.dim}x{m.dim} matrices, Cayley map by batched solves"}[rep.name]
+                "matrix": f"{m.dim}x{m.dim} matrices, Cayley map, no per-matrix solves"}[rep.name]
     lines.append(f"rotations: {rep_text}")
     p = plan(scene, method, dt, tolerance, distributed=distributed, check=False)
     info = p.method.info
@@ -282,6 +261,30 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
         lines.append(f"integrator: adaptive DOP853-Lie, tolerance {p.tolerance:g} — {p.reason}")
     lines.extend(f"note: {n}" for n in scene.notes)
     return lines
+
+
+def _centroid_line(m, distributed: bool) -> str:
+    """How the centroids advance: exact flow (Prop. 2.1) or with the method's stages."""
+    if m.inter_group:
+        return (f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; "
+                "centroids integrated "
+                "with the method's stages (the inter-group force is nonlinear)")
+    if distributed and m.centroids_exact and any(g.graph is not None for g in m.groups):
+        return ("centroids: integrated with the method's stages in a distributed run on a "
+                "graph (the exact Laplacian flow reads every agent; stages keep the "
+                "exchange between in-neighbours)")
+    if m.centroids_exact and any(g.graph is not None for g in m.groups):
+        return ("centroids: exact linear flow of Proposition 2.1 (no inter-group potential);"
+                " on graphs mode by mode of the Laplacian (eigh once, O(N^3); O(N^2 d) "
+                "per step)")
+    if m.centroids_exact:
+        return "centroids: exact linear flow of Proposition 2.1 (no inter-group potential)"
+    if m.centroids == "exact":
+        return ("centroids: integrated with the method's stages (a directed graph: "
+                "its Laplacian is not symmetric; stages keep the exchange between "
+                "in-neighbours)")
+    return ("centroids: integrated with the method's stages (model.centroids = integrated; "
+            "the exact flow would be cheaper and exact)")
 
 
 def _graph_line(g) -> str:

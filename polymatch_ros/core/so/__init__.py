@@ -26,7 +26,8 @@ Representations
          Stacked 3x3 products in array-of-structures layout are slow in numpy;
          in SoA every entry is a contiguous length-N vector.
 ``SOn``  any d >= 2: matrices (N, d, d); so(d) as skew matrices (N, d, d).
-         Cayley map through batched linear solves (no batched ``expm``).
+         Cayley map without per-matrix solves (``cayley``): closed forms through
+         so(4) = so(3) + so(3) for d = 4, batched matrix products otherwise.
 """
 
 from .base import RotationGroup, polar_newton_schulz

@@ -85,6 +85,10 @@ class RotationGroup:
         """psi(xi) O for each rotation; psi is exp or Cayley."""
         raise NotImplementedError
 
+    def retract_each(self, xis: np.ndarray, g: Array) -> list[Array]:
+        """[psi(xi) O for xi in xis]: xis stacks algebra arrays along a leading axis."""
+        return [self.retract(xi, g) for xi in xis]
+
     def dpsi_inv(self, xi: Array, a: Array) -> Array:
         """Inverse right-trivialised differential of psi at xi, applied to a."""
         raise NotImplementedError
@@ -116,6 +120,47 @@ class RotationGroup:
     def project(self, g: Array) -> Array:
         """Nearest rotation (polar factor) of each near-orthogonal matrix."""
         raise NotImplementedError
+
+
+
+class RowsFirstGroup(RotationGroup):
+    """A representation whose group and algebra arrays hold rotation i in row i (axis 0).
+
+    Angles (N,) and matrices (N, d, d) share this layout, and with it the row bookkeeping.
+    """
+
+    def count(self, g: Array) -> int:
+        return g.shape[0]
+
+    def take(self, g: Array, idx) -> Array:
+        return g[idx]
+
+    def put(self, g: Array, idx, values: Array) -> None:
+        g[idx] = values
+
+    def concat(self, parts: Sequence[Array]) -> Array:
+        return np.concatenate(parts, axis=0)
+
+    def algebra_take(self, a: Array, idx) -> Array:
+        return a[idx]
+
+    def algebra_concat(self, parts: Sequence[Array]) -> Array:
+        return np.concatenate(parts, axis=0)
+
+#: multiply-adds below which OpenBLAS runs a product on one thread (2^18); a threaded product
+#: of a long, thin matrix stalls whenever the machine's cores are busy
+ONE_THREAD_PRODUCT = 1 << 18
+
+
+def rows_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b for a long (n, k) a and a small (k, m) b, in row blocks each on one thread."""
+    rows = max(1, ONE_THREAD_PRODUCT // (a.shape[1] * b.shape[1]))
+    if a.shape[0] <= rows:
+        return a @ b
+    out = np.empty((a.shape[0], b.shape[1]))
+    for start in range(0, a.shape[0], rows):
+        np.matmul(a[start:start + rows], b, out=out[start:start + rows])
+    return out
 
 
 def polar_newton_schulz(mats: np.ndarray, tol: float = 1e-15, max_iter: int = 12) -> np.ndarray:

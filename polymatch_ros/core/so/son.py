@@ -1,18 +1,24 @@
 """SO(d) for any d >= 2 as (N, d, d) matrices with the Cayley map (exp for d = 2)."""
 
-from collections.abc import Sequence
 
 import numpy as np
 
-from .base import Array, MeanField, RotationGroup, polar_newton_schulz
+from .base import Array, MeanField, RowsFirstGroup, polar_newton_schulz, rows_product
+from .cayley import cayley_series
+from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split
 
 
-class SOn(RotationGroup):
+class SOn(RowsFirstGroup):
     """SO(d) for any d >= 2 as (N, d, d) matrices, with the Cayley map (exp for d = 2).
 
     cay(W) = (I - W/2)^{-1} (I + W/2),   dcay^{-1}_W(A) = (I - W/2) A (I + W/2).
     Both are exact and need no matrix exponential, which is what makes a
-    4th-order Munthe-Kaas step affordable for d >= 4.
+    4th-order Munthe-Kaas step affordable for d >= 4.  Neither needs a per-matrix
+    LAPACK call either: for d = 4 closed forms through so(4) = so(3) + so(3) and unit
+    quaternion pairs (``so4``), for the others batched matrix products (``cayley``).
+    For d = 4 the pairs of O and the so(4) parts of Theta are kept by identity while the
+    stages of a step reuse them: arrays handed to ``retract`` and ``dpsi_inv`` must not be
+    modified in place afterwards (no integrator does).
     """
 
     name = "matrix"
@@ -36,29 +42,11 @@ class SOn(RotationGroup):
     def to_matrices(self, g: Array) -> np.ndarray:
         return g
 
-    def count(self, g: Array) -> int:
-        return g.shape[0]
-
-    def take(self, g: Array, idx) -> Array:
-        return g[idx]
-
-    def put(self, g: Array, idx, values: Array) -> None:
-        g[idx] = values
-
-    def concat(self, parts: Sequence[Array]) -> Array:
-        return np.concatenate(parts, axis=0)
-
     def rotate(self, g: Array, r: np.ndarray) -> np.ndarray:
         return g @ r
 
     def algebra_zeros(self, n: int) -> Array:
         return np.zeros((n, self.dim, self.dim))
-
-    def algebra_take(self, a: Array, idx) -> Array:
-        return a[idx]
-
-    def algebra_concat(self, parts: Sequence[Array]) -> Array:
-        return np.concatenate(parts, axis=0)
 
     def algebra_from_skew(self, w: np.ndarray) -> Array:
         return np.array(w, dtype=float)
@@ -77,17 +65,44 @@ class SOn(RotationGroup):
             c, s = np.cos(xi[:, 1, 0]), np.sin(xi[:, 1, 0])
             rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
             return rot @ g
-        half = 0.5 * xi
-        return np.linalg.solve(self._eye - half, (self._eye + half) @ g)
+        if self.dim == 4:
+            return cayley4_retract(self._so4_parts(xi), self._quaternion_pairs(g))
+        return cayley_series(xi, g)
+
+    _pairs = (None, None)
+    _parts = (None, None)
+
+    def _so4_parts(self, xi):
+        """so4_split(Theta), kept for dpsi_inv at the same Theta (RKMK: the same stage)."""
+        cached, parts = self._parts
+        if cached is not xi:
+            parts = so4_split(xi)
+            self._parts = (xi, parts)
+        return parts
+
+    def _quaternion_pairs(self, g):
+        """O = L(p) R(q) for d = 4, kept while the stages of a step retract around one O."""
+        cached, pairs = self._pairs
+        if cached is not g:
+            pairs = quaternion_pairs(g)
+            self._pairs = (g, pairs)
+        return pairs
 
     def dpsi_inv(self, xi: Array, a: Array) -> Array:
         if self.dim == 2:
             return a
-        half = 0.5 * xi
-        return (self._eye - half) @ a @ (self._eye + half)
+        if self.dim == 4:
+            return dcay_inv4(xi, a, self._so4_parts(xi))
+        half = 0.5 * xi                         # (I - H) A (I + H) = B + B H,  B = A - H A
+        b = a - half @ a
+        b += b @ half
+        return b
 
     def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
-        return g.sum(axis=0) if weights is None else np.tensordot(weights, g, axes=(0, 0))
+        # a BLAS product: summing over the leading axis of (N, d, d) is several times slower
+        n = g.shape[0]
+        w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
+        return (w @ g.reshape(n, -1)).reshape(self.dim, self.dim)
 
     def neighbour_fields(self, g: Array, weights) -> MeanField:
         d = self.dim
@@ -98,7 +113,7 @@ class SOn(RotationGroup):
         if np.ndim(s) == 3:                      # one field per row
             b = g @ np.swapaxes(s, 1, 2)
             return np.swapaxes(b, 1, 2) - b
-        b = (g.reshape(-1, d) @ s.T).reshape(-1, d, d)  # b_i = O_i S^T
+        b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T)).reshape(-1, d, d)  # O S^T
         return np.swapaxes(b, 1, 2) - b
 
     def tangent(self, a: Array, g: Array) -> Array:

@@ -1,0 +1,100 @@
+"""Flat increment coordinates of the adaptive DOP853-Lie method, centred at a state.
+
+An increment vector holds, per group with local rows, Theta in so(d) (the rotations move as
+psi(Theta) O) and, when the stages integrate them, the centroid, velocity and angular-velocity
+offsets.  ``Chart.state`` turns an increment into the stage state the right-hand side sees,
+``Chart.pack`` the right-hand side's rates into one flat vector.
+"""
+
+import copy
+
+import numpy as np
+
+from .model import GroupState, State
+
+
+class Chart:
+    """Flat increment coordinates centred at the state y: per group rot, [x, v,] [w]."""
+
+    def __init__(self, system, y):
+        self.system, self.y = system, y
+        grp, model = system.group, system.model
+        self.parts = []
+        pos = 0
+        is_rot = []
+        for gi, gs in enumerate(y.groups):
+            if gs is None or grp.count(gs.rot) == 0:
+                continue
+            fields = [("rot", grp.algebra_zeros(grp.count(gs.rot)))]
+            if not model.centroids_exact:
+                fields.append(("x", gs.x))
+                if model.order == 2:
+                    fields.append(("v", gs.v))
+            if model.order == 2:
+                fields.append(("w", gs.w))
+            for kind, value in fields:
+                size = value.size
+                self.parts.append((gi, kind, value.shape, slice(pos, pos + size)))
+                is_rot.append(np.full(size, kind == "rot"))
+                pos += size
+        self.n = pos
+        self.is_rot = np.concatenate(is_rot) if is_rot else np.zeros(0, dtype=bool)
+        self.rotations_only = bool(np.all(self.is_rot))
+        self.single_part = len(self.parts) == 1         # one group, rotations only
+        self._centre(y)
+
+    def _centre(self, y):
+        self.y = y
+        if self.rotations_only:                       # the increment itself: base 0, unit size
+            self.base = np.zeros(self.n)
+            self.base_size = np.ones(self.n)
+            return
+        self.base = np.zeros(self.n)                  # 0 in the rotation slots
+        for gi, kind, _, sl in self.parts:
+            if kind != "rot":
+                self.base[sl] = np.ravel(getattr(y.groups[gi], kind))
+        self.base_size = np.where(self.is_rot, 1.0, np.abs(self.base))   # rotations: unit size
+
+    def at(self, y):
+        """The same layout centred at another state of the ensemble (the next step's chart)."""
+        chart = copy.copy(self)
+        if self.rotations_only:
+            chart.y = y
+        else:
+            chart._centre(y)
+        return chart
+
+    def state(self, vec):
+        """(State at psi(vec) . y, per-group Theta): the stage the right-hand side sees."""
+        grp = self.system.group
+        groups = list(self.y.groups)
+        thetas = [None] * len(groups)
+        if self.single_part:                          # one group, rotations only (first order)
+            gi, _, shape, _ = self.parts[0]
+            gs = groups[gi]
+            thetas[gi] = theta = vec.reshape(shape)
+            groups[gi] = GroupState(gs.x, grp.retract(theta, gs.rot), gs.v, gs.w)
+            return State(self.y.t, tuple(groups)), thetas
+        for gi, kind, shape, sl in self.parts:
+            piece = vec[sl].reshape(shape)
+            gs = groups[gi]
+            if kind == "rot":
+                thetas[gi] = piece
+                groups[gi] = GroupState(gs.x, grp.retract(piece, gs.rot), gs.v, gs.w)
+            elif kind == "x":
+                groups[gi] = GroupState(self.y.groups[gi].x + piece, gs.rot, gs.v, gs.w)
+            elif kind == "v":
+                groups[gi] = GroupState(gs.x, gs.rot, self.y.groups[gi].v + piece, gs.w)
+            else:
+                groups[gi] = GroupState(gs.x, gs.rot, gs.v, self.y.groups[gi].w + piece)
+        return State(self.y.t, tuple(groups)), thetas
+
+    _INDEX = {"rot": 0, "x": 1, "v": 2, "w": 3}
+
+    def pack(self, rates):
+        if self.single_part:                          # one group, rotations only: no copy needed
+            return rates[self.parts[0][0]][0].reshape(-1)
+        out = np.empty(self.n)
+        for gi, kind, _shape, sl in self.parts:
+            out[sl] = rates[gi][self._INDEX[kind]].reshape(-1)
+        return out

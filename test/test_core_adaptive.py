@@ -1,0 +1,37 @@
+"""The adaptive DOP853-Lie run: its step cap and its dense output against independent formulas."""
+
+import numpy as np
+from core_testlib import make_scene
+
+from polymatch_ros.core import simulate, stability
+from polymatch_ros.core.adaptive import CAP_FRACTION, AdaptiveLie
+from polymatch_ros.core.rk import rk_stability
+
+
+def test_step_cap_is_the_stability_boundary_of_the_dop853_tableau():
+    meth = AdaptiveLie(1e-8)
+    for order, kappa in ((1, 1.0), (1, 40.0), (2, 3.0)):
+        model = make_scene(2, order, kappa=kappa, mass=0.5, velocities={}).model
+        cap, cause = meth.step_cap(model)
+        assert cause and cap == meth.step_cap(model)[0]            # cached: the same value
+        h = cap / CAP_FRACTION                                       # the boundary itself
+        for _, mat, _ in stability.test_matrices(model):
+            lam = np.linalg.eigvals(np.atleast_2d(mat))
+            assert np.all(np.abs(rk_stability(meth.A, meth.B, h * (1 - 1e-9) * lam)) <= 1.0)
+        assert any(np.any(np.abs(rk_stability(meth.A, meth.B, h * (1 + 1e-9) * lam)) > 1.0)
+                   for _, mat, _ in stability.test_matrices(model)
+                   for lam in [np.linalg.eigvals(np.atleast_2d(mat))])
+
+
+def test_adaptive_samples_carry_the_exact_centroid_flow_prop_2_1():
+    kappa, gamma = 1.3, 0.7
+    scene = make_scene(2, 1, count=6, seed=3, kappa=kappa, gamma=gamma, t_end=4.0)
+    times = np.linspace(0.0, 4.0, 57)
+    traj = simulate(scene, "adaptive", tolerance=1e-6, samples=times, metrics=False)
+    x0 = scene.initial.groups[0].x
+    mean = x0.mean(axis=0)
+    assert np.allclose(traj.times, times)
+    assert traj.steps < len(times) - 1                     # several samples inside one step
+    for t, st in zip(traj.times, traj.states):
+        want = mean + np.exp(-kappa * t / gamma) * (x0 - mean)
+        np.testing.assert_allclose(st.groups[0].x, want, rtol=0, atol=1e-13)

@@ -1,0 +1,92 @@
+"""The batched Cayley forms of core.so.cayley against the definition by LAPACK solves."""
+
+import numpy as np
+import pytest
+
+from polymatch_ros.core.so import SOn
+from polymatch_ros.core.so.cayley import SERIES_LIMIT, cayley_series
+from polymatch_ros.core.so.so4 import cayley4, dcay_inv4, pair_matrices, quaternion_pairs
+
+
+def _skew(rng, n, d, scale):
+    w = rng.normal(size=(n, d, d)) * scale
+    return w - np.swapaxes(w, 1, 2)
+
+
+def _rotations(rng, n, d):
+    q, r = np.linalg.qr(rng.normal(size=(n, d, d)))
+    q *= np.sign(np.diagonal(r, axis1=1, axis2=2))[:, None, :]
+    q[np.linalg.det(q) < 0, :, 0] *= -1.0
+    return q
+
+
+def _cayley_by_solve(w, g):
+    eye = np.eye(w.shape[1])
+    return np.linalg.solve(eye - 0.5 * w, (eye + 0.5 * w) @ g)
+
+
+@pytest.mark.parametrize("scale", [1e-3, 0.1, 1.0, 30.0])
+def test_so4_closed_form_cayley_and_inverse_differential_equal_the_definition(scale):
+    rng = np.random.default_rng(4)
+    w, a = _skew(rng, 300, 4, scale), _skew(rng, 300, 4, 1.0)
+    eye = np.eye(4)
+    cay = cayley4(w)
+    np.testing.assert_allclose(cay, _cayley_by_solve(w, np.broadcast_to(eye, w.shape)),
+                               rtol=0, atol=1e-14)
+    assert np.max(np.abs(np.swapaxes(cay, 1, 2) @ cay - eye)) < 1e-14       # in SO(4) ...
+    assert np.all(np.linalg.det(cay) > 0)                                   # ... not O(4)
+    want = (eye - 0.5 * w) @ a @ (eye + 0.5 * w)
+    np.testing.assert_allclose(dcay_inv4(w, a), want, rtol=0, atol=1e-13 * max(1.0, scale ** 2))
+
+
+@pytest.mark.parametrize("dim", [3, 5, 10])
+def test_cayley_series_equals_the_solve_inside_and_beyond_its_limit(dim):
+    rng = np.random.default_rng(dim)
+    # rows near zero, near the limit |W|_F^2 / 8 = SERIES_LIMIT, and far beyond it (LAPACK)
+    w = np.concatenate([_skew(rng, 50, dim, 1e-3), _skew(rng, 50, dim, 1.0)])
+    norms = np.sqrt(np.einsum("nij,nij->n", w, w))
+    w[50:75] *= (np.sqrt(8 * SERIES_LIMIT) * 0.999 / norms[50:75])[:, None, None]
+    g = _rotations(rng, len(w), dim)
+    got = cayley_series(w, g)
+    np.testing.assert_allclose(got, _cayley_by_solve(w, g), rtol=0, atol=1e-14)
+    small = slice(0, 50)                          # a batch of small rows only: fewer factors
+    np.testing.assert_allclose(cayley_series(w[small], g[small]), _cayley_by_solve(w, g)[small],
+                               rtol=0, atol=1e-14)
+    gram = np.swapaxes(got, 1, 2) @ got
+    assert np.max(np.abs(gram - np.eye(dim))) < 1e-14
+
+
+def test_cayley_series_rows_do_not_depend_on_the_rest_of_the_batch():
+    """A lockstep agent retracts its own rows only; the centralised run retracts all of them."""
+    rng = np.random.default_rng(7)
+    w = np.concatenate([_skew(rng, 20, 6, 1e-2), _skew(rng, 20, 6, 2.0)])
+    g = _rotations(rng, len(w), 6)
+    batch = cayley_series(w, g)
+    for i in (0, 5, 25, 39):
+        np.testing.assert_allclose(cayley_series(w[i:i + 1], g[i:i + 1])[0], batch[i],
+                                   rtol=0, atol=2e-15)
+
+
+@pytest.mark.parametrize("dim", [3, 4, 7])
+def test_son_maps_are_the_cayley_map_and_its_inverse_differential(dim):
+    rng = np.random.default_rng(11)
+    grp = SOn(dim)
+    w, a = _skew(rng, 40, dim, 0.5), _skew(rng, 40, dim, 1.0)
+    g = _rotations(rng, 40, dim)
+    eye = np.eye(dim)
+    np.testing.assert_allclose(grp.retract(w, g), _cayley_by_solve(w, g), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(grp.dpsi_inv(w, a), (eye - 0.5 * w) @ a @ (eye + 0.5 * w),
+                               rtol=0, atol=1e-14)
+
+
+def test_so4_rotations_are_unit_quaternion_pairs_and_retractions_stay_in_so4():
+    rng = np.random.default_rng(5)
+    g = _rotations(rng, 200, 4)
+    p, q = quaternion_pairs(g)
+    np.testing.assert_allclose(np.linalg.norm(p, axis=0), 1.0, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(pair_matrices(p, q), g, rtol=0, atol=1e-14)
+    grp, rot = SOn(4), g
+    for _ in range(200):                       # repeated retractions: no drift off SO(4)
+        rot = grp.retract(_skew(rng, 200, 4, 0.3), rot)
+    assert np.max(np.abs(np.swapaxes(rot, 1, 2) @ rot - np.eye(4))) < 1e-14
+    assert np.all(np.linalg.det(rot) > 0)
