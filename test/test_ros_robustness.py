@@ -207,25 +207,30 @@ def test_runner_ends_every_process_it_started(ros, how):
     assert not [p for p in kids if _alive(p)], "a process outlived the runner"
 
 
-def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
-    """Lockstep: SIGKILL one agent mid-run; its neighbours stop with a one-line error naming it."""
+def _three_agents_running(ros, tmp_path, t_end, round_timeout):
+    """Three lockstep agents, returned once each is well into its rounds (diagnostics show
+    t > 0.5): a fixed sleep could strike during discovery on a loaded machine, where the first
+    rounds also allow discovery_timeout."""
     scene = _scene_file(
-        tmp_path / "three.yaml", "triangles", "triangle", 3, 2, 0.01, 1000.0, seed=3
+        tmp_path / "three.yaml", "triangles", "triangle", 3, 2, 0.01, t_end, seed=3
     )
     agents = [
-        ros.agent(str(scene), i, timeout=90, round_timeout=2.0, discovery_timeout=20.0)
+        ros.agent(str(scene), i, timeout=90, round_timeout=round_timeout, discovery_timeout=20.0)
         for i in range(3)
     ]
-    victim = agents[2]
     diag = ros.start(cli_argv("echo", "/diagnostics", "--timeout", 80), timeout=90)
-    # kill only once every agent is well into its rounds (t_end needs ~1e5 steps): a fixed sleep
-    # could strike during discovery on a loaded machine, where the first round also allows
-    # discovery_timeout and the error would name no lockstep round
     assert _wait_until_all_step(ros, diag, agents, 3, t_min=0.5, timeout=40), ros.output(diag)[
         -2000:
     ]
     assert all(a.poll() is None for a in agents), [ros.output(a) for a in agents]
-    ros.kill(victim)
+    return agents
+
+
+def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
+    """Lockstep: SIGKILL one agent mid-run; its neighbours stop with a one-line error naming it
+    as gone (its writer unmatched once its DDS lease ran out)."""
+    agents = _three_agents_running(ros, tmp_path, 1000.0, round_timeout=2.0)  # ~1e5 steps
+    ros.kill(agents[2])
     for a in agents[:2]:
         assert ros.wait(a, 30) == 1, ros.output(a)
         text = ros.output(a)
@@ -237,7 +242,30 @@ def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
         named = re.search(r"waiting for agent\(s\) ([0-9, ]+)", errors[0]).group(1)
         others = {int(k) for k in named.split(",")}
         assert 2 in others and others <= {0, 1, 2} - {agents.index(a)}, errors[0]
+        gone = re.search(r"; agent\(s\) ([0-9, ]+) left", errors[0])
+        assert gone is not None and gone.group(1).strip(), errors[0]
         assert "Traceback" not in text
+
+
+def test_a_stalled_peer_is_waited_for_and_the_run_completes(ros, tmp_path):
+    """Lockstep: one agent is frozen (SIGSTOP) for 4 s, four times round_timeout, as a loaded
+    machine can starve a process.  Its writer stays matched (the DDS lease is 10 s), so its
+    neighbours wait instead of failing, and all three finish the run.  (With stall_timeout
+    below the freeze the same run fails naming agent 2 "present but silent".)"""
+    agents = _three_agents_running(ros, tmp_path, 8.0, round_timeout=1.0)   # 800 steps
+    frozen = _children(agents[2].pid)
+    assert frozen
+    for pid in frozen:
+        os.kill(pid, signal.SIGSTOP)
+    try:
+        time.sleep(4.0)
+        assert all(a.poll() is None for a in agents), [ros.output(a)[-600:] for a in agents]
+    finally:
+        for pid in frozen:
+            os.kill(pid, signal.SIGCONT)
+    for a in agents:
+        assert ros.wait(a, 60) == 0, ros.output(a)[-1500:]
+        assert "finished at t = 8" in ros.output(a), ros.output(a)[-1500:]
 
 
 def _wait_until_all_step(ros, diag, agents, n, t_min, timeout):

@@ -22,7 +22,7 @@ class LockstepExchange:
     the peers' stage topics, whose names the agent node (``resolver``) resolves.
     """
 
-    def __init__(self, resolver, layout, run_id, rot_tol, drops, t_max):
+    def __init__(self, resolver, layout, run_id, rot_tol, drops, t_max, stall_timeout=300.0):
         from std_msgs.msg import Float64MultiArray
 
         self.node, self.executor = lean_node(
@@ -56,6 +56,8 @@ class LockstepExchange:
             )
             for a in layout.peers
         ]
+        self.writers = dict(zip(layout.peers, self.subs))  # peer -> its stage subscription
+        self.stall_timeout = stall_timeout
         self.publish_time = 0.0  # seconds spent publishing stages (for the diagnostics)
         self.wait_time = 0.0  # seconds spent waiting for (and taking) the peers' stages
 
@@ -136,16 +138,12 @@ class LockstepExchange:
         self.publish(step, stage, request, stop_flag)
         t1 = time.perf_counter()
         self.publish_time += t1 - t0
-        deadline = time.monotonic() + timeout
         waiting = [a for a in self.layout.peers if key not in self.inbox[a]]
         while waiting:
-            left = deadline - time.monotonic()
+            left = t1 + timeout - time.perf_counter()
             if left <= 0:
-                raise RoundTimeout(
-                    f"lockstep round (step {step}, stage {stage}) timed out after "
-                    f"{timeout:g} s waiting for agent(s) {', '.join(map(str, waiting))}"
-                )
-            self.executor.spin_once(timeout_sec=min(left, 0.5))
+                self._give_up_if_gone(key, timeout, waiting, time.perf_counter() - t1)
+            self.executor.spin_once(timeout_sec=min(left, 0.5) if left > 0 else 0.5)
             waiting = [a for a in waiting if key not in self.inbox[a]]
         self.wait_time += time.perf_counter() - t1
         if self.layout.sparse:
@@ -155,6 +153,22 @@ class LockstepExchange:
                 self.inbox[a][key].flags & wire.FLAG_STOP for a in self.layout.peers
             )
         return self._assemble(key, request), stop
+
+    def _give_up_if_gone(self, key, timeout, waiting, waited):
+        """Past ``round_timeout``: fail if a peer we wait for has left (its writer is no longer
+        matched: a crash, an exit, or a SIGKILL once its DDS lease ran out), or if a peer has
+        been silent for ``stall_timeout``.  A peer that is still there is slow, not gone (a
+        loaded machine can starve one process for many seconds), so the round waits on."""
+        gone = [a for a in waiting if self.writers[a].get_publisher_count() < 1]
+        if not gone and waited < self.stall_timeout:
+            return
+        why = (f"agent(s) {', '.join(map(str, gone))} left" if gone else
+               f"present but silent for stall_timeout = {self.stall_timeout:g} s")
+        raise RoundTimeout(
+            f"lockstep round (step {key[0]}, stage {key[1]}) timed out after {timeout:g} s "
+            f"waiting for agent(s) {', '.join(map(str, waiting))}; {why} "
+            f"({waited:.1f} s in all)"
+        )
 
     def _assemble(self, key, request):
         """Per group the peers' stage rows and the local ones (None for groups not needed)."""
@@ -203,7 +217,8 @@ class LockstepAgent(AgentBase):
         projection = self.plan.method.info.family == "projection"
         rot_tol = wire.PROJECTION_STAGE_TOL if projection else wire.ROTATION_TOL
         self.exchange = LockstepExchange(
-            node, self.layout, params["run_id"], rot_tol, self.drops, self.scene.t_end
+            node, self.layout, params["run_id"], rot_tol, self.drops, self.scene.t_end,
+            params["stall_timeout"],
         )
 
     def step_size(self, p):

@@ -68,8 +68,15 @@ AGENT = (
     Param(
         "round_timeout",
         10.0,
-        "lockstep: seconds to wait for a round before giving up (the first "
-        "round: plus discovery_timeout)",
+        "lockstep: seconds a round waits before it fails if a missing peer has left (the "
+        "first two steps: plus discovery_timeout); see stall_timeout",
+        (0.001, 1e6),
+    ),
+    Param(
+        "stall_timeout",
+        300.0,
+        "lockstep: past round_timeout, how long a round keeps waiting for peers that are "
+        "still present (slow, not gone); a peer that left fails the round at once",
         (0.001, 1e6),
     ),
     Param("discovery_timeout", 30.0, "seconds to wait until every peer is matched", (0.0, 1e6)),
