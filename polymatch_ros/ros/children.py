@@ -167,6 +167,9 @@ def _agents_per_process(args, n_agents, localhost):
     return args.agents_per_process
 
 
+MONITOR_GRACE_SECONDS = 10.0
+
+
 def stop_all(children, monitor, watcher):
     """End every child by its PID; the monitor last, after the watcher heard its last reports."""
     for c in children:
@@ -175,7 +178,9 @@ def stop_all(children, monitor, watcher):
         t0 = time.monotonic()
         while watcher is not None and time.monotonic() - t0 < 0.5:
             watcher.spin(0.05)
-        monitor.stop()
+        # its final record is the summary's monitor line: on a loaded machine (or under a
+        # flood of rogue messages) it can take more than the agents' 3 s to write it
+        monitor.stop(grace=MONITOR_GRACE_SECONDS)
 
 
 # How long the host that prints the summary waits, after its own agents ended, for the latched
