@@ -81,8 +81,8 @@ def _realtime_argvs(scene_file, out, *options):
     """Realtime on three hosts, 4 agents (one process) each; the lead (host 2) saves."""
     return [host_argv(scene_file, f"{4 * i}-{4 * i + 3}", i == 2, "--mode", "realtime",
                       "--rate", RATE, "--time-scale", TIME_SCALE, "--t-end", T_END, "-k", 4,
-                      "--peer-timeout", PEER_TIMEOUT, *options,
-                      *(["--save", out] if i == 2 else []))
+                      "--peer-timeout", PEER_TIMEOUT, "--records", f"{out}.h{i}.jsonl",
+                      *options, *(["--save", out] if i == 2 else []))
             for i in range(3)]
 
 
@@ -123,10 +123,26 @@ def test_realtime_converges_under_loss_and_delay(net, tmp_path):
     argvs = _realtime_argvs(scene_file, out, "--delay", 0.05)
     started_procs, _, root, dropped = run_on_hosts(net, tmp_path, argvs, lossy(net, LOSSY_HOST))
     _check_converged(scene_file, started_procs, out)
+    _check_clock_offsets(out)
     assert dropped > 20, f"the loss rule dropped {dropped} packets: too few to matter"
     assert root.matched() == 0, "the root namespace's interfaces saw DDS packets"
     print(f"\nrealtime, {AGENTS} agents on 3 hosts, {LOSS}% loss ({dropped} packets), 50 ms "
           f"delay: {time.monotonic() - started:.1f} s")
+
+
+def _check_clock_offsets(out):
+    """Every agent estimated the clock offset of every peer from its pose stamps; the hosts share
+    one clock, so each is near zero (the transport delay and a peer's lag behind its schedule
+    only; a wrong time scale or sign would be seconds off)."""
+    agents = []
+    for host in range(3):
+        with open(f"{out}.h{host}.jsonl") as fh:
+            agents += [r for r in run_records(fh) if r.role == "agent"]
+    assert len(agents) == 3, agents
+    for rec in agents:
+        assert sorted(rec.clock_offsets) == sorted(rec.peers), rec
+        worst = max(abs(v) for v in rec.clock_offsets.values())
+        assert worst < 0.5, f"{rec.name()}: clock offsets {rec.clock_offsets}"
 
 
 def _status_records(procs, echo):

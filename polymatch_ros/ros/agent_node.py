@@ -208,6 +208,7 @@ class AgentBase:
         }
         vals.update({f"{k}_ms_per_round": v for k, v in rec.ms_per_round.items()})
         vals.update({f"dropped: {k}": v for k, v in self.drops.counts.items()})
+        vals.update(self.extra_diagnostics())
         status.values = [
             KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v))
             for k, v in vals.items()
@@ -215,6 +216,10 @@ class AgentBase:
         arr = DiagnosticArray(status=[status])
         arr.header.stamp = self.node.get_clock().now().to_msg()
         self.diag_pub.publish(arr)
+
+    def extra_diagnostics(self):
+        """{key: value} a mode adds to the diagnostics (realtime: the peers' clock offsets)."""
+        return {}
 
     # -- running ---------------------------------------------------------------------------------
     def spin_once(self, timeout):

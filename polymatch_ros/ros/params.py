@@ -66,6 +66,13 @@ AGENT = (
         (0.0, 1e6),
     ),
     Param(
+        "clock_offset_warn",
+        0.1,
+        "realtime: warn when a peer's clock offset, estimated from its pose stamps, passes "
+        "this many seconds",
+        (0.0, 1e6),
+    ),
+    Param(
         "round_timeout",
         10.0,
         "lockstep: seconds to wait for a round before giving up (the first "
