@@ -73,6 +73,13 @@ AGENT = (
         (0.0, 1e6),
     ),
     Param(
+        "hold_final",
+        0.0,
+        "seconds to keep the latched final poses alive after the run until 'received' on the "
+        "control topic (hosts of a run across hosts without the summary); 0 = do not wait",
+        (0.0, 1e6),
+    ),
+    Param(
         "round_timeout",
         10.0,
         "lockstep: seconds to wait for a round before giving up (the first "
