@@ -163,7 +163,7 @@ def _wait_for_record(procs, echo, holds, seconds):
     return False
 
 
-def link_down_while_running(net, scene_file):
+def link_down_while_running(net):
     """``during``: once the monitor hears all agents, host DOWN_HOST's link goes down for
     DOWN_SECONDS; returns the monitor's records (heard before, in the outage once the monitor's
     peer timeout has passed, after it)."""
@@ -179,14 +179,14 @@ def link_down_while_running(net, scene_file):
         net.link_down(DOWN_HOST)
         down = time.monotonic()
         time.sleep(PEER_TIMEOUT + 1.0)
-        before = len(_status_records(procs, echo))
+        timed_out = len(_status_records(procs, echo))    # the monitor has dropped host 0
         time.sleep(max(0.0, down + DOWN_SECONDS - time.monotonic()))
-        during = len(_status_records(procs, echo))
+        back = len(_status_records(procs, echo))
         net.link_up(DOWN_HOST)
         for proc in started:
             proc.wait(timeout=150)
         records = _status_records(procs, echo)
-        return records[:before], records[before:during], records[during:]
+        return records[:timed_out], records[timed_out:back], records[back:]
 
     return outage
 
@@ -196,7 +196,7 @@ def test_realtime_link_down_then_rejoin(net, tmp_path):
     scene_file = scene_with(tmp_path, REALTIME_SCENE, AGENTS)
     out = tmp_path / "final.npz"
     procs, _, root, (before, outage, after) = run_on_hosts(
-        net, tmp_path, _realtime_argvs(scene_file, out), link_down_while_running(net, scene_file))
+        net, tmp_path, _realtime_argvs(scene_file, out), link_down_while_running(net))
     others = AGENTS - AGENTS // 3
     assert any(r.agents_heard == AGENTS for r in before)
     assert len(outage) >= 5, f"{len(outage)} monitor reports in {DOWN_SECONDS:g} s"
