@@ -295,6 +295,13 @@ class Capture:
             total += int(received.group(1))
         return total
 
+    def addresses(self):
+        """The IPv4 addresses the captured packets came from or went to."""
+        found = set()
+        for line in self.packets():
+            found.update(re.findall(r"(\d+\.\d+\.\d+\.\d+)\.\d+", line))
+        return found
+
     def packets(self):
         """The captured packets, one summary line each."""
         lines = []

@@ -169,11 +169,11 @@ def test_server_command_rejects_bad_arguments(argv, words):
 
 # -- more than 32 participants through a discovery server --------------------------------------
 
-def root_capture(tmp_path):
+def root_capture(tmp_path, interfaces=None, label="root"):
     """tcpdump for DDS on the machine's non-loopback interfaces, where root and tcpdump allow."""
     if os.geteuid() != 0 or shutil.which("tcpdump") is None:
         return contextlib.nullcontext()
-    return Capture(str(tmp_path), root_interfaces())
+    return Capture(str(tmp_path), interfaces or root_interfaces(), label=label)
 
 
 @needs_ros
@@ -183,7 +183,8 @@ def test_server_carries_forty_participants(tmp_path):
     procs = Processes(str(tmp_path))
     envs = discovery.discovery_environments("server", str(tmp_path))
     server = None
-    with domain_id() as domain, root_capture(tmp_path) as capture:
+    with domain_id() as domain, root_capture(tmp_path) as capture, \
+            root_capture(tmp_path, ["lo"], "loopback") as loopback:
         base = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1")
         try:
             server = discovery.start_discovery_server(
@@ -210,6 +211,9 @@ def test_server_carries_forty_participants(tmp_path):
     if capture is not None:
         assert capture.packets() == [], "DDS packets left the machine"
         assert capture.matched() == 0, "DDS packets left the machine"
+        # even between processes of this machine, no packet is addressed to eth0's address
+        assert loopback.matched() > 100
+        assert {address.split(".")[0] for address in loopback.addresses()} == {"127"}
     print(f"\n{PUBLISHERS} participants via a discovery server: "
           f"{time.monotonic() - started:.1f} s")
 

@@ -115,7 +115,8 @@ def _parse_agents(lines):
     )
 
 
-def _deployed(path, env, timeout, per_process):
+def _deployed(path, env, timeout, per_process, extra=(), with_matched=False):
+    """(agent processes' rounds/s, failure or None[, seconds until peers matched])."""
     records = path + ".records.jsonl"
     out = subprocess.run(
         [
@@ -138,6 +139,7 @@ def _deployed(path, env, timeout, per_process):
             records,
             "-k",
             str(per_process),
+            *extra,
         ],
         env=env,
         capture_output=True,
@@ -150,9 +152,9 @@ def _deployed(path, env, timeout, per_process):
     rates, matched = _parse_agents(lines)
     errors = [line for line in out.stderr.splitlines() if line.startswith("polymatch: error:")]
     # 3: ran to t_end without matching yet (t_end is short here)
-    if out.returncode in (0, 3):
-        return rates, None
-    return rates, errors[-1] if errors else f"exit code {out.returncode}"
+    failure = None if out.returncode in (0, 3) else (
+        errors[-1] if errors else f"exit code {out.returncode}")
+    return (rates, failure, matched) if with_matched else (rates, failure)
 
 
 def _deployed_per_process(n):
