@@ -114,47 +114,93 @@ def test_run_through_its_own_discovery_server_converges(ros):
 
 # -- three namespace hosts -----------------------------------------------------------------------
 
+def three_hosts(tools=("tcpdump",)):
+    """The body of a ``net`` fixture: three namespace hosts (skips without root or ``tools``)."""
+    yield from provided_hosts(3, tools)
+
+
 @pytest.fixture
 def net():
-    yield from provided_hosts(3, ("tcpdump",))
+    yield from three_hosts()
 
 
-def _host_argv(only, lead, out):
-    argv = [sys.executable, "-m", "polymatch_ros.cli", "run", SCENE, "--t-end", str(T_END),
-            "--only", only, "--discovery", "subnet", "-k", "2", "--timeout", "100"]
-    return argv + (["--save", str(out)] if lead else ["--no-monitor"])
+def host_argv(scene, only, lead, *options):
+    """`polymatch run` of the agents ``only`` on one host; the lead host runs the monitor."""
+    argv = [sys.executable, "-m", "polymatch_ros.cli", "run", str(scene), "--only", only,
+            "--discovery", "subnet", "--timeout", "100"] + [str(o) for o in options]
+    return argv + ([] if lead else ["--no-monitor"])
 
 
-@needs_ros
-def test_twelve_agents_on_three_hosts_equal_the_centralised_run(net, tmp_path):
+def host_environment(domain):
+    """The environment of every host's runner: the shared domain, data over UDPv4 only."""
+    env = {k: v for k, v in os.environ.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}
+    env.update(ROS_DOMAIN_ID=str(domain), FASTDDS_BUILTIN_TRANSPORTS="UDPv4",
+               PYTHONUNBUFFERED="1")
+    return env
+
+
+def run_on_hosts(net, tmp_path, argvs, during=None, seconds=120):
+    """Run ``argvs[i]`` in host i while tcpdump watches the root namespace.
+
+    ``during(procs, started, env)`` runs while they do (loss, a link down, an observer).
+    Returns (the processes, their outputs, the root capture (ended), what ``during`` returned).
+    """
     from domain_coordinator import domain_id
-    procs, out = Processes(str(tmp_path)), tmp_path / "final.npz"
+    procs, found = Processes(str(tmp_path)), None
     with domain_id() as domain, Capture(str(tmp_path), root_interfaces()) as root:
-        env = {k: v for k, v in os.environ.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}
-        env.update(ROS_DOMAIN_ID=str(domain), FASTDDS_BUILTIN_TRANSPORTS="UDPv4",
-                   PYTHONUNBUFFERED="1")
+        env = host_environment(domain)
         try:
-            hosts = [procs.start(_host_argv(only, lead, out), env, 120, f"h{i}",
-                                 prefix=net.prefix(i))
-                     for i, (only, lead) in enumerate([("0-3", False), ("4-7", False),
-                                                       ("8-11", True)])]
-            for proc in hosts:
-                proc.wait(timeout=130)
-            texts = [procs.output(proc) for proc in hosts]
+            started = [procs.start(argv, env, seconds, f"h{i}", prefix=net.prefix(i))
+                       for i, argv in enumerate(argvs)]
+            if during is not None:
+                found = during(procs, started, env)
+            for proc in started:
+                proc.wait(timeout=seconds + 10)
+            texts = [procs.output(proc) for proc in started]
         finally:
             procs.close()
-    for proc, text in zip(hosts, texts):
+    for proc, text in zip(started, texts):
         assert proc.returncode in (0, 3), f"{proc.name}:\n{text[-3000:]}"
-    for text, only in zip(texts[:2], ("0-3", "4-7")):
+    return started, texts, root, found
+
+
+def lockstep_split(hosts, n):
+    """--only ranges of ``n`` agents split evenly over ``hosts`` hosts."""
+    size = n // hosts
+    return [f"{i * size}-{(i + 1) * size - 1}" for i in range(hosts)]
+
+
+def check_lockstep_on_hosts(scene_file, texts, out, n):
+    """The non-lead hosts' lines, the lead's summary and saved poses equal the centralised run
+    to 1e-9 (the lead host is the last)."""
+    split = lockstep_split(len(texts), n)
+    for text, only in zip(texts[:-1], split):
         assert f"agents {only} ended at t = " in text and "max vertex deviation" not in text
-    lead = texts[2]
-    assert "12 of 12 agents" not in lead and "4 of 12 agents (8-11)" in lead
+    lead = texts[-1]
+    assert f"{n} of {n} agents" not in lead and f"{n // len(texts)} of {n} agents " in lead
     deviation = DEVIATION.search(lead)
     assert deviation and float(deviation.group(1)) <= 1e-9, lead[-3000:]
-    scene = load_scene(scene_path(SCENE))
+    scene = load_scene(scene_file)
     t, got = received_vertices(scene, out)
     assert t > 0.0
     want = central_vertices(scene, plan(scene, None, None, distributed=True).name, t)
     dev = max(float(abs(a - b).max()) for a, b in zip(got, want))
     assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
+
+
+def lockstep_argvs(scene_file, n, out, t_end=T_END):
+    """Lockstep on three hosts, n/3 agents each, one process per host; the last saves."""
+    split = lockstep_split(3, n)
+    return [host_argv(scene_file, only, i == 2, "--t-end", t_end, "-k", n // 3,
+                      *(["--save", out] if i == 2 else []))
+            for i, only in enumerate(split)]
+
+
+@needs_ros
+def test_twelve_agents_on_three_hosts_equal_the_centralised_run(net, tmp_path):
+    out = tmp_path / "final.npz"
+    _, texts, root, _ = run_on_hosts(net, tmp_path, lockstep_argvs(SCENE, 12, out))
+    assert "4 of 12 agents (8-11)" in texts[2]
+    check_lockstep_on_hosts(scene_path(SCENE), texts, out, 12)
     assert root.packets() == [], "DDS packets reached the root namespace"
+    assert root.matched() == 0, "the root namespace's interfaces saw DDS packets"

@@ -80,6 +80,7 @@ class AgentBase(NodeApp):
         self.drops = DropCounter(self.log)
         self.stop_requested = False
         self.start_epoch = None
+        self.final_received = False  # the host with the summary has every final pose
         self.rounds = self.steps = self.late_ticks = 0
         self.round_time = 0.0
         self.finished = False
@@ -108,6 +109,8 @@ class AgentBase(NodeApp):
         if words == ["stop"] and not self.stop_requested:
             self.log.info("stop requested")
             self.stop_requested = True
+        elif words == ["received"]:
+            self.final_received = True
         elif len(words) == 2 and words[0] == "start" and self.start_epoch is None:
             try:
                 self.start_epoch = float(words[1])
@@ -208,6 +211,7 @@ class AgentBase(NodeApp):
         }
         vals.update({f"{k}_ms_per_round": v for k, v in rec.ms_per_round.items()})
         vals.update({f"dropped: {k}": v for k, v in self.drops.counts.items()})
+        vals.update(self.extra_diagnostics())
         status.values = [
             KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v))
             for k, v in vals.items()
@@ -215,6 +219,10 @@ class AgentBase(NodeApp):
         arr = DiagnosticArray(status=[status])
         arr.header.stamp = self.node.get_clock().now().to_msg()
         self.diag_pub.publish(arr)
+
+    def extra_diagnostics(self):
+        """{key: value} a mode adds to the diagnostics (realtime: the peers' clock offsets)."""
+        return {}
 
     # -- running ---------------------------------------------------------------------------------
     def spin_once(self, timeout):
@@ -249,7 +257,17 @@ class AgentBase(NodeApp):
         self.finished = True
         self._maybe_diagnostics(force=True)
         self.flush_poses()
+        self.hold_final_poses()
         return 0
+
+    def hold_final_poses(self):
+        """On a host without the summary: keep the latched final poses alive (this process)
+        until the host with it says 'received', at most ``hold_final`` s.  Its runner may match
+        our final-pose writers only after we published: a writer that ended by then is gone
+        with its sample."""
+        deadline = time.monotonic() + self.params["hold_final"]
+        while not self.final_received and time.monotonic() < deadline:
+            self.spin_once(0.05)
 
     def final_record(self):
         return self.record() if self.finished else None

@@ -279,6 +279,8 @@ class Supervision:
         drain = time.monotonic() + seconds
         while time.monotonic() < drain and not self.watcher.have_final():
             self.watcher.spin(0.05)
+        if remote and self.watcher.have_final():
+            self.watcher.received()  # the other hosts' agents may end now
         if remote and not self.watcher.have_final():
             missing = sorted(set(range(self.scene.model.n_agents)) - set(self.watcher.poses))
             return 1, (

@@ -31,6 +31,8 @@ from xml.etree import ElementTree
 from ..core.errors import ParameterError
 from .ros_env import PROFILE
 
+NETWORK_PROFILE = os.path.join(os.path.dirname(PROFILE), "fastdds_profile_network.xml")
+
 KINDS = ("localhost", "subnet", "server", "peers")
 DEFAULT_SERVER_HOST = "127.0.0.1"
 FASTDDS_NAMESPACE = "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"
@@ -185,8 +187,10 @@ def apply_environment(base, overlay):
 
 
 def _overlay(**values):
+    """Discovery across hosts takes the network profile: the shipped one plus reliable writers
+    that heartbeat every 100 ms (repairs on a lossy link; see the file)."""
     overlay = dict.fromkeys(DISCOVERY_VARIABLES)
-    overlay["FASTRTPS_DEFAULT_PROFILES_FILE"] = PROFILE
+    overlay["FASTRTPS_DEFAULT_PROFILES_FILE"] = NETWORK_PROFILE
     overlay.update(values)
     return overlay
 
@@ -199,7 +203,8 @@ def discovery_environments(spec, directory=None, port=None):
     """
     spec = spec if isinstance(spec, DiscoverySpec) else parse_discovery_spec(spec)
     if spec.kind == "localhost":
-        client = _overlay(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        client = _overlay(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                          FASTRTPS_DEFAULT_PROFILES_FILE=PROFILE)
         return DiscoveryEnvironments(spec, client, dict(client))
     if spec.kind == "subnet":
         client = _overlay(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET")

@@ -66,6 +66,20 @@ AGENT = (
         (0.0, 1e6),
     ),
     Param(
+        "clock_offset_warn",
+        0.1,
+        "realtime: warn when a peer's clock offset, estimated from its pose stamps, passes "
+        "this many seconds",
+        (0.0, 1e6),
+    ),
+    Param(
+        "hold_final",
+        0.0,
+        "seconds to keep the latched final poses alive after the run until 'received' on the "
+        "control topic (hosts of a run across hosts without the summary); 0 = do not wait",
+        (0.0, 1e6),
+    ),
+    Param(
         "round_timeout",
         10.0,
         "lockstep: seconds a round waits before it fails if a missing peer has left (the "

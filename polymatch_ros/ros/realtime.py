@@ -2,6 +2,8 @@
 
 Peers that fall silent longer than ``peer_timeout`` are dropped from the sums of
 (A-1)/(A-2) and re-admitted when they speak again (Theorem 4.2 under delays and churn).
+Each peer's clock offset is estimated from its pose stamps (clock_offset.py) and published in
+the diagnostics.
 """
 
 import time
@@ -13,13 +15,15 @@ import numpy as np
 from ..core.simulate import drive
 from . import wire
 from .agent_node import AgentBase
+from .clock_offset import ClockOffsets
 
 
 class PeerTable:
     """The latest pose (and velocity) heard from each peer, and who is still alive."""
 
-    def __init__(self, node, layout, frame_id, timeout, drops, origin, delay, t_max):
+    def __init__(self, node, layout, frame_id, timeout, drops, origin, delay, t_max, clock=None):
         self.node, self.layout, self.drops = node, layout, drops
+        self.clock = clock  # ClockOffsets fed with every pose's stamp and arrival, or None
         self.delay = float(
             delay
         )  # injected transport delay (s): a pose is used this long after arrival
@@ -62,6 +66,8 @@ class PeerTable:
             if got is None:
                 self.drops(f"agent {agent}", reason)
                 return
+            if kind == "pose" and self.clock is not None:
+                self.clock.add(agent, got.t, time.time())
             value = (got.t, got.vec - self.origin, got.rot) if kind == "pose" else got.vec
             self.pending[agent].append((time.monotonic(), kind, value))
 
@@ -145,6 +151,7 @@ class RealtimeAgent(AgentBase):
 
     def __init__(self, node, params):
         super().__init__(node, params)
+        self.clock = ClockOffsets(params["time_scale"], params["clock_offset_warn"])
         self.peers = PeerTable(
             node,
             self.layout,
@@ -154,7 +161,23 @@ class RealtimeAgent(AgentBase):
             self.scene.origin,
             params["delay"],
             self.scene.t_end,
+            self.clock,
         )
+
+    def record(self):
+        rec = super().record()
+        rec.clock_offsets = self.clock.offsets()
+        return rec
+
+    def extra_diagnostics(self):
+        """Each peer's estimated clock offset (s, its clock ahead of ours); warns once per peer
+        whose offset passes ``clock_offset_warn``."""
+        for agent, offset in self.clock.over_threshold():
+            self.node.get_logger().warning(
+                f"agent {agent}: clock offset {offset:+.3f} s is past "
+                f"{self.clock.threshold:g} s (estimated from its pose stamps)"
+            )
+        return {f"clock_offset_s: agent {a}": v for a, v in sorted(self.clock.offsets().items())}
 
     def step_size(self, p):
         return p["time_scale"] / p["rate"]
@@ -187,6 +210,7 @@ class RealtimeAgent(AgentBase):
         self.wait_for_discovery()
         self.publish_state()
         start = self._start_epoch()
+        self.clock.start(start)
         while time.time() < start and not self.stop_requested:  # the ensemble starts together
             self.spin_once(min(0.05, max(0.0, start - time.time())))
         h, period = self.plan.dt, 1.0 / self.params["rate"]

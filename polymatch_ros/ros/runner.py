@@ -24,6 +24,7 @@ from ..core.simulate import plan
 from . import wire
 from .children import (  # noqa: F401 (API)
     LOCALHOST_PARTICIPANTS,
+    REMOTE_FINAL_POSE_SECONDS,
     Child,
     Supervision,
     _agents_per_process,
@@ -168,6 +169,8 @@ def _node_args(args, scene, scene_path, the_plan):
         f"discovery_timeout:={30.0 + 2.0 * len(partition(n, args.agents_per_process))!r}",
         "-p",
         f"peer_timeout:={args.peer_timeout!r}",
+        "-p",
+        f"hold_final:={0.0 if args.lead else REMOTE_FINAL_POSE_SECONDS!r}",
     ]
     if args.mode == "realtime":
         agent += [

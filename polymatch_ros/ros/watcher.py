@@ -112,6 +112,14 @@ class Watcher:
 
         self.control.publish(String(data="stop"))
 
+    def received(self):
+        """'received' on the control topic: every final pose is here (runs across hosts)."""
+        from rclpy.duration import Duration
+        from std_msgs.msg import String
+
+        self.control.publish(String(data="received"))
+        self.control.wait_for_all_acked(Duration(seconds=2.0))
+
     def start(self, epoch):
         from std_msgs.msg import String
 

@@ -31,8 +31,9 @@ class RunRecord:
     ``ms_per_round`` publish/wait/other split (lockstep); ``late_ticks`` realtime ticks started
     more than one period late; ``dropped`` counts per reason; ``peers`` the agents whose
     messages the process needs and ``stage_subscriptions`` its stage-topic subscriptions
-    (lockstep; on a communication graph only the in-neighbours); monitor: ``diameter`` of its last
-    report, ``agents_heard`` in it, ``reports`` published.
+    (lockstep; on a communication graph only the in-neighbours); ``clock_offsets`` {peer: s its
+    clock is ahead of this one}, estimated from its pose stamps (realtime); monitor:
+    ``diameter`` of its last report, ``agents_heard`` in it, ``reports`` published.
     """
 
     role: str
@@ -52,6 +53,7 @@ class RunRecord:
     reports: int = 0
     peers: tuple = ()
     stage_subscriptions: int = 0
+    clock_offsets: dict = field(default_factory=dict)
 
     @property
     def dropped_total(self):
@@ -79,6 +81,7 @@ class RunRecord:
             rec.peers = tuple(int(a) for a in rec.peers)
             rec.stage_subscriptions = int(rec.stage_subscriptions)
             rec.dropped = {str(k): int(v) for k, v in dict(rec.dropped).items()}
+            rec.clock_offsets = {int(k): float(v) for k, v in dict(rec.clock_offsets).items()}
             rec.t = float(rec.t)
             return rec if math.isfinite(rec.t) else None
         except (TypeError, ValueError, AttributeError):
