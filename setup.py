@@ -32,6 +32,7 @@ setup(
             "polymatch = polymatch_ros.cli:main",
             "agent = polymatch_ros.ros.agent_node:main",
             "monitor = polymatch_ros.ros.monitor_node:main",
+            "robot = polymatch_ros.ros.robot_sim:main",
         ],
     },
 )

@@ -20,7 +20,7 @@ from ..core.model import GroupState, State, System
 from ..core.simulate import plan, prepare
 from . import wire
 from .exchange import DropCounter, Layout
-from .params import AGENT, declare
+from .params import AGENT, RUNTIME, declare
 from .process import ros_main
 
 
@@ -146,6 +146,10 @@ class AgentBase:
                         wire.twist_message(self.grp, st.t, gs.v[r], w_one, frame)
                     )
 
+    def diagnostic_note(self):
+        """(a note for the status message ('' or ending in '; '), extra {key: value})."""
+        return "", {}
+
     def time_split(self):
         """Milliseconds per round publishing stages, waiting for peers, and everything else."""
         return {}
@@ -197,8 +201,10 @@ class AgentBase:
             name=f"polymatch{self.node.get_fully_qualified_name()}",
             hardware_id=self.node.get_fully_qualified_name(),
         )
-        status.level = DiagnosticStatus.OK if self.drops.total == 0 else DiagnosticStatus.WARN
-        status.message = f"{self.mode}: t = {self.state.t:.4g}; {self.drops.summary()}"
+        note, extra = self.diagnostic_note()
+        fine = self.drops.total == 0 and not note
+        status.level = DiagnosticStatus.OK if fine else DiagnosticStatus.WARN
+        status.message = f"{self.mode}: t = {self.state.t:.4g}; {note}{self.drops.summary()}"
         vals = {
             "t": rec.t,
             "steps": rec.steps,
@@ -208,6 +214,7 @@ class AgentBase:
         }
         vals.update({f"{k}_ms_per_round": v for k, v in rec.ms_per_round.items()})
         vals.update({f"dropped: {k}": v for k, v in self.drops.counts.items()})
+        vals.update(extra)
         status.values = [
             KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v))
             for k, v in vals.items()
@@ -272,11 +279,17 @@ def make_agent(argv=None):
         namespace=wire.namespace(wire.DEFAULT_ENSEMBLE),
         automatically_declare_parameters_from_overrides=False,
     )
-    params = declare(node, AGENT)
-    if params["mode"] == "lockstep":
+    mode = declare(node, [p for p in AGENT if p.name == "mode"])["mode"]
+    rest = [p for p in AGENT if p.name != "mode"]
+    params = dict(declare(node, rest, RUNTIME if mode != "lockstep" else ()), mode=mode)
+    if mode == "lockstep":
         from .lockstep import LockstepAgent
 
         return LockstepAgent(node, params)
+    if mode == "bridge":
+        from .bridge import BridgeAgent
+
+        return BridgeAgent(node, params)
     from .realtime import RealtimeAgent
 
     return RealtimeAgent(node, params)
