@@ -3,7 +3,6 @@ simulated robots driven by bridged agents match, stop when their pose goes stale
 gains changed while running (multi-process tests)."""
 
 import math
-import os
 import re
 import textwrap
 import time
@@ -176,3 +175,118 @@ def test_runtime_parameters_are_checked_against_their_ranges():
     assert accepted is None and "expected a number" in reason
     accepted, reason = validate([change("scene", "other.yaml")])
     assert accepted is None and "read-only" in reason
+
+
+# -- robots in the loop (multi-process) ----------------------------------------------
+
+SET_PARAMETER = textwrap.dedent("""\
+    import sys
+    import rclpy
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    rclpy.init()
+    node = Node("param_setter")
+    client = node.create_client(SetParameters, sys.argv[1] + "/set_parameters")
+    assert client.wait_for_service(timeout_sec=20.0), "no parameter service"
+    request = SetParameters.Request()
+    request.parameters = [Parameter(sys.argv[2], value=eval(sys.argv[3])).to_parameter_msg()]
+    future = client.call_async(request)
+    rclpy.spin_until_future_complete(node, future, timeout_sec=20.0)
+    result = future.result().results[0]
+    print("RESULT", result.successful, result.reason, flush=True)
+""")
+
+
+def _set_parameter(ros, node, name, value):
+    """(successful, reason) of a SetParameters call, as `ros2 param set` makes it."""
+    proc = ros.start([PY, "-c", SET_PARAMETER, node, name, repr(value)], timeout=40)
+    assert ros.wait(proc, 45) == 0, ros.output(proc)
+    found = re.search(r"^RESULT (True|False) ?(.*)$", ros.output(proc), re.M)
+    assert found, ros.output(proc)
+    return found.group(1) == "True", found.group(2)
+
+
+def _twists(text):
+    """Every Twist `polymatch echo` printed: (linear xyz, angular xyz) rows."""
+    out = []
+    for block in text.split("---"):
+        values = re.findall(r"^\s+[xyz]: (\S+)$", block, re.M)
+        if len(values) == 6:
+            out.append([float(v) for v in values])
+    return np.array(out).reshape(-1, 6)
+
+
+def _wait(predicate, timeout):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.2)
+    return predicate()
+
+
+def _robot(ros, scene, agent, **params):
+    argv = [PY, "-m", "polymatch_ros.ros.robot_sim", "--ros-args",
+            "-r", f"__ns:=/polymatch/robot_{agent}", "-r", "__node:=robot",
+            "-p", f"scene:={scene}", "-p", f"agent:={agent}"]
+    argv += [a for k, v in params.items() for a in ("-p", f"{k}:={v!r}")]
+    return ros.start(argv, timeout=100, name=f"robot {agent}")
+
+
+@needs_ros
+def test_runtime_gain_change_and_a_killed_robot_gets_one_zero_command(ros, tmp_path):
+    ros.realtime()
+    scene = _scene(tmp_path, SCENE_ROBOTS.format(t_end=80.0, count=2))
+    robots = [_robot(ros, scene, a, position_noise=0.0005) for a in range(2)]
+    agents = []
+    for a in range(2):
+        argv = [PY, "-m", "polymatch_ros.ros.agent_node", "--ros-args", "-p", f"scene:={scene}",
+                "-p", f"agent:={a}", "-p", "mode:=bridge", "-p", "rate:=10.0",
+                "-p", "start_time:=0.0", "-r", f"measured_pose:=robot_{a}/measured_pose",
+                "-r", f"cmd_vel:=robot_{a}/cmd_vel", "-r", f"__node:=agent_{a}"]
+        agents.append(ros.start(argv, timeout=100, name=f"agent {a}"))
+    echo = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/polymatch/robot_0/cmd_vel",
+                      "--timeout", "80"], timeout=90)
+    # the agent commands its robot: non-zero twists in the plane (linear x, y; angular z)
+    assert _wait(lambda: len(_twists(ros.output(echo))) >= 5, 40), ros.output(agents[0])[-2000:]
+    moving = _twists(ros.output(echo))
+    assert np.abs(moving[:, [0, 1, 5]]).max() > 1e-6 and np.abs(moving[:, [2, 3, 4]]).max() == 0
+
+    # a gain in range is applied at the next tick; one out of range and a read-only one are not
+    ok, reason = _set_parameter(ros, "/polymatch/agent_0", "kappa", 3.0)
+    assert ok, reason
+    assert _wait(lambda: "kappa 2 -> 3" in ros.output(agents[0]), 10), ros.output(agents[0])
+    ok, reason = _set_parameter(ros, "/polymatch/agent_0", "max_linear_speed", -1.0)
+    assert not ok and "max_linear_speed" in reason, reason
+    ok, reason = _set_parameter(ros, "/polymatch/agent_0", "scene", "other.yaml")
+    assert not ok and "read-only" in reason.lower(), reason
+
+    # the robot dies: the agent sends one zero command, then stays quiet
+    ros.kill(robots[0])
+    assert _wait(lambda: "robot stopped: measured pose older than" in ros.output(agents[0]), 10)
+    time.sleep(1.5)  # ten ticks at 10 Hz
+    seen = _twists(ros.output(echo))
+    assert np.all(seen[-1] == 0.0), seen[-3:]
+    time.sleep(1.5)
+    assert len(_twists(ros.output(echo))) == len(seen), "commands after the zero command"
+    assert agents[0].poll() is None and agents[1].poll() is None
+
+
+@needs_ros
+def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
+    count = 6
+    scene = _scene(tmp_path, SCENE_ROBOTS.format(t_end=25.0, count=count))
+    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene, "--mode", "bridge",
+                      "--rate", "10", "--position-noise", "0.002", "--angle-noise", "0.002",
+                      "--lag", "0.2", "--timeout", "90"], timeout=110)
+    rc = ros.wait(proc, 120)
+    text = ros.output(proc)
+    assert rc == 0, text[-3000:]
+    found = re.search(r"converged: matching diameter < (\S+) from t = (\S+)", text)
+    assert found, text[-3000:]
+    tolerance = float(found.group(1))
+    radius = np.linalg.norm(load_scene(scene).model.groups[0].reference, axis=1).max()
+    assert tolerance == pytest.approx(noise_floor(0.002, 0.002, radius, 2), rel=1e-5)
+    final = re.search(rf"^triangles +{count} +\S+ +\S+ +(\S+) ", text, re.M)
+    assert final and float(final.group(1)) < tolerance, text[-2000:]

@@ -61,14 +61,18 @@ class RuntimeParams:
         if not getattr(self, "pending", None):
             return False
         changed, self.pending = self.pending, {}
-        old = {k: self.params[k] for k in changed}
+        old = {k: self._in_use(k) for k in changed}
         self.params.update(changed)
         if "kappa" in changed or "gamma" in changed:
             self.model = gains(self.scene.model, self.params)
             self.rebuild_system()
-        described = ", ".join(f"{k} {old[k]:g} -> {v:g}" for k, v in changed.items())
+        described = ", ".join(f"{k} {old[k]:g} -> {self._in_use(k):g}" for k in changed)
         self.log.info(f"parameters applied at t = {self.state.t:.4g}: {described}")
         return True
+
+    def _in_use(self, name):
+        """The value in use: the model's gains (0 = the scene's), else the parameter."""
+        return getattr(self.model, name) if name in ("kappa", "gamma") else self.params[name]
 
     def rebuild_system(self):
         raise NotImplementedError
