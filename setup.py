@@ -18,6 +18,7 @@ setup(
         (os.path.join("share", package_name, "config"), glob("config/*.yaml")),
         (os.path.join("share", package_name, "config", "extremes"),
          glob("config/extremes/*.yaml")),
+        (os.path.join("share", package_name, "config", "params"), glob("config/params/*.yaml")),
     ],
     install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
     extras_require={"plot": ["matplotlib"], "test": ["pytest"]},

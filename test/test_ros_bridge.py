@@ -3,6 +3,7 @@ simulated robots driven by bridged agents match, stop when their pose goes stale
 gains changed while running (multi-process tests)."""
 
 import math
+import os
 import re
 import textwrap
 import time
@@ -10,6 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import yaml
 from ros_harness import PY, needs_ros, scene_path
 
 from polymatch_ros.core.command import (
@@ -25,6 +27,7 @@ from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState, State
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
+from polymatch_ros.ros.params import AGENT, check
 from polymatch_ros.ros.robot_sim import SimulatedRobot
 from polymatch_ros.ros.runtime_params import validate
 
@@ -163,6 +166,18 @@ def test_noise_floor_grows_with_the_noise():
     assert noise_floor(0.0, 0.01, 1.0, 3) < noise_floor(0.0, 0.01, 2.0, 3)
 
 
+PARAMS_FILE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config",
+                           "params", "bridge_agent.yaml")
+
+
+def test_shipped_params_file_is_a_valid_bridge_agent_configuration():
+    with open(PARAMS_FILE) as fh:
+        values = yaml.safe_load(fh)["/**"]["ros__parameters"]
+    assert values["mode"] == "bridge" and set(values) <= {p.name for p in AGENT}
+    checked = check(AGENT, dict(values, scene="congruent_triangles"))
+    assert checked["max_linear_speed"] == 0.5
+
+
 def test_runtime_parameters_are_checked_against_their_ranges():
     def change(name, value):
         return SimpleNamespace(name=name, value=value)
@@ -241,8 +256,8 @@ def test_runtime_gain_change_and_a_killed_robot_gets_one_zero_command(ros, tmp_p
     robots = [_robot(ros, scene, a, position_noise=0.0005) for a in range(2)]
     agents = []
     for a in range(2):
-        argv = [PY, "-m", "polymatch_ros.ros.agent_node", "--ros-args", "-p", f"scene:={scene}",
-                "-p", f"agent:={a}", "-p", "mode:=bridge", "-p", "rate:=10.0",
+        argv = [PY, "-m", "polymatch_ros.ros.agent_node", "--ros-args",
+                "--params-file", PARAMS_FILE, "-p", f"scene:={scene}", "-p", f"agent:={a}",
                 "-p", "start_time:=0.0", "-r", f"measured_pose:=robot_{a}/measured_pose",
                 "-r", f"cmd_vel:=robot_{a}/cmd_vel", "-r", f"__node:=agent_{a}"]
         agents.append(ros.start(argv, timeout=100, name=f"agent {a}"))
