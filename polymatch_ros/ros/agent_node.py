@@ -285,6 +285,12 @@ def make_agent(argv=None):
     if mode == "lockstep":
         from .lockstep import LockstepAgent
 
+        if params["kappa"] or params["gamma"]:
+            raise ParameterError(
+                "parameters 'kappa', 'gamma': realtime and bridge only (lockstep runs the "
+                "scene's model, to equal the centralised simulation)"
+            )
+
         return LockstepAgent(node, params)
     if mode == "bridge":
         from .bridge import BridgeAgent
