@@ -18,6 +18,7 @@ setup(
         (os.path.join("share", package_name, "config"), glob("config/*.yaml")),
         (os.path.join("share", package_name, "config", "extremes"),
          glob("config/extremes/*.yaml")),
+        (os.path.join("share", package_name, "config", "params"), glob("config/params/*.yaml")),
     ],
     install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
     extras_require={"plot": ["matplotlib"], "test": ["pytest"]},
@@ -32,6 +33,7 @@ setup(
             "polymatch = polymatch_ros.cli:main",
             "agent = polymatch_ros.ros.agent_node:main",
             "monitor = polymatch_ros.ros.monitor_node:main",
+            "robot = polymatch_ros.ros.robot_sim:main",
         ],
     },
 )

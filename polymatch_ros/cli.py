@@ -6,6 +6,7 @@
     polymatch scenes             the scenes shipped in config/
     polymatch run SCENE          the distributed ROS 2 ensemble (one process per agent) + monitor
     polymatch agent | monitor    single ROS 2 nodes (= `ros2 run polymatch_ros agent|monitor`)
+    polymatch robot              a simulated robot for bridge mode (= `ros2 run ... robot`)
     polymatch echo TOPIC         print a topic (stand-in for `ros2 topic echo`)
     polymatch sweep [SCENE]      many random ensembles in batches: which initial states match
     polymatch bench WHAT         benchmarks (figures for README)
@@ -221,7 +222,8 @@ def build_parser():
     return parser
 
 
-PASSTHROUGH = {"agent": "ros.agent_node", "monitor": "ros.monitor_node"}
+PASSTHROUGH = {"agent": "ros.agent_node", "monitor": "ros.monitor_node",
+               "robot": "ros.robot_sim"}
 
 
 def main(argv=None):

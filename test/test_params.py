@@ -26,7 +26,7 @@ for spec_name, spec in (("agent", AGENT), ("monitor", MONITOR)):
                 )
             )
         if p.choices is not None:
-            CASES.append((spec_name, p.name, "fast", "expected lockstep or realtime"))
+            CASES.append((spec_name, p.name, "fast", "expected " + " or ".join(p.choices)))
 
 
 @pytest.mark.parametrize("spec_name,name,value,expect", CASES)

@@ -20,7 +20,7 @@ from ..core.model import GroupState, State, System
 from ..core.simulate import plan, prepare
 from . import wire
 from .exchange import DropCounter, Layout
-from .params import AGENT, declare
+from .params import AGENT, RUNTIME, declare
 from .process import NodeApp, ros_main
 
 
@@ -149,6 +149,10 @@ class AgentBase(NodeApp):
                         wire.twist_message(self.grp, st.t, gs.v[r], w_one, frame)
                     )
 
+    def diagnostic_note(self):
+        """(a note for the status message ('' or ending in '; '), extra {key: value})."""
+        return "", {}
+
     def time_split(self):
         """Milliseconds per round publishing stages, waiting for peers, and everything else."""
         return {}
@@ -200,8 +204,10 @@ class AgentBase(NodeApp):
             name=f"polymatch{self.node.get_fully_qualified_name()}",
             hardware_id=self.node.get_fully_qualified_name(),
         )
-        status.level = DiagnosticStatus.OK if self.drops.total == 0 else DiagnosticStatus.WARN
-        status.message = f"{self.mode}: t = {self.state.t:.4g}; {self.drops.summary()}"
+        note, extra = self.diagnostic_note()
+        fine = self.drops.total == 0 and not note
+        status.level = DiagnosticStatus.OK if fine else DiagnosticStatus.WARN
+        status.message = f"{self.mode}: t = {self.state.t:.4g}; {note}{self.drops.summary()}"
         vals = {
             "t": rec.t,
             "steps": rec.steps,
@@ -211,6 +217,7 @@ class AgentBase(NodeApp):
         }
         vals.update({f"{k}_ms_per_round": v for k, v in rec.ms_per_round.items()})
         vals.update({f"dropped: {k}": v for k, v in self.drops.counts.items()})
+        vals.update(extra)
         vals.update(self.extra_diagnostics())
         status.values = [
             KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v))
@@ -282,11 +289,23 @@ def make_agent(argv=None):
         namespace=wire.namespace(wire.DEFAULT_ENSEMBLE),
         automatically_declare_parameters_from_overrides=False,
     )
-    params = declare(node, AGENT)
-    if params["mode"] == "lockstep":
+    mode = declare(node, [p for p in AGENT if p.name == "mode"])["mode"]
+    rest = [p for p in AGENT if p.name != "mode"]
+    params = dict(declare(node, rest, RUNTIME if mode != "lockstep" else ()), mode=mode)
+    if mode == "lockstep":
         from .lockstep import LockstepAgent
 
+        if params["kappa"] or params["gamma"]:
+            raise ParameterError(
+                "parameters 'kappa', 'gamma': realtime and bridge only (lockstep runs the "
+                "scene's model, to equal the centralised simulation)"
+            )
+
         return LockstepAgent(node, params)
+    if mode == "bridge":
+        from .bridge import BridgeAgent
+
+        return BridgeAgent(node, params)
     from .realtime import RealtimeAgent
 
     return RealtimeAgent(node, params)

@@ -205,7 +205,7 @@ class Supervision:
             progress,
         )
         self.rounds_per_step = (
-            1 if args.mode == "realtime" else max(1, the_plan.method.info.rounds)
+            1 if args.mode != "lockstep" else max(1, the_plan.method.info.rounds)
         )
         self.rate_mark, self.rps = None, 0.0
         self.below_since, self.stop_sent = None, 0.0
@@ -253,7 +253,7 @@ class Supervision:
         self.epoch, self.start_sent = None, 0.0
         while True:
             watcher.spin(0.05)
-            if args.mode == "realtime" and args.lead:
+            if args.mode != "lockstep" and args.lead:
                 self.start_clock()
             self.check_graph()
             if interrupted:

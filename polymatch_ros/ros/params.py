@@ -10,7 +10,11 @@ from dataclasses import dataclass
 
 from ..core.errors import ParameterError
 
-MODES = ("lockstep", "realtime")
+MODES = ("lockstep", "realtime", "bridge")
+MONITOR_MODES = ("lockstep", "realtime")
+#: changeable while running (``ros2 param set``) in realtime and bridge modes, applied at the
+#: next tick; every other parameter, and all of them in lockstep, are read-only
+RUNTIME = ("kappa", "gamma", "rate", "max_linear_speed", "max_angular_speed")
 
 
 @dataclass(frozen=True)
@@ -40,11 +44,14 @@ AGENT = (
         "K of the runner's partition: process p hosts agents [pK, (p+1)K)",
         (1, 1_000_000),
     ),
-    Param("mode", "lockstep", "lockstep | realtime", choices=MODES),
+    Param("mode", "lockstep", "lockstep | realtime | bridge", choices=MODES),
     Param("integrator", "", "integrator name ('' = the scene's, see `polymatch integrators`)"),
     Param("dt", 0.0, "lockstep step size (0 = the scene's)", (0.0, 1e6)),
     Param("t_end", 0.0, "end time (0 = the scene's)", (0.0, 1e12)),
-    Param("rate", 50.0, "realtime: steps per wall-clock second", (0.01, 100000.0)),
+    Param("rate", 50.0, "realtime: steps, bridge: commands per wall-clock second",
+          (0.01, 100000.0)),
+    Param("kappa", 0.0, "realtime, bridge: coupling strength (0 = the scene's)", (0.0, 1e6)),
+    Param("gamma", 0.0, "realtime, bridge: damping (0 = the scene's)", (0.0, 1e6)),
     Param("time_scale", 1.0, "realtime: simulated seconds per wall-clock second", (1e-6, 1e6)),
     Param(
         "start_time",
@@ -102,6 +109,27 @@ AGENT = (
     ),
     Param("frame_id", "world", "frame_id of published poses"),
     Param(
+        "max_linear_speed", 1e6, "bridge: commanded linear speed limit (m/s, by norm)", (0.0, 1e6)
+    ),
+    Param(
+        "max_angular_speed",
+        1e6,
+        "bridge: commanded angular speed limit (rad/s, by norm)",
+        (0.0, 1e6),
+    ),
+    Param(
+        "pose_timeout",
+        0.5,
+        "bridge: a measured pose older than this (s) stops the robot (one zero command)",
+        (0.001, 1e6),
+    ),
+    Param("pose_type", "pose", "bridge: measured_pose is pose (PoseStamped) | odometry",
+          choices=("pose", "odometry")),
+    Param("cmd_type", "twist", "bridge: cmd_vel is twist (Twist) | twist_stamped",
+          choices=("twist", "twist_stamped")),
+    Param("command_frame", "world", "bridge: cmd_vel components in the world | body frame",
+          choices=("world", "body")),
+    Param(
         "run_id",
         0,
         "run identifier shared by the ensemble; stage messages with another are dropped",
@@ -115,8 +143,8 @@ MONITOR = (
         "mode",
         "lockstep",
         "lockstep: report each simulated time once all agents reached it; "
-        "realtime: report at 'rate' Hz from the latest poses",
-        choices=MODES,
+        "realtime: report at 'rate' Hz from the latest poses (also for bridged agents)",
+        choices=MONITOR_MODES,
     ),
     Param("rate", 10.0, "realtime: reports per second", (0.01, 10000.0)),
     Param(
@@ -167,35 +195,40 @@ def _typed(p, value):
     return value
 
 
+def check_value(p, value):
+    """One parameter's raw value, typed and checked (range, choices), or ParameterError."""
+    value = _typed(p, value)
+    if p.bounds is not None and value is not None and not p.bounds[0] <= value <= p.bounds[1]:
+        raise ParameterError(
+            f"parameter {p.name!r}: {value:g} is out of range "
+            f"[{p.bounds[0]:g}, {p.bounds[1]:g}]"
+        )
+    if p.choices is not None and value not in p.choices:
+        raise ParameterError(
+            f"parameter {p.name!r}: expected {' or '.join(p.choices)}, got {value!r}"
+        )
+    if isinstance(value, (list, tuple)) and any(v < 0 for v in value):
+        raise ParameterError(f"parameter {p.name!r}: indices must be >= 0, got {list(value)}")
+    return list(value) if isinstance(value, (list, tuple)) else value
+
+
 def check(spec, values):
     """Check {name: raw value} against ``spec`` (types, ranges, choices); the typed values."""
     out = {}
     for p in spec:
-        value = _typed(p, values.get(p.name, p.default))
-        if p.bounds is not None and value is not None and not p.bounds[0] <= value <= p.bounds[1]:
-            raise ParameterError(
-                f"parameter {p.name!r}: {value:g} is out of range "
-                f"[{p.bounds[0]:g}, {p.bounds[1]:g}]"
-            )
-        if p.choices is not None and value not in p.choices:
-            raise ParameterError(
-                f"parameter {p.name!r}: expected {' or '.join(p.choices)}, got {value!r}"
-            )
-        if isinstance(value, (list, tuple)) and any(v < 0 for v in value):
-            raise ParameterError(f"parameter {p.name!r}: indices must be >= 0, got {list(value)}")
-        out[p.name] = list(value) if isinstance(value, (list, tuple)) else value
+        out[p.name] = check_value(p, values.get(p.name, p.default))
     if "scene" in out and not out["scene"]:
         raise ParameterError("parameter 'scene' is required (a scene file)")
     return out
 
 
-def _descriptor(p):
+def _descriptor(p, runtime=False):
     from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
     # dynamic typing: `check` gives the one-line error for a wrong type (and takes `t_end:=2`
     # for a float); the ranges are there for `ros2 param describe`
     desc = ParameterDescriptor(
-        description=p.text, read_only=True, dynamic_typing=p.default is not None
+        description=p.text, read_only=not runtime, dynamic_typing=p.default is not None
     )
     if p.choices:
         desc.additional_constraints = "one of: " + ", ".join(p.choices)
@@ -212,8 +245,9 @@ def _descriptor(p):
     return desc
 
 
-def declare(node, spec):
-    """Declare ``spec`` on ``node`` (descriptors, ranges) and return the checked values."""
+def declare(node, spec, runtime=()):
+    """Declare ``spec`` on ``node`` (descriptors, ranges) and return the checked values;
+    the names in ``runtime`` may be set while the node runs (``runtime_params``)."""
     from rclpy.exceptions import (
         InvalidParameterTypeException,
         InvalidParameterValueException,
@@ -225,7 +259,7 @@ def declare(node, spec):
     for p in spec:
         initial = Parameter.Type.INTEGER_ARRAY if p.default is None else p.default
         try:
-            node.declare_parameter(p.name, initial, _descriptor(p))
+            node.declare_parameter(p.name, initial, _descriptor(p, p.name in runtime))
             raw[p.name] = node.get_parameter(p.name).value
         except ParameterUninitializedException:
             raw[p.name] = None

@@ -12,10 +12,12 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..core.model import System
 from ..core.simulate import drive
 from . import wire
 from .agent_node import AgentBase
 from .clock_offset import ClockOffsets
+from .runtime_params import RuntimeParams
 
 
 class PeerTable:
@@ -143,7 +145,7 @@ class PeerTable:
         return tuple(out)
 
 
-class RealtimeAgent(AgentBase):
+class RealtimeAgent(RuntimeParams, AgentBase):
     """Steps on a wall-clock timer (``rate`` Hz, ``time_scale`` simulated s per s) with the newest
     peer poses; starts on the runner's ``start <epoch>`` (start_time -1) or at ``start_time``."""
 
@@ -163,6 +165,10 @@ class RealtimeAgent(AgentBase):
             self.scene.t_end,
             self.clock,
         )
+        self.watch_parameters()
+
+    def rebuild_system(self):
+        self.system = System(self.model, self.layout.rows)
 
     def record(self):
         rec = super().record()
@@ -219,6 +225,8 @@ class RealtimeAgent(AgentBase):
         while self.state.t < self.scene.t_end - 1e-12 and not self.stop_requested:
             next_tick += period
             self._wait_tick(next_tick, period)
+            if self.apply_runtime():  # kappa, gamma, rate set while running
+                h, period = self.step_size(self.params), 1.0 / self.params["rate"]
             alive = self.peers.active()
             self.state.coupling = None
             t = self.state.t

@@ -21,7 +21,7 @@ from ..console import Progress, positive_float, writable_output
 from ..core.errors import ParameterError, PolymatchError
 from ..core.scene import load_scene, resolve_scene_path
 from ..core.simulate import plan
-from . import wire
+from . import bridge_run, wire
 from .children import (  # noqa: F401 (API)
     LOCALHOST_PARTICIPANTS,
     REMOTE_FINAL_POSE_SECONDS,
@@ -61,7 +61,10 @@ def _check_ensemble(name):
 def cmd_run(args):
     scene_path = resolve_scene_path(args.scene)
     scene = load_scene(scene_path, {"time.t_end": args.t_end})
-    rt = args.mode == "realtime"
+    rt = args.mode != "lockstep"
+    if args.mode == "bridge":
+        scene = bridge_run.prepare(args, scene)  # the noise-floor tolerance
+        args.time_scale = 1.0  # robots move in real time
     dt = args.time_scale / args.rate if rt else args.dt
     the_plan = plan(scene, args.integrator, dt, distributed=True)  # one-line errors first
     if args.save:
@@ -80,7 +83,8 @@ def cmd_run(args):
     with reserved_domain_id() as domain, tempfile.TemporaryDirectory(
         prefix="polymatch_run_"
     ) as directory:
-        env = ros_environment(domain, mode=args.mode)
+        transports = "lockstep" if args.mode == "lockstep" else "realtime"
+        env = ros_environment(domain, mode=transports)
         envs = None if spec.kind == "localhost" else discovery_environments(spec, directory)
         args.agents_per_process = _agents_per_process(
             args, len(args.agents), envs is None and _localhost(env)
@@ -150,10 +154,10 @@ def _node_args(args, scene, scene_path, the_plan):
         f"scene:={os.path.abspath(scene_path)}",
         "-p",
         f"t_end:={scene.t_end!r}",
-        "-p",
-        f"mode:={args.mode}",
     ]
     agent = common + [
+        "-p",
+        f"mode:={args.mode}",
         "-p",
         f"run_id:={_run_id(args, scene, scene_path, the_plan)}",
         "-p",
@@ -172,7 +176,7 @@ def _node_args(args, scene, scene_path, the_plan):
         "-p",
         f"hold_final:={0.0 if args.lead else REMOTE_FINAL_POSE_SECONDS!r}",
     ]
-    if args.mode == "realtime":
+    if args.mode != "lockstep":
         agent += [
             "-p",
             f"rate:={args.rate!r}",
@@ -185,8 +189,12 @@ def _node_args(args, scene, scene_path, the_plan):
         ]
     else:
         agent += ["-p", f"dt:={the_plan.dt!r}"]
-    monitor = common + ["-p", f"peer_timeout:={args.peer_timeout!r}"]
-    if args.mode == "realtime":
+    if args.mode == "bridge":
+        agent += bridge_run.agent_args(args)
+    monitor_mode = "lockstep" if args.mode == "lockstep" else "realtime"
+    monitor = common + ["-p", f"mode:={monitor_mode}"]
+    monitor += ["-p", f"peer_timeout:={args.peer_timeout!r}"]
+    if args.mode != "lockstep":
         monitor += ["-p", "rate:=10.0"]
     return monitor, agent
 
@@ -226,6 +234,7 @@ def _start(args, scene, scene_path, the_plan, env, envs=None):
                 + ["polymatch_ros.ros.agent_node", "--ros-args"]
                 + agent_args
                 + sel
+                + (bridge_run.remaps(agents[0]) if args.mode == "bridge" else [])
                 + ["-r", f"__node:={name}"],
                 agent_env,
             )
@@ -250,7 +259,7 @@ def _run(args, scene, scene_path, the_plan, env, domain, envs=None):
         f"ensemble {wire.namespace(args.ensemble)}"
     )
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    children, monitor, watcher = [], None, None
+    children, monitor, watcher, robots = [], None, None, []
     interrupted = []
     old = {
         s: signal.signal(s, lambda sig, frame: interrupted.append(sig))
@@ -262,6 +271,8 @@ def _run(args, scene, scene_path, the_plan, env, domain, envs=None):
     try:
         name = "runner" if here == n else f"runner_{args.agents[0]}"
         watcher = Watcher(scene, args.ensemble, name)
+        if args.mode == "bridge":
+            robots = bridge_run.robots(args, scene_path, env)
         monitor, children = _start(args, scene, scene_path, the_plan, env, envs)
         run = Supervision(args, scene, the_plan, watcher, children, monitor, progress)
         code, message = run.watch(interrupted, start)
@@ -269,6 +280,7 @@ def _run(args, scene, scene_path, the_plan, env, domain, envs=None):
         code, message = exc.exit_code, str(exc)
     finally:
         stop_all(children, monitor, watcher)
+        stop_all(robots, None, None)
         for s, h in old.items():
             signal.signal(s, h)
     try:
@@ -302,7 +314,8 @@ def add_parser(sub):
         "run", help="run the distributed ROS 2 ensemble of a scene (one process per agent)"
     )
     p.add_argument("scene", help="scene file or shipped scene name")
-    p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    p.add_argument("--mode", choices=("lockstep", "realtime", "bridge"), default="lockstep",
+                   help="bridge: simulated robots driven by bridged agents")
     p.add_argument("--integrator", "-i", metavar="NAME",
                    help="fixed-step integrator (default: the scene's)")
     p.add_argument("--dt", type=positive_float, help="lockstep step size (default: the scene's)")
@@ -369,6 +382,7 @@ def add_parser(sub):
     p.add_argument(
         "--save", metavar="NPZ", help="save the final poses received from the agents (npz)"
     )
+    bridge_run.add_arguments(p)
     p.add_argument("--quiet", "-q", action="store_true")
     p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
     p.add_argument("--records", metavar="JSONL",

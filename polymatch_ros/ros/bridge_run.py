@@ -1,0 +1,84 @@
+"""`polymatch run SCENE --mode bridge`: N simulated robots, N bridged agents and the monitor.
+
+Robot i runs in namespace ``/<ensemble>/robot_<i>`` (topics ``measured_pose``, ``cmd_vel``);
+agent i is remapped onto them.  The matching diameter the monitor reports comes from measured
+poses, so it cannot fall below what the noise makes: the run's tolerance is the larger of the
+scene's and the noise floor (``core.command.noise_floor``).
+"""
+
+import os
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+from ..console import positive_float
+from ..core.command import bridge_model, noise_floor
+from ..core.errors import ParameterError
+from . import wire
+from .children import Child
+
+
+def add_arguments(p):
+    """The options of the simulated robots (bridge mode)."""
+    g = p.add_argument_group("bridge mode (simulated robots)")
+    g.add_argument("--lag", type=float, default=0.1,
+                   help="robots' actuator time constant (s, default 0.1)")
+    g.add_argument("--position-noise", type=float, default=0.001,
+                   help="std of the measured positions (m, default 0.001)")
+    g.add_argument("--angle-noise", type=float, default=0.001,
+                   help="std of the measured orientations (rad, default 0.001)")
+    g.add_argument("--max-linear-speed", type=positive_float, default=1e6,
+                   help="commanded speed limit (m/s)")
+    g.add_argument("--max-angular-speed", type=positive_float, default=1e6,
+                   help="commanded angular speed limit (rad/s)")
+
+
+def prepare(args, scene):
+    """The scene with the noise-floor tolerance; one-line errors for what bridge cannot run."""
+    bridge_model(scene.model)  # d <= 3, first order
+    for name in ("lag", "position_noise", "angle_noise"):
+        value = getattr(args, name)
+        if not np.isfinite(value) or value < 0:
+            raise ParameterError(f"--{name.replace('_', '-')} must be >= 0, got {value:g}")
+    if args.only is not None:
+        raise ParameterError("--mode bridge runs every robot on this host (no --only)")
+    args.agents_per_process = 1
+    radius = max(float(np.max(np.linalg.norm(g.reference, axis=1))) for g in scene.model.groups)
+    floor = noise_floor(args.position_noise, args.angle_noise, radius, scene.model.dim)
+    return replace(scene, tolerance=max(scene.tolerance, floor))
+
+
+def agent_args(args):
+    """Extra --ros-args of every bridged agent."""
+    return [
+        "-p", f"max_linear_speed:={args.max_linear_speed!r}",
+        "-p", f"max_angular_speed:={args.max_angular_speed!r}",
+    ]
+
+
+def remaps(agent):
+    """Agent ``agent``'s own pose and command topics: its robot's."""
+    return [
+        "-r", f"measured_pose:=robot_{agent}/measured_pose",
+        "-r", f"cmd_vel:=robot_{agent}/cmd_vel",
+    ]
+
+
+def robots(args, scene_path, env):
+    """Start one simulated robot per agent (``Child``ren, ended by PID like the agents)."""
+    out = []
+    for a in args.agents:
+        argv = [
+            sys.executable, "-m", "polymatch_ros.ros.robot_sim", "--ros-args",
+            "-r", f"__ns:={wire.namespace(args.ensemble)}/robot_{a}",
+            "-r", "__node:=robot",
+            "-p", f"scene:={os.path.abspath(scene_path)}",
+            "-p", f"agent:={a}",
+            "-p", f"lag:={args.lag!r}",
+            "-p", f"position_noise:={args.position_noise!r}",
+            "-p", f"angle_noise:={args.angle_noise!r}",
+            "-p", "rate:=30.0",
+        ]
+        out.append(Child(f"robot_{a}", argv, env))
+    return out

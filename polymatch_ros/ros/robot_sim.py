@@ -1,0 +1,177 @@
+"""A simulated robot: what a bridged agent drives when no hardware is at hand.
+
+    ros2 run polymatch_ros robot --ros-args -r __ns:=/polymatch/robot_3 \\
+        -p scene:=FILE -p agent:=3 [-p lag:=0.1 -p position_noise:=0.001 ...]
+
+It receives ``cmd_vel`` (geometry_msgs/Twist or TwistStamped, world or body frame), tracks it
+with a first-order actuator lag (time constant ``lag``) under the speed limits, integrates its
+pose at ``rate`` Hz and publishes it with Gaussian noise on ``measured_pose`` (PoseStamped or
+nav_msgs/Odometry): the topics a real robot offers and receives.  It starts at agent
+``agent``'s initial pose of the scene.  A robot without a command for ``cmd_timeout`` s
+stops by itself, as robot drivers do.
+"""
+
+import math
+import sys
+import time
+
+import numpy as np
+
+from ..core.command import saturate
+from ..core.errors import ParameterError
+from .params import Param, declare
+from .process import ros_main
+
+ROBOT = (
+    Param("scene", "", "scene file (YAML) or shipped scene name: the initial pose; required"),
+    Param("agent", 0, "the agent whose initial pose the robot starts at", (0, 1_000_000)),
+    Param("rate", 50.0, "integration and pose publishing rate (Hz)", (0.1, 10000.0)),
+    Param("lag", 0.1, "actuator time constant (s): v' = (v_cmd - v) / lag; 0 = none", (0.0, 1e3)),
+    Param("max_linear_speed", 1e6, "actuator linear speed limit (m/s)", (0.0, 1e6)),
+    Param("max_angular_speed", 1e6, "actuator angular speed limit (rad/s)", (0.0, 1e6)),
+    Param("position_noise", 0.0, "standard deviation of the measured position (m)", (0.0, 1e3)),
+    Param("angle_noise", 0.0, "standard deviation of the measured orientation (rad)", (0.0, 1.0)),
+    Param("seed", 0, "noise seed (0 = from the agent index)", (0, 2**31 - 1)),
+    Param("cmd_timeout", 0.5, "stop when no command came for this long (s)", (0.001, 1e6)),
+    Param("pose_type", "pose", "measured_pose is pose (PoseStamped) | odometry",
+          choices=("pose", "odometry")),
+    Param("cmd_type", "twist", "cmd_vel is twist (Twist) | twist_stamped",
+          choices=("twist", "twist_stamped")),
+    Param("command_frame", "world", "cmd_vel components in the world | body frame",
+          choices=("world", "body")),
+    Param("frame_id", "world", "frame_id of the measured pose"),
+)
+
+
+class SimulatedRobot:
+    """Pose (position p, rotation R, 3-D; planar robots stay in z = 0 about z) and the actual
+    velocity (world frame) of a robot that tracks commanded twists with a first-order lag."""
+
+    def __init__(self, position, rotation, planar, lag, max_linear, max_angular):
+        from scipy.spatial.transform import Rotation
+
+        self.p = np.zeros(3)
+        self.p[: len(position)] = position
+        rot = np.eye(3)
+        rot[: len(rotation), : len(rotation)] = rotation
+        self.rot = Rotation.from_matrix(rot)
+        self.planar, self.lag = planar, lag
+        self.max_linear, self.max_angular = max_linear, max_angular
+        self.v, self.w = np.zeros(3), np.zeros(3)
+
+    def step(self, dt, linear, angular, frame="world"):
+        """Advance ``dt`` s towards the commanded (linear, angular) velocity."""
+        from scipy.spatial.transform import Rotation
+
+        linear, angular = np.asarray(linear, float), np.asarray(angular, float)
+        if frame == "body":
+            mat = self.rot.as_matrix()
+            linear, angular = mat @ linear, mat @ angular
+        if self.planar:
+            linear, angular = linear * [1, 1, 0], angular * [0, 0, 1]
+        linear = saturate(linear, self.max_linear)[0]
+        angular = saturate(angular, self.max_angular)[0]
+        follow = 1.0 if self.lag == 0.0 else 1.0 - math.exp(-dt / self.lag)
+        self.v += follow * (linear - self.v)
+        self.w += follow * (angular - self.w)
+        self.p += self.v * dt
+        self.rot = Rotation.from_rotvec(self.w * dt) * self.rot
+
+    def measure(self, rng, position_noise, angle_noise):
+        """(position, quaternion xyzw) with Gaussian noise."""
+        from scipy.spatial.transform import Rotation
+
+        p = self.p + rng.normal(0.0, position_noise, 3) * ([1, 1, 0] if self.planar else 1)
+        turn = rng.normal(0.0, angle_noise, 3) * ([0, 0, 1] if self.planar else 1)
+        return p, (Rotation.from_rotvec(turn) * self.rot).as_quat()
+
+
+class RobotNode:
+    """The simulated robot as a node (``run()`` until Ctrl-C or SIGTERM)."""
+
+    def __init__(self, node, params):
+        from ..core.scene import load_scene, resolve_scene_path
+        from .bridge import CMD_VEL, MEASURED_POSE, pose_class, robot_qos, twist_class
+
+        self.node, self.params = node, params
+        scene = load_scene(resolve_scene_path(params["scene"]))
+        model = scene.model
+        if params["agent"] >= model.n_agents:
+            raise ParameterError(
+                f"parameter 'agent': {params['agent']} is not in the scene "
+                f"(0..{model.n_agents - 1})"
+            )
+        if model.dim > 3:
+            raise ParameterError(f"robot: d = {model.dim}; robots live in 2-D or 3-D")
+        gi, row = model.group_of(params["agent"])
+        gs = scene.initial.groups[gi]
+        rot = model.rotations.to_matrices(model.rotations.take(gs.rot, [row]))[0]
+        self.robot = SimulatedRobot(
+            gs.x[row] + scene.origin, rot, model.dim == 2, params["lag"],
+            params["max_linear_speed"], params["max_angular_speed"],
+        )
+        self.rng = np.random.default_rng(params["seed"] or 1000 + params["agent"])
+        self.command = (np.zeros(3), np.zeros(3), -math.inf)
+        pose_qos, cmd_qos = robot_qos()
+        self.pose_msg = pose_class(params["pose_type"])
+        self.pose_pub = node.create_publisher(self.pose_msg, MEASURED_POSE, 10)
+        node.create_subscription(twist_class(params["cmd_type"]), CMD_VEL, self._command, cmd_qos)
+
+    def _command(self, msg):
+        body = msg.twist if hasattr(msg, "header") else msg
+        lin, ang = body.linear, body.angular
+        values = np.array([lin.x, lin.y, lin.z, ang.x, ang.y, ang.z])
+        if np.all(np.isfinite(values)):  # a robot ignores a corrupt command
+            self.command = (values[:3], values[3:], time.monotonic())
+
+    def _publish(self):
+        p, q = self.robot.measure(
+            self.rng, self.params["position_noise"], self.params["angle_noise"]
+        )
+        msg = self.pose_msg()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.frame_id = self.params["frame_id"]
+        pose = msg.pose.pose if hasattr(msg, "child_frame_id") else msg.pose
+        if hasattr(msg, "child_frame_id"):
+            msg.child_frame_id = "base_link"
+        pose.position.x, pose.position.y, pose.position.z = map(float, p)
+        o = pose.orientation
+        o.x, o.y, o.z, o.w = map(float, q)
+        self.pose_pub.publish(msg)
+
+    def run(self):
+        import rclpy
+
+        period = 1.0 / self.params["rate"]
+        last = time.monotonic()
+        while rclpy.ok():
+            rclpy.spin_once(self.node, timeout_sec=max(0.0, last + period - time.monotonic()))
+            now = time.monotonic()
+            if now - last < period:
+                continue
+            linear, angular, heard = self.command
+            if now - heard > self.params["cmd_timeout"]:
+                linear, angular = np.zeros(3), np.zeros(3)
+            self.robot.step(min(now - last, 5 * period), linear, angular,
+                            self.params["command_frame"])
+            last = now
+            self._publish()
+        return 0
+
+    def destroy(self):
+        self.node.destroy_node()
+
+
+def make_robot(argv=None):
+    from rclpy.node import Node
+
+    node = Node("robot", automatically_declare_parameters_from_overrides=False)
+    return RobotNode(node, declare(node, ROBOT))
+
+
+def main(args=None):
+    return ros_main(make_robot, "robot", args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
