@@ -76,16 +76,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
 
     def __init__(self, node, params):
         super().__init__(node, params)
-        self.peers = PeerTable(
-            node,
-            self.layout,
-            params["frame_id"],
-            params["peer_timeout"],
-            self.drops,
-            self.scene.origin,
-            params["delay"],
-            self.scene.t_end,
-        )
+        self.peers = PeerTable.of_agent(self)
         self.measured = None  # SimpleNamespace(x, rot, heard) of the last good measured pose
         self.holding = "no measured pose yet"
         self.zero_sent = False

@@ -26,13 +26,11 @@ class PeerTable:
     def __init__(self, node, layout, frame_id, timeout, drops, origin, delay, t_max, clock=None):
         self.node, self.layout, self.drops = node, layout, drops
         self.clock = clock  # ClockOffsets fed with every pose's stamp and arrival, or None
-        self.delay = float(
-            delay
-        )  # injected transport delay (s): a pose is used this long after arrival
+        # injected transport delay (s): a pose is used this long after arrival
+        self.delay = float(delay)
         self.pending = defaultdict(list)  # agent -> [(arrival, kind, values)] not yet delivered
-        self.origin = np.asarray(
-            origin, dtype=float
-        )  # poses are absolute; the core works in offsets
+        # poses are absolute; the core works in offsets
+        self.origin = np.asarray(origin, dtype=float)
         self.model = layout.model
         self.grp = self.model.rotations
         self.frame_id, self.timeout, self.t_max = frame_id, timeout, t_max
@@ -51,6 +49,13 @@ class PeerTable:
                         node, "twist", self._receiver(a, "twist"), dim, a, mode="realtime"
                     )
                 )
+
+    @classmethod
+    def of_agent(cls, agent, clock=None):
+        """The table of a realtime or bridge agent (``AgentBase``), from its parameters."""
+        p = agent.params
+        return cls(agent.node, agent.layout, p["frame_id"], p["peer_timeout"], agent.drops,
+                   agent.scene.origin, p["delay"], agent.scene.t_end, clock)
 
     def _entry(self, agent):
         return self.latest.setdefault(
@@ -154,17 +159,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
     def __init__(self, node, params):
         super().__init__(node, params)
         self.clock = ClockOffsets(params["time_scale"], params["clock_offset_warn"])
-        self.peers = PeerTable(
-            node,
-            self.layout,
-            params["frame_id"],
-            params["peer_timeout"],
-            self.drops,
-            self.scene.origin,
-            params["delay"],
-            self.scene.t_end,
-            self.clock,
-        )
+        self.peers = PeerTable.of_agent(self, self.clock)
         self.watch_parameters()
 
     def rebuild_system(self):

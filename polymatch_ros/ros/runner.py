@@ -338,7 +338,7 @@ def add_parser(sub):
     p.add_argument("--delay", type=float, default=0.0,
                    help="realtime: injected transport delay (s), experiments")
     p.add_argument("--round-timeout", type=positive_float, default=10.0,
-                   help="lockstep: give up a round after S s")
+                   help="lockstep: after S s a round fails if a missing peer has left")
     p.add_argument(
         "--hold",
         type=float,
