@@ -281,7 +281,7 @@ class Supervision:
             self.watcher.spin(0.05)
         if remote and self.watcher.have_final():
             self.watcher.received()  # the other hosts' agents may end now
-        if remote and not self.watcher.have_final():
+        if not self.watcher.have_final():  # no summary from a partial state: an error
             missing = sorted(set(range(self.scene.model.n_agents)) - set(self.watcher.poses))
             return 1, (
                 f"no final pose from agents {describe_agents(missing) or '(velocities)'} "
