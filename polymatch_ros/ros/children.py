@@ -250,7 +250,7 @@ class Supervision:
 
     def watch(self, interrupted, start):
         watcher, args = self.watcher, self.args
-        self.epoch, self.start_sent = None, 0.0
+        self.epoch, self.start_sent, self.received_sent = None, 0.0, False
         while True:
             watcher.spin(0.05)
             if args.mode != "lockstep" and args.lead:
@@ -263,6 +263,9 @@ class Supervision:
             if failed:
                 self.progress.done()
                 return failed
+            if args.lead and not self.received_sent and watcher.have_final():
+                watcher.received()  # the agents hold their final poses until this
+                self.received_sent = True
             if all(c.ended_well() for c in self.children):
                 return self.await_final_poses()
             if time.monotonic() > start + args.timeout:
@@ -279,7 +282,7 @@ class Supervision:
         drain = time.monotonic() + seconds
         while time.monotonic() < drain and not self.watcher.have_final():
             self.watcher.spin(0.05)
-        if remote and self.watcher.have_final():
+        if self.watcher.have_final() and not self.received_sent:
             self.watcher.received()  # the other hosts' agents may end now
         if not self.watcher.have_final():  # no summary from a partial state: an error
             missing = sorted(set(range(self.scene.model.n_agents)) - set(self.watcher.poses))

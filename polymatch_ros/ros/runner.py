@@ -174,7 +174,9 @@ def _node_args(args, scene, scene_path, the_plan):
         "-p",
         f"peer_timeout:={args.peer_timeout!r}",
         "-p",
-        f"hold_final:={0.0 if args.lead else REMOTE_FINAL_POSE_SECONDS!r}",
+        # every agent keeps its latched final pose alive until the lead host has them all: a
+        # writer that exits before the runner's reader matched it takes its sample along
+        f"hold_final:={REMOTE_FINAL_POSE_SECONDS!r}",
     ]
     if args.mode != "lockstep":
         agent += [
