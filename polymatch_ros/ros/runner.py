@@ -244,22 +244,28 @@ def _start(args, scene, scene_path, the_plan, env, envs=None):
     return monitor, children
 
 
+def _announce(args, n, the_plan, env, domain, envs):
+    """The run's first line (stderr, unless --quiet): what runs here, how, where."""
+    if args.quiet:
+        return
+    here = len(args.agents)
+    which = f"{n} agents" if here == n else (
+        f"{here} of {n} agents ({describe_agents(args.agents)})")
+    print(
+        f"polymatch run: {which} in {len(partition(here, args.agents_per_process))} processes, "
+        f"{args.mode}, integrator {the_plan.name}, dt {the_plan.dt:g}, ROS_DOMAIN_ID={domain}, "
+        f"discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE'] if envs is None else envs.spec}, "
+        f"ensemble {wire.namespace(args.ensemble)}",
+        file=sys.stderr, flush=True,
+    )
+
+
 def _run(args, scene, scene_path, the_plan, env, domain, envs=None):
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
     n, here = scene.model.n_agents, len(args.agents)
-    say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
-    which = f"{n} agents"
-    if here < n:
-        which = f"{here} of {n} agents ({describe_agents(args.agents)})"
-    say(
-        f"polymatch run: {which} in {len(partition(here, args.agents_per_process))} processes, "
-        f"{args.mode}, "
-        f"integrator {the_plan.name}, dt {the_plan.dt:g}, ROS_DOMAIN_ID={domain}, "
-        f"discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE'] if envs is None else envs.spec}, "
-        f"ensemble {wire.namespace(args.ensemble)}"
-    )
+    _announce(args, n, the_plan, env, domain, envs)
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     children, monitor, watcher, robots = [], None, None, []
     interrupted = []
@@ -286,18 +292,8 @@ def _run(args, scene, scene_path, the_plan, env, domain, envs=None):
         for s, h in old.items():
             signal.signal(s, h)
     try:
-        report(
-            args,
-            scene,
-            the_plan,
-            watcher,
-            children,
-            monitor,
-            progress,
-            code,
-            message,
-            time.monotonic() - start,
-        )
+        wall = time.monotonic() - start
+        report(args, scene, the_plan, watcher, children, monitor, progress, code, message, wall)
         summarised = args.lead and watcher.final_state() is not None
         code = verdict(scene, watcher) if code == 0 and summarised else code
     finally:
@@ -347,6 +343,17 @@ def add_parser(sub):
         default=1.0,
         help="stop once the diameter stayed under the tolerance this long (simulated s)",
     )
+    _add_ensemble_options(p)
+    bridge_run.add_arguments(p)
+    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
+    p.add_argument("--records", metavar="JSONL",
+                   help="write every process's run record (JSON, one a line) to this file")
+    p.set_defaults(func=cmd_run)
+
+
+def _add_ensemble_options(p):
+    """Where and how the ensemble runs: time limit, namespace, hosts, discovery, output."""
     p.add_argument(
         "--timeout",
         type=positive_float,
@@ -384,9 +391,3 @@ def add_parser(sub):
     p.add_argument(
         "--save", metavar="NPZ", help="save the final poses received from the agents (npz)"
     )
-    bridge_run.add_arguments(p)
-    p.add_argument("--quiet", "-q", action="store_true")
-    p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
-    p.add_argument("--records", metavar="JSONL",
-                   help="write every process's run record (JSON, one a line) to this file")
-    p.set_defaults(func=cmd_run)
