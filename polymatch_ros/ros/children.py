@@ -213,11 +213,13 @@ class Supervision:
 
     def failure(self):
         """The first child that ended badly, as (code, message), or None."""
-        failed = [c for c in self.children if not c.ended_well() and c.poll() is not None]
+        # poll first: a child that exits between "not ended well" (still running) and "has
+        # ended" would be taken for a failure with exit code 0
+        failed = [c for c in self.children if c.poll() is not None and not c.ended_well()]
         if (
             self.monitor is not None
-            and not self.monitor.ended_well()
             and self.monitor.poll() is not None
+            and not self.monitor.ended_well()
         ):
             failed.append(self.monitor)
         if not failed:
