@@ -225,14 +225,15 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             alive = self.peers.active()
             self.state.coupling = None
             t = self.state.t
+            step = min(h, self.scene.t_end - t)  # the last tick ends the run at t_end exactly
             self.state = drive(
                 self.plan.method,
                 self.system,
                 self.state,
-                h,
+                step,
                 lambda request, stage, alive=alive: self.peers.ensemble(request, alive),
             )
-            self.state.t = t + h
+            self.state.t = t + step
             self.steps += 1
             self.rounds += 1
             self.round_time = time.monotonic() - t0
