@@ -228,6 +228,12 @@ class Supervision:
         detail = " | ".join(line for line in c.tail(3) if line.strip())
         return 1, f"{c.name} (pid {c.pid}) exited with code {c.poll()}: {detail}"
 
+    def last_words(self, most=3):
+        """'; <process>: <its last line>' for up to ``most`` processes still running: what they
+        were doing when the run timed out (a lockstep agent says which peers it waits for)."""
+        running = [c for c in self.children if c.poll() is None and c.tail(1)]
+        return "".join(f"; {c.name}: {c.tail(1)[0].strip()}" for c in running[:most])
+
     def check_graph(self):
         """Once every agent is up: its node and the monitor are in the ensemble's namespace."""
         if self.graph_checked or not self.watcher.agents_up():
@@ -272,7 +278,8 @@ class Supervision:
                 return self.await_final_poses()
             if time.monotonic() > start + args.timeout:
                 self.progress.done()
-                return 1, f"timed out after {args.timeout:g} s (raise --timeout)"
+                last = self.last_words()
+                return 1, f"timed out after {args.timeout:g} s (raise --timeout){last}"
             self.show_progress()
 
     def await_final_poses(self):

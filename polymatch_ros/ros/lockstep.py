@@ -7,13 +7,21 @@ then the simulator's).
 """
 
 import time
-from collections import defaultdict
+from collections import defaultdict, deque
 
 from ..core.simulate import drive, step_grid
 from . import wire
 from .agent_node import AgentBase
 from .exchange import RoundTimeout, lean_node, quiet_events
 
+# A round that has waited this long re-sends this process's last two rounds of stage messages,
+# and again each period after.  RELIABLE delivery repairs a lost datagram, but a sample can
+# still vanish for good: a peer starved past its DDS lease is matched anew as a late joiner
+# of a VOLATILE topic, and what was sent before the new match never reaches it.  Every
+# process then waits for a present peer and the run stalls.  A peer is at most one round
+# ahead or behind, so the last two rounds are all it can miss; receivers take a repeat of a
+# round they already have as what it is (``repeats``), not as a drop.
+RESEND_AFTER = 1.0  # s
 
 class LockstepExchange:
     """Stage rounds: publish the local stage rows, wait for every peer's message of the same round.
@@ -39,9 +47,12 @@ class LockstepExchange:
             )
             for a in layout.local
         }
-        self._out = {
-            a: Float64MultiArray() for a in layout.local
-        }  # reused: rclpy copies on publish
+        # two messages per agent, used in turn: the previous round's stays intact for a resend
+        self._out = {a: (Float64MultiArray(), Float64MultiArray()) for a in layout.local}
+        self.sent = deque(maxlen=2)  # the messages of the last two rounds, for resends
+        self.resends = 0  # rounds re-sent because a peer's message did not come
+        self.repeats = 0  # peers' messages of rounds already taken (their resends)
+        self.taken = {}  # peer -> the last round of it this process has taken
         self.inbox = defaultdict(dict)  # agent -> {(step, stage): Stage}
         self.current = (0, 0)
         self.stop_step = None  # graph runs: the step after which every agent stops
@@ -71,7 +82,10 @@ class LockstepExchange:
                 return
             key = (stage.step, stage.stage)
             if key < self.current:
-                self.drops(f"agent {agent}", "stale round (a stamp from the past)")
+                if key <= self.taken.get(agent, (-1, -1)):
+                    self.repeats += 1  # a resend of a round already taken: not a drop
+                else:
+                    self.drops(f"agent {agent}", "stale round (a stamp from the past)")
                 return
             self.inbox[agent][key] = stage
 
@@ -114,6 +128,8 @@ class LockstepExchange:
     def publish(self, step, stage, request, stop_flag):
         flags = self._stop_flags(stop_flag)
         st = request.stage
+        turn = 1 - self.sent[-1][0] if self.sent else 0  # not the previous round's message
+        sent = []
         for gi in self.layout.local_groups:
             gs = st.groups[gi]
             g = self.model.groups[gi]
@@ -124,8 +140,24 @@ class LockstepExchange:
                 if "v" in request.fields and gs.v is not None:
                     fields["v"] = gs.v[r].tolist()
                 a = g.start + row
-                wire.encode_stage(self._out[a], self.run_id, a, step, stage, flags, st.t, fields)
-                self.pubs[a].publish(self._out[a])
+                msg = self._out[a][turn]
+                wire.encode_stage(msg, self.run_id, a, step, stage, flags, st.t, fields)
+                self.pubs[a].publish(msg)
+                sent.append((self.pubs[a], msg))
+        self.sent.append((turn, sent))
+
+    def resend(self, key, waiting, waited):
+        """Publish the last two rounds' messages again (see ``RESEND_AFTER``)."""
+        self.resends += 1
+        self.drops.logger.warning(
+            f"round (step {key[0]}, stage {key[1]}): no message from agent(s) "
+            f"{', '.join(map(str, waiting))} after {waited:.1f} s; re-sending this process's "
+            f"last two rounds ({self.resends} so far)",
+            throttle_duration_sec=5.0,
+        )
+        for _, sent in self.sent:
+            for pub, msg in sent:
+                pub.publish(msg)
 
     def spin_once(self, timeout):
         self.executor.spin_once(timeout_sec=timeout)
@@ -139,11 +171,17 @@ class LockstepExchange:
         t1 = time.perf_counter()
         self.publish_time += t1 - t0
         waiting = [a for a in self.layout.peers if key not in self.inbox[a]]
+        resend_at = RESEND_AFTER
         while waiting:
-            left = t1 + timeout - time.perf_counter()
+            waited = time.perf_counter() - t1
+            if waited >= resend_at:
+                self.resend(key, waiting, waited)
+                resend_at = waited + RESEND_AFTER
+            left = timeout - waited
             if left <= 0:
-                self._give_up_if_gone(key, timeout, waiting, time.perf_counter() - t1)
-            self.executor.spin_once(timeout_sec=min(left, 0.5) if left > 0 else 0.5)
+                self._give_up_if_gone(key, timeout, waiting, waited)
+            wait = min(resend_at - waited, 0.5)
+            self.executor.spin_once(timeout_sec=min(wait, left) if left > 0 else wait)
             waiting = [a for a in waiting if key not in self.inbox[a]]
         self.wait_time += time.perf_counter() - t1
         if self.layout.sparse:
@@ -192,7 +230,8 @@ class LockstepExchange:
             )
             out.append(e)
         for a in self.layout.peers:
-            self.inbox[a].pop(key, None)
+            if self.inbox[a].pop(key, None) is not None:
+                self.taken[a] = key
         return tuple(out)
 
     def flush(self, timeout=5.0):
@@ -234,6 +273,10 @@ class LockstepAgent(AgentBase):
 
     def stage_subscriptions(self):
         return len(list(self.exchange.node.subscriptions))
+
+    def extra_diagnostics(self):
+        """Rounds re-sent for a peer whose message did not come, and peers' resends taken."""
+        return {"stage_resends": self.exchange.resends, "stage_repeats": self.exchange.repeats}
 
     def _discover(self):
         ex = self.exchange
