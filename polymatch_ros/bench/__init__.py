@@ -5,7 +5,7 @@
     polymatch bench dop853       adaptive Lie DOP853 against scipy's DOP853 at a target error
     polymatch bench precision    work-precision: every integrator and scipy, run error vs cost
     polymatch bench longhorizon  orthogonality defect and energy drift (gamma = 0) after 10^5 steps
-    polymatch bench lossy        3 namespace hosts: realtime error vs loss and delay, lockstep rounds/s
+    polymatch bench lossy        three namespace hosts: realtime error and lockstep rate vs loss
     polymatch bench all --out DIR   every family, one report DIR/report.md
 
 Benchmarks *report* figures (markdown tables on stdout; with ``--out DIR``
