@@ -47,7 +47,7 @@ def _percents(text):
 
 
 def add_arguments(p):
-    from .options import float_list
+    from .options import at_least, float_list
 
     p.add_argument("--loss", type=_percents, default=[0, 5, 10, 20, 40], metavar="P,...",
                    help="realtime: percent of packets every host drops (default 0,5,10,20,40)")
@@ -55,7 +55,7 @@ def add_arguments(p):
                    help="realtime: injected delay in s (default 0,0.05,0.2)")
     p.add_argument("--lockstep-loss", type=_percents, default=[0, 10, 20],
                    metavar="P,...", help="lockstep: loss percents (default 0,10,20)")
-    p.add_argument("--t-end", type=float, default=60.0,
+    p.add_argument("--t-end", type=at_least(1.0, float), default=60.0,
                    help="realtime: simulated seconds before a run that has not matched ends "
                    "(default 60)")
 
