@@ -38,7 +38,9 @@ EXPECTED = {
               "Speed-up (scipy loop / batch"],
 }
 
-FAMILY_NAMES = [m.NAME for m in families()]
+# lossy runs ROS ensembles on namespace hosts: even --quick takes about a minute; its tables
+# are tested from records below
+FAMILY_NAMES = [m.NAME for m in families() if m.NAME != "lossy"]
 
 
 def test_shipped_families_are_registered():
@@ -89,3 +91,81 @@ def test_all_only_keeps_the_other_families_reports(tmp_path, capsys):
 
 def test_all_rejects_unknown_family(tmp_path, capsys):
     assert cli.main(["bench", "all", "--quick", "--only", "nope", "--out", str(tmp_path)]) == 2
+
+
+# -- lossy: the tables from run records (the runs themselves need namespace hosts) -------------
+
+def _monitor(t, diameter, heard=12):
+    from polymatch_ros.ros.wire import RunRecord
+
+    return RunRecord(role="monitor", mode="realtime", t=t, diameter=diameter, agents_heard=heard)
+
+
+def _agent(rate, late=0, steps=100):
+    from polymatch_ros.ros.wire import RunRecord
+
+    return RunRecord(role="agent", mode="lockstep", t=1.0, agents=(0,), finished=True,
+                     steps=steps, rounds_per_second=rate, late_ticks=late)
+
+
+def test_lossy_time_to_tolerance_is_where_the_diameter_stays_under():
+    from polymatch_ros.bench.lossy_tables import time_to_tolerance
+
+    series = [_monitor(1.0, 1e-3), _monitor(2.0, 1e-7), _monitor(3.0, 1e-5),
+              _monitor(4.0, 1e-7, heard=8), _monitor(5.0, 1e-7), _monitor(6.0, 1e-8)]
+    # the dip at t = 2 does not count (it rose again); a report of 8 agents is skipped
+    assert time_to_tolerance(series, 12, 1e-6) == 5.0
+    assert time_to_tolerance(series[:3], 12, 1e-6) is None
+    assert time_to_tolerance([], 12, 1e-6) is None
+
+
+def test_lossy_realtime_rows():
+    from polymatch_ros.bench.lossy_tables import REALTIME_HEADER, RealtimeCell, realtime_row
+
+    cell = RealtimeCell(10, 0.05, 0, [_monitor(1.0, 1e-3), _monitor(20.0, 5e-7)],
+                        [_agent(0, late=3), _agent(0, late=1)], dropped=42)
+    row = realtime_row(cell, 12, 1e-6, 10.0)
+    assert len(row) == len(REALTIME_HEADER)
+    assert row == ["10", "0.05", "yes", "20.00", "2.00x", "5.00e-07", "4 of 200", "42"]
+    stuck = RealtimeCell(40, 0.2, 3, [_monitor(60.0, 2e-2)], [], dropped=7)
+    assert realtime_row(stuck, 12, 1e-6, 10.0)[2:6] == ["no", "not reached", "-", "2.00e-02"]
+    failed = realtime_row(RealtimeCell(5, 0.0, 1, failure="exit 1"), 12, 1e-6, 10.0)
+    assert failed[2] == "failed: exit 1" and len(failed) == len(REALTIME_HEADER)
+
+
+def test_lossy_lockstep_rows_compare_with_no_loss():
+    from polymatch_ros.bench.lossy_tables import LOCKSTEP_HEADER, LockstepCell, lockstep_rows
+
+    cells = [LockstepCell(0, [_agent(40.0), _agent(60.0)], 1e-16, 0, 30.0),
+             LockstepCell(10, [_agent(25.0)], 2e-16, 900, 45.0),
+             LockstepCell(20, [], None, 0, 0.0, failure="exit codes [1, 0, 0]")]
+    rows = lockstep_rows(cells)
+    assert [len(r) for r in rows] == [len(LOCKSTEP_HEADER)] * 3
+    assert rows[0][:3] == ["0", "50.0", "1.00"] and rows[1][:5] == ["10", "25.0", "0.50",
+                                                                   "2.0e-16", "900"]
+    assert rows[2][1] == "failed: exit codes [1, 0, 0]"
+
+
+def test_lossy_deviation_of_the_centralised_run_itself_is_zero(tmp_path):
+    """The deviation reads saved poses as `polymatch run --save` writes them."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from polymatch_ros.bench.lossy_tables import central_deviation
+    from polymatch_ros.core.scene import load_scene, resolve_scene_path
+    from polymatch_ros.core.simulate import plan, simulate
+
+    scene = load_scene(resolve_scene_path("congruent_triangles"), {"time.t_end": 0.2})
+    method = plan(scene, None, None, distributed=True).name
+    traj = simulate(replace(scene, t_end=0.2), method, scene.integrator.dt, samples=[0.2],
+                    metrics=False)
+    model, data = traj.scene.model, {"t": 0.2}
+    for gi, gs in enumerate(traj.final.groups):
+        data[f"group{gi}_centroids"] = gs.x + scene.origin
+        data[f"group{gi}_rotations"] = model.rotations.to_matrices(gs.rot)
+    np.savez(tmp_path / "final.npz", **data)
+    assert central_deviation(scene, tmp_path / "final.npz") < 1e-12
+    data["group0_centroids"] = data["group0_centroids"] + np.array([1e-3, 0.0])
+    np.savez(tmp_path / "moved.npz", **data)
+    assert abs(central_deviation(scene, tmp_path / "moved.npz") - 1e-3) < 1e-9

@@ -15,18 +15,23 @@ import subprocess
 import sys
 
 import pytest
-from netns_hosts import Capture, provided_hosts, root_interfaces
-from proc_group import Processes
+from netns_hosts import provided_hosts
+from proc_group import REPO
 from ros_harness import needs_ros, scene_path
 from test_ros_lockstep import central_vertices, received_vertices
 
+from polymatch_ros.bench import netns_run
+from polymatch_ros.bench.netns_run import (  # noqa: F401 (test_ros_lossy_hosts uses them)
+    host_argv,
+    lockstep_argvs,
+    lockstep_split,
+)
 from polymatch_ros.core.errors import ParameterError
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import plan
 from polymatch_ros.ros.children import describe_agents, parse_only
 
 SCENE = "mixed_triangles_tetrahedra"        # 12 agents (6 triangles, 6 tetrahedra)
-T_END = 1.0
 DEVIATION = re.compile(r"max vertex deviation (\S+)")
 
 
@@ -124,50 +129,17 @@ def net():
     yield from three_hosts()
 
 
-def host_argv(scene, only, lead, *options):
-    """`polymatch run` of the agents ``only`` on one host; the lead host runs the monitor."""
-    argv = [sys.executable, "-m", "polymatch_ros.cli", "run", str(scene), "--only", only,
-            "--discovery", "subnet", "--timeout", "100"] + [str(o) for o in options]
-    return argv + ([] if lead else ["--no-monitor"])
-
-
-def host_environment(domain):
-    """The environment of every host's runner: the shared domain, data over UDPv4 only."""
-    env = {k: v for k, v in os.environ.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}
-    env.update(ROS_DOMAIN_ID=str(domain), FASTDDS_BUILTIN_TRANSPORTS="UDPv4",
-               PYTHONUNBUFFERED="1")
-    return env
-
-
 def run_on_hosts(net, tmp_path, argvs, during=None, seconds=120):
     """Run ``argvs[i]`` in host i while tcpdump watches the root namespace.
 
     ``during(procs, started, env)`` runs while they do (loss, a link down, an observer).
     Returns (the processes, their outputs, the root capture (ended), what ``during`` returned).
     """
-    from domain_coordinator import domain_id
-    procs, found = Processes(str(tmp_path)), None
-    with domain_id() as domain, Capture(str(tmp_path), root_interfaces()) as root:
-        env = host_environment(domain)
-        try:
-            started = [procs.start(argv, env, seconds, f"h{i}", prefix=net.prefix(i))
-                       for i, argv in enumerate(argvs)]
-            if during is not None:
-                found = during(procs, started, env)
-            for proc in started:
-                proc.wait(timeout=seconds + 10)
-            texts = [procs.output(proc) for proc in started]
-        finally:
-            procs.close()
+    started, texts, root, found = netns_run.run_on_hosts(net, tmp_path, argvs, during, seconds,
+                                                         cwd=REPO)
     for proc, text in zip(started, texts):
         assert proc.returncode in (0, 3), f"{proc.name}:\n{text[-3000:]}"
     return started, texts, root, found
-
-
-def lockstep_split(hosts, n):
-    """--only ranges of ``n`` agents split evenly over ``hosts`` hosts."""
-    size = n // hosts
-    return [f"{i * size}-{(i + 1) * size - 1}" for i in range(hosts)]
 
 
 def check_lockstep_on_hosts(scene_file, texts, out, n):
@@ -186,14 +158,6 @@ def check_lockstep_on_hosts(scene_file, texts, out, n):
     want = central_vertices(scene, plan(scene, None, None, distributed=True).name, t)
     dev = max(float(abs(a - b).max()) for a, b in zip(got, want))
     assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
-
-
-def lockstep_argvs(scene_file, n, out, t_end=T_END):
-    """Lockstep on three hosts, n/3 agents each, one process per host; the last saves."""
-    split = lockstep_split(3, n)
-    return [host_argv(scene_file, only, i == 2, "--t-end", t_end, "-k", n // 3,
-                      *(["--save", out] if i == 2 else []))
-            for i, only in enumerate(split)]
 
 
 @needs_ros

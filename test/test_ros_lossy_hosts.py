@@ -17,8 +17,7 @@ import time
 
 import numpy as np
 import pytest
-import yaml
-from ros_harness import needs_ros, scene_path
+from ros_harness import needs_ros
 from test_ros_hosts import (
     check_lockstep_on_hosts,
     host_argv,
@@ -28,6 +27,7 @@ from test_ros_hosts import (
 )
 from test_ros_lockstep import received_vertices
 
+from polymatch_ros.bench.netns_run import scene_with
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.ros import discovery
 from polymatch_ros.ros.wire import run_records
@@ -51,17 +51,6 @@ PEER_TIMEOUT = 1.0            # s: agents and the monitor drop a peer silent thi
 @pytest.fixture
 def net():
     yield from three_hosts(("tcpdump", "nft"))
-
-
-def scene_with(tmp_path, name, count):
-    """A copy of a shipped scene with ``count`` agents in every group (seeded: reproducible)."""
-    with open(scene_path(name)) as fh:
-        data = yaml.safe_load(fh)
-    for group in data["groups"]:
-        group["count"] = count
-    path = tmp_path / f"{name}_{count}.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return str(path)
 
 
 def lossy(net, index):

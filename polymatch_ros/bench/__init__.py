@@ -5,6 +5,7 @@
     polymatch bench dop853       adaptive Lie DOP853 against scipy's DOP853 at a target error
     polymatch bench precision    work-precision: every integrator and scipy, run error vs cost
     polymatch bench longhorizon  orthogonality defect and energy drift (gamma = 0) after 10^5 steps
+    polymatch bench lossy        three namespace hosts: realtime error and lockstep rate vs loss
     polymatch bench all --out DIR   every family, one report DIR/report.md
 
 Benchmarks *report* figures (markdown tables on stdout; with ``--out DIR``
@@ -38,7 +39,8 @@ from .timing import machine_lines
 
 #: modules of this package that are helpers, not families
 HELPERS = frozenset({"report", "timing", "scenes", "options", "flat", "solve", "extremes_lib",
-                      "extremes_cases", "extremes_stiff", "extremes_geometry"})
+                      "extremes_cases", "extremes_stiff", "extremes_geometry", "netns",
+                      "netns_run", "lossy_tables"})
 
 
 def families():
