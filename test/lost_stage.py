@@ -29,6 +29,7 @@ from polymatch_ros.ros.agent_node import local_state
 from polymatch_ros.ros.exchange import DropCounter, Layout
 
 DT, LOST = 0.05, (0, 1, 2)  # the swallowed message: agent 0, step 1, stage 2
+STALL = 8.0  # s: stall_timeout; resends come after 1 s, even on a loaded machine
 
 
 def swallow_first(publisher, agent, step, stage):
@@ -56,7 +57,7 @@ class Side:
         self.state = local_state(scene, self.layout)
         self.exchange = lockstep.LockstepExchange(
             self.node, self.layout, run_id, wire.ROTATION_TOL,
-            DropCounter(self.node.get_logger()), scene.t_end, stall_timeout=3.0)
+            DropCounter(self.node.get_logger()), scene.t_end, stall_timeout=STALL)
         self.scene, self.plan, self.error = scene, the_plan, None
 
     def run(self, steps):
