@@ -34,6 +34,9 @@ EXPECTED = {
                     "slowest match"],
     "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
               "injected delay"],
+    "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
+               "true: median / max", "true / floor", "true below floor from (s)",
+               "(A-2) alone (no noise, no lag"],
     "sweep": ["| solver", "batch (rkmk4)", "scipy DOP853 loop", "max vertex error",
               "Speed-up (scipy loop / batch"],
 }

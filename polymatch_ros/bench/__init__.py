@@ -6,6 +6,7 @@
     polymatch bench precision    work-precision: every integrator and scipy, run error vs cost
     polymatch bench longhorizon  orthogonality defect and energy drift (gamma = 0) after 10^5 steps
     polymatch bench lossy        three namespace hosts: realtime error and lockstep rate vs loss
+    polymatch bench bridge       simulated robots in the loop: matching error vs pose noise and lag
     polymatch bench all --out DIR   every family, one report DIR/report.md
 
 Benchmarks *report* figures (markdown tables on stdout; with ``--out DIR``

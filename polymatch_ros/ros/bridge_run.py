@@ -3,7 +3,9 @@
 Robot i runs in namespace ``/<ensemble>/robot_<i>`` (topics ``measured_pose``, ``cmd_vel``);
 agent i is remapped onto them.  The matching diameter the monitor reports comes from measured
 poses, so it cannot fall below what the noise makes: the run's tolerance is the larger of the
-scene's and the noise floor (``core.command.noise_floor``).
+scene's and the noise floor (``core.command.noise_floor``).  With ``--robot-log DIR`` each
+robot also writes its true and measured pose at every step to ``DIR/robot_<i>.txt``
+(``robot_sim.POSE_LOG_COLUMNS``).
 """
 
 import os
@@ -32,6 +34,20 @@ def add_arguments(p):
                    help="commanded speed limit (m/s)")
     g.add_argument("--max-angular-speed", type=positive_float, default=1e6,
                    help="commanded angular speed limit (rad/s)")
+    g.add_argument("--robot-log", metavar="DIR",
+                   help="each robot writes its true and measured pose at every step to "
+                   "DIR/robot_<i>.txt")
+
+
+def scene_noise_floor(scene, position_noise, angle_noise):
+    """``core.command.noise_floor`` for the scene's largest vertex radius."""
+    radius = max(float(np.max(np.linalg.norm(g.reference, axis=1))) for g in scene.model.groups)
+    return noise_floor(position_noise, angle_noise, radius, scene.model.dim)
+
+
+def robot_log(directory, agent):
+    """The pose log file of robot ``agent`` in ``directory``."""
+    return os.path.join(os.path.abspath(directory), f"robot_{agent}.txt")
 
 
 def prepare(args, scene):
@@ -43,9 +59,10 @@ def prepare(args, scene):
             raise ParameterError(f"--{name.replace('_', '-')} must be >= 0, got {value:g}")
     if args.only is not None:
         raise ParameterError("--mode bridge runs every robot on this host (no --only)")
+    if args.robot_log is not None and not os.path.isdir(args.robot_log):
+        raise ParameterError(f"--robot-log: {args.robot_log} is not a directory")
     args.agents_per_process = 1
-    radius = max(float(np.max(np.linalg.norm(g.reference, axis=1))) for g in scene.model.groups)
-    floor = noise_floor(args.position_noise, args.angle_noise, radius, scene.model.dim)
+    floor = scene_noise_floor(scene, args.position_noise, args.angle_noise)
     return replace(scene, tolerance=max(scene.tolerance, floor))
 
 
@@ -80,5 +97,7 @@ def robots(args, scene_path, env):
             "-p", f"angle_noise:={args.angle_noise!r}",
             "-p", "rate:=30.0",
         ]
+        if args.robot_log is not None:
+            argv += ["-p", f"pose_log:={robot_log(args.robot_log, a)}"]
         out.append(Child(f"robot_{a}", argv, env))
     return out

@@ -9,6 +9,10 @@ pose at ``rate`` Hz and publishes it with Gaussian noise on ``measured_pose`` (P
 nav_msgs/Odometry): the topics a real robot offers and receives.  It starts at agent
 ``agent``'s initial pose of the scene.  A robot without a command for ``cmd_timeout`` s
 stops by itself, as robot drivers do.
+
+With ``pose_log:=FILE`` it also writes one line per step to FILE (``POSE_LOG_COLUMNS``): the
+wall time (s since the epoch), its true pose and the noisy pose it published; what no real
+robot can offer, and what `polymatch bench bridge` measures the matching error with.
 """
 
 import math
@@ -40,7 +44,13 @@ ROBOT = (
     Param("command_frame", "world", "cmd_vel components in the world | body frame",
           choices=("world", "body")),
     Param("frame_id", "world", "frame_id of the measured pose"),
+    Param("pose_log", "", "file for one line per step: time, true and measured pose ('' = none)"),
 )
+
+#: the columns of a ``pose_log`` line (world frame; quaternions x y z w)
+POSE_LOG_COLUMNS = ("wall_time", "x", "y", "z", "qx", "qy", "qz", "qw",
+                    "measured_x", "measured_y", "measured_z",
+                    "measured_qx", "measured_qy", "measured_qz", "measured_qw")
 
 
 class SimulatedRobot:
@@ -116,6 +126,14 @@ class RobotNode:
         self.pose_msg = pose_class(params["pose_type"])
         self.pose_pub = node.create_publisher(self.pose_msg, MEASURED_POSE, 10)
         node.create_subscription(twist_class(params["cmd_type"]), CMD_VEL, self._command, cmd_qos)
+        self.pose_log = None
+        if params["pose_log"]:
+            try:
+                self.pose_log = open(params["pose_log"], "w", encoding="utf-8", buffering=1)
+            except OSError as exc:
+                raise ParameterError(f"parameter 'pose_log': {exc.strerror}: "
+                                     f"{params['pose_log']}") from None
+            self.pose_log.write("# " + " ".join(POSE_LOG_COLUMNS) + "\n")
 
     def _command(self, msg):
         body = msg.twist if hasattr(msg, "header") else msg
@@ -138,6 +156,10 @@ class RobotNode:
         o = pose.orientation
         o.x, o.y, o.z, o.w = map(float, q)
         self.pose_pub.publish(msg)
+        if self.pose_log is not None:
+            true = (*self.robot.p, *self.robot.rot.as_quat())
+            values = (time.time(), *true, *p, *q)
+            self.pose_log.write(" ".join(f"{v:.17g}" for v in values) + "\n")
 
     def run(self):
         import rclpy
@@ -159,6 +181,8 @@ class RobotNode:
         return 0
 
     def destroy(self):
+        if self.pose_log is not None:
+            self.pose_log.close()
         self.node.destroy_node()
 
 
