@@ -17,30 +17,29 @@ import sys
 import time
 
 
-def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
+def _parse(argv):
+    """(INDEX, K, ROUNDS, PAYLOAD, executor kind) from the command line."""
     executor_kind = "single"
     if "--executor" in argv:
         i = argv.index("--executor")
         executor_kind = argv[i + 1]
         argv = argv[:i] + argv[i + 2:]
-    me, k, rounds = int(argv[0]), int(argv[1]), int(argv[2])
     payload = int(argv[3]) if len(argv) > 3 else 10
-    t_start = time.monotonic()
-    import rclpy
-    from rclpy.duration import Duration
+    return int(argv[0]), int(argv[1]), int(argv[2]), payload, executor_kind
+
+
+def _endpoints(node, me, k, inbox):
+    """This process's writer and a reader of every peer's topic; a reader files each round's
+    message under ``inbox[round]``."""
     from std_msgs.msg import Float64MultiArray
 
     from ..ros import wire
+    from ..ros.exchange import quiet_events
 
-    rclpy.init()
-    from ..ros.exchange import lean_node, quiet_events
-    node, executor = lean_node(f"bare_{me}")
     pub_events, sub_events = quiet_events()
     qos = wire.qos_profiles()
     pub = node.create_publisher(Float64MultiArray, f"/polymatch_bare/p{me}", qos["stage"],
                                 event_callbacks=pub_events)
-    inbox = {}
 
     def callback(peer):
         def receive(msg):
@@ -58,18 +57,34 @@ def main(argv=None):
         for p in range(k)
         if p != me
     ]
-    if executor_kind == "events":
-        from rclpy.experimental.events_executor import EventsExecutor
+    return pub, subs
 
-        executor.remove_node(node)
-        executor = EventsExecutor()
-        executor.add_node(node)
+
+def _events_executor(node, executor):
+    """Move ``node`` from ``executor`` to a new rclpy EventsExecutor."""
+    from rclpy.experimental.events_executor import EventsExecutor
+
+    executor.remove_node(node)
+    executor = EventsExecutor()
+    executor.add_node(node)
+    return executor
+
+
+def _wait_matched(executor, pub, subs, k):
+    """Spin until every peer's writer and K - 1 readers are matched; the seconds it took."""
     t_node = time.monotonic()
     while not (
         all(s.get_publisher_count() >= 1 for s in subs) and pub.get_subscription_count() >= k - 1
     ):
         executor.spin_once(timeout_sec=0.05)
-    matched = time.monotonic() - t_node
+    return time.monotonic() - t_node
+
+
+def _exchange(executor, pub, inbox, k, rounds, payload):
+    """``rounds`` lockstep rounds: publish, then spin until every peer's message of the round
+    is in; the wall seconds."""
+    from std_msgs.msg import Float64MultiArray
+
     msg = Float64MultiArray()
     filler = [0.5] * (payload - 1)
     t0 = time.perf_counter()
@@ -79,7 +94,24 @@ def main(argv=None):
         while len(inbox.get(r, ())) < k - 1:
             executor.spin_once(timeout_sec=1.0)
         inbox.pop(r, None)
-    wall = time.perf_counter() - t0
+    return time.perf_counter() - t0
+
+
+def main(argv=None):
+    me, k, rounds, payload, executor_kind = _parse(sys.argv[1:] if argv is None else argv)
+    t_start = time.monotonic()
+    import rclpy
+    from rclpy.duration import Duration
+
+    rclpy.init()
+    from ..ros.exchange import lean_node
+    node, executor = lean_node(f"bare_{me}")
+    inbox = {}
+    pub, subs = _endpoints(node, me, k, inbox)
+    if executor_kind == "events":
+        executor = _events_executor(node, executor)
+    matched = _wait_matched(executor, pub, subs, k)
+    wall = _exchange(executor, pub, inbox, k, rounds, payload)
     pub.wait_for_all_acked(Duration(seconds=5))
     print(
         f"bare {me}/{k}: {rounds / wall:.1f} rounds/s over {rounds} rounds; matched after "

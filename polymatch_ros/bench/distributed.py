@@ -15,11 +15,11 @@ every peer was matched.  Every ROS process runs with loopback discovery, a domai
 id reserved for the benchmark, and a timeout.
 """
 
-import os
 import re
 import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass, field
 
 NAME = "distributed"
 HELP = "lockstep rounds/s of the agent processes vs the bare rclpy exchange, N = 4 ... 32"
@@ -108,7 +108,12 @@ def _parse_agents(lines):
     """(rounds/s, seconds until peers matched) of every agent's run record among ``lines``."""
     from ..ros.wire import run_records
 
-    records = [r for r in run_records(lines) if r.role == "agent" and r.finished]
+    return _rates_and_matches(r for r in run_records(lines) if r.role == "agent" and r.finished)
+
+
+def _rates_and_matches(records):
+    """(rounds/s, seconds until peers matched) of finished agents' run ``records``."""
+    records = list(records)
     return (
         [r.rounds_per_second for r in records],
         [r.matched_after for r in records if r.matched_after is not None],
@@ -117,39 +122,13 @@ def _parse_agents(lines):
 
 def _deployed(path, env, timeout, per_process, extra=(), with_matched=False):
     """(agent processes' rounds/s, failure or None[, seconds until peers matched])."""
+    from .ros_runs import agent_records, run_cli
+
     records = path + ".records.jsonl"
-    out = subprocess.run(
-        [
-            "timeout",
-            "-k",
-            "5",
-            str(timeout),
-            sys.executable,
-            "-m",
-            "polymatch_ros.cli",
-            "run",
-            path,
-            "--no-compare",
-            "--hold",
-            "1e9",
-            "--timeout",
-            str(timeout - 10),
-            "-q",
-            "--records",
-            records,
-            "-k",
-            str(per_process),
-            *extra,
-        ],
-        env=env,
-        capture_output=True,
-        text=True,
-    )
-    lines = []
-    if os.path.exists(records):
-        with open(records, encoding="utf-8") as fh:
-            lines = fh.read().splitlines()
-    rates, matched = _parse_agents(lines)
+    out = run_cli(env, ["run", path, "--no-compare", "--hold", "1e9", "--timeout",
+                        str(timeout - 10), "-q", "--records", records, "-k", str(per_process),
+                        *extra], timeout)
+    rates, matched = _rates_and_matches(r for r in agent_records(records) if r.finished)
     errors = [line for line in out.stderr.splitlines() if line.startswith("polymatch: error:")]
     # 3: ran to t_end without matching yet (t_end is short here)
     failure = None if out.returncode in (0, 3) else (
@@ -171,8 +150,126 @@ def _stats(values):
     return (max(values), float(np.median(values))) if values else (float("nan"), float("nan"))
 
 
-def run(args, log):
+def _mean_if_all(rates, expected):
+    """The mean rate of a run in which all ``expected`` processes reported, else nan."""
     import numpy as np
+
+    return np.mean(rates) if len(rates) == expected else float("nan")
+
+
+def _finished(values):
+    """The runs that finished (a failed run is nan)."""
+    return [x for x in values if x == x]
+
+
+@dataclass
+class _SizeRuns:
+    """The repeats at ``n`` processes: their scene file, the mean rate of every run and every
+    peer-match time."""
+
+    n: int
+    rounds: int
+    path: str
+    bare: list = field(default_factory=list)
+    agents: list = field(default_factory=list)
+    deployed: list = field(default_factory=list)
+    bare_match: list = field(default_factory=list)
+    agents_match: list = field(default_factory=list)
+
+    @property
+    def timeout(self):
+        return 60 + int(self.n * self.rounds / 10)
+
+
+def _repeat(runs, r, env, deployed, failures):
+    """Repeat ``r``: bare, agents and (if ``deployed``) deployed, one after the other."""
+    n, timeout = runs.n, runs.timeout
+    rates, matched = _bare(n, runs.rounds, env, timeout)
+    runs.bare.append(_mean_if_all(rates, n))
+    runs.bare_match += matched
+    rates, matched = _agents(n, runs.path, env, timeout, 1000 + r)
+    runs.agents.append(_mean_if_all(rates, n))
+    runs.agents_match += matched
+    if deployed:
+        per_process = _deployed_per_process(n)
+        rates, failure = _deployed(runs.path, env, timeout, per_process)
+        runs.deployed.append(_mean_if_all(rates, -(-n // per_process)) if not failure
+                             else float("nan"))
+        if failure:
+            failures.append(f"N = {n}, repeat {r + 1}, deployed: {failure}")
+
+
+def _size_row(n, runs, repeats, deployed):
+    bare, agents, dep = _finished(runs.bare), _finished(runs.agents), _finished(runs.deployed)
+    (b_best, b_med), (a_best, a_med), (d_best, d_med) = _stats(bare), _stats(agents), _stats(dep)
+    return [
+        n,
+        f"{b_best:.1f} / {b_med:.1f}",
+        f"{a_best:.1f} / {a_med:.1f}",
+        f"{a_med / b_med:.0%}" if bare and agents else "-",
+        f"{d_best:.1f} / {d_med:.1f}" if deployed else "-",
+        f"{max(runs.bare_match):.2f}" if runs.bare_match else "-",
+        f"{max(runs.agents_match):.2f}" if runs.agents_match else "-",
+        f"{len(bare)}+{len(agents)}+{len(dep)} of {repeats}",
+    ]
+
+
+def _measure_size(n, rounds, repeats, deployed, workdir, env, log, failures):
+    """The table row of ``n`` processes, from ``repeats`` alternating repeats."""
+    from .ros_runs import write_scene
+
+    path = write_scene(workdir, f"bench_{n}.yaml", _scene_yaml(n, max(1, rounds // 4), 0.01))
+    runs = _SizeRuns(n, rounds, path)
+    for r in range(repeats):
+        log(f"N = {n}, repeat {r + 1}/{repeats}: bare, agents"
+            + (", deployed" if deployed else ""))
+        _repeat(runs, r, env, deployed, failures)
+    return _size_row(n, runs, repeats, deployed)
+
+
+def _table(report, rows, rounds, repeats):
+    report.table(
+        [
+            "processes",
+            "bare rounds/s best / median",
+            "agents rounds/s best / median",
+            "agents / bare (medians)",
+            "deployed (runner + monitor)",
+            "bare: slowest match (s)",
+            "agents: slowest match (s)",
+            "runs that finished",
+        ],
+        rows,
+        caption=f"{rounds} lockstep rounds, all-to-all, one agent per process, "
+        f"{repeats} alternating repeats; rates are means over the processes of a run; 'match' "
+        "is the time from node creation until every peer's writer and reader were matched",
+    )
+
+
+def _notes(report, sizes, deployed):
+    report.text(
+        "- agents: congruent triangles, first-order model, rkmk4 (4 rounds per step); a round = "
+        "publish one stage message, take every peer's, run the stage's numerics; poses are "
+        "published every step.",
+        "- bare: the same QoS (RELIABLE, VOLATILE, readers KEEP_ALL), node and executor, "
+        "no numerics.",
+        "- deployed: `polymatch run` with the monitor, which hears every pose and computes the "
+        "metrics each step on the same two cores.",
+    )
+    packed = [n for n in sizes if _deployed_per_process(n) > 1]
+    if packed and deployed:
+        report.text(
+            "- deployed at "
+            + ", ".join(f"N = {n}: {_deployed_per_process(n)} agents per process "
+                        f"({-(-n // _deployed_per_process(n))} processes)" for n in packed)
+            + ": with the runner and the monitor, one process per agent would exceed the "
+            "32 DDS participants that LOCALHOST discovery reaches (rmw_fastrtps probes 32 "
+            "participant ports on 127.0.0.1); `polymatch run` picks this itself. Its rate is "
+            "per process."
+        )
+
+
+def run(args, log):
     from domain_coordinator import domain_id
 
     from ..ros.ros_env import private_ros_environment
@@ -188,91 +285,9 @@ def run(args, log):
     with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
         env = private_ros_environment(dom)
         for n in sizes:
-            timeout = 60 + int(n * rounds / 10)
-            path = os.path.join(workdir, f"bench_{n}.yaml")
-            with open(path, "w") as fh:
-                fh.write(_scene_yaml(n, max(1, rounds // 4), 0.01))
-            bare, agents, deployed, b_match, a_match = [], [], [], [], []
-            for r in range(repeats):
-                log(
-                    f"N = {n}, repeat {r + 1}/{repeats}: bare, agents"
-                    + (", deployed" if args.deployed else "")
-                )
-                rates, matched = _bare(n, rounds, env, timeout)
-                bare.append(np.mean(rates) if len(rates) == n else float("nan"))
-                b_match += matched
-                rates, matched = _agents(n, path, env, timeout, 1000 + r)
-                agents.append(np.mean(rates) if len(rates) == n else float("nan"))
-                a_match += matched
-                if args.deployed:
-                    per_process = _deployed_per_process(n)
-                    rates, failure = _deployed(path, env, timeout, per_process)
-                    procs = -(-n // per_process)
-                    deployed.append(
-                        np.mean(rates) if len(rates) == procs and not failure else float("nan")
-                    )
-                    if failure:
-                        failures.append(f"N = {n}, repeat {r + 1}, deployed: {failure}")
-            ok = lambda xs: [x for x in xs if x == x]  # noqa: E731  (drop failed runs)
-            (b_best, b_med), (a_best, a_med) = _stats(ok(bare)), _stats(ok(agents))
-            d_best, d_med = _stats(ok(deployed))
-            rows.append(
-                [
-                    n,
-                    f"{b_best:.1f} / {b_med:.1f}",
-                    f"{a_best:.1f} / {a_med:.1f}",
-                    f"{a_med / b_med:.0%}" if ok(bare) and ok(agents) else "-",
-                    f"{d_best:.1f} / {d_med:.1f}" if args.deployed else "-",
-                    f"{max(b_match):.2f}" if b_match else "-",
-                    f"{max(a_match):.2f}" if a_match else "-",
-                    f"{len(ok(bare))}+{len(ok(agents))}+{len(ok(deployed))} of {repeats}",
-                ]
-            )
-    report.table(
-        [
-            "processes",
-            "bare rounds/s best / median",
-            "agents rounds/s best / median",
-            "agents / bare (medians)",
-            "deployed (runner + monitor)",
-            "bare: slowest match (s)",
-            "agents: slowest match (s)",
-            "runs that finished",
-        ],
-        rows,
-        caption=f"{rounds} lockstep rounds, all-to-all, one agent per process, "
-        f"{repeats} alternating repeats; "
-        "rates are means over the processes of a run; 'match' is the time from "
-        "node creation "
-        "until every peer's writer and reader were matched",
-    )
-    report.text(
-        "- agents: congruent triangles, first-order model, rkmk4 (4 rounds per step); a round = "
-        "publish one "
-        "stage message, take every peer's, run the stage's numerics; poses are published "
-        "every step.",
-        "- bare: the same QoS (RELIABLE, VOLATILE, readers KEEP_ALL), node and executor, "
-        "no numerics.",
-        "- deployed: `polymatch run` with the monitor, which hears every pose and "
-        "computes the metrics "
-        "each step on the same two cores.",
-    )
-    packed = [n for n in sizes if _deployed_per_process(n) > 1]
-    if packed and args.deployed:
-        report.text(
-            "- deployed at "
-            + ", ".join(
-                f"N = {n}: {_deployed_per_process(n)} agents per process "
-                f"({-(-n // _deployed_per_process(n))} "
-                "processes)"
-                for n in packed
-            )
-            + ": with the runner and the monitor, one process per agent would exceed the "
-            "32 DDS participants "
-            "that LOCALHOST discovery reaches (rmw_fastrtps probes 32 participant ports "
-            "on 127.0.0.1); "
-            "`polymatch run` picks this itself. Its rate is per process."
-        )
-    if failures:
-        report.text("Failed runs:", *[f"- {f}" for f in failures])
+            rows.append(_measure_size(n, rounds, repeats, args.deployed, workdir, env, log,
+                                      failures))
+    _table(report, rows, rounds, repeats)
+    _notes(report, sizes, args.deployed)
+    report.failures(failures)
     return report

@@ -62,13 +62,12 @@ def _median(values):
 def _measure(n, per_process, rounds, repeats, workdir, env, log, failures):
     """{graph: (median rounds/s, slowest match s)} for one N and packing."""
     from .distributed import _deployed
+    from .ros_runs import write_scene
 
     discovery = _discovery(n, per_process)
-    paths = {}
-    for graph in GRAPHS:
-        paths[graph] = os.path.join(workdir, f"{graph}_{n}.yaml")
-        with open(paths[graph], "w") as fh:
-            fh.write(_scene_yaml(n, _graph_yaml(graph, n), max(1, rounds // 4), 0.01))
+    paths = {graph: write_scene(workdir, f"{graph}_{n}.yaml",
+                                _scene_yaml(n, _graph_yaml(graph, n), max(1, rounds // 4), 0.01))
+             for graph in GRAPHS}
     rates = {graph: [] for graph in GRAPHS}
     matched = {graph: [] for graph in GRAPHS}
     timeout = 120 + int(n * rounds / 10)
@@ -114,6 +113,5 @@ def run(args, log):
                   "vs complete", "slowest match (s)"], rows,
                  caption=f"{rounds} lockstep rounds through `polymatch run` (runner + monitor), "
                  f"{repeats} alternating repeats; rates are means over the agent processes")
-    if failures:
-        report.text("Failed runs:", *[f"- {f}" for f in failures])
+    report.failures(failures)
     return report

@@ -19,6 +19,8 @@ whose stability region misses the imaginary axis (Euler, Heun, ETD1).  E is comp
 from the matrices as they are, without projecting them onto SO(d).
 """
 
+from dataclasses import dataclass
+
 NAME = "longhorizon"
 HELP = ("orthogonality defect and energy drift (gamma = 0) after 10^5 steps, "
         "every integrator and scipy")
@@ -113,98 +115,78 @@ def _verdict(drift_end, p):
 
 
 def _wall_cells(run):
-    import statistics
+    """Best and median wall seconds of a solver's runs ('-' if none ran)."""
     if not run.walls:
         return ["-", "-"]
-    return [f"{min(run.walls):.2f}", f"{statistics.median(run.walls):.2f}"]
+    return [f"{run.best:.2f}", f"{run.median:.2f}"]
 
 
-def run(args, log):
+RUN_HEADER = ["method", "h or tol", "wall s (best)", "median s", "rhs evals"]
+
+
+def _rows(runs, scored, width):
+    """A row per solver: ``scored(run)`` for one that ran, its status and ``width`` dashes for
+    one that was refused or failed."""
+    return [scored(r) if r.ok else [r.name, r.param, r.status] + ["-"] * width for r in runs]
+
+
+def _second_order(runs, flat, marks):
+    """Rows of table A: energy drift (Prop. 2.2 i), its growth and the orthogonality defect;
+    keeps each run's (t, drift, defect) in ``run.series`` for the figure."""
     import numpy as np
 
-    from .report import Report
-    from .solve import measure, solvers_for
-
-    report = Report(NAME, "Long horizons (`polymatch bench longhorizon`)")
-    steps = 1000 if args.quick else args.steps
-    tols = [1e-6] if args.quick else sorted(args.tolerances, reverse=True)
-    # quick: angles, the cheapest steps
-    dt, n, dim = args.dt, args.n, (2 if args.quick else args.dim)
-    repeats = args.repeats or 1
-    t_end = steps * dt
-    marks_steps = _checkpoints(steps)
-    marks = [k * dt for k in marks_steps]
-    times = _sample_steps(steps) * dt
-    report.text(f"N = {n} regular {dim}-simplices in R^{dim}, uniform rotations, {steps:,} steps "
-                f"of dt = {dt:g} (t = {t_end:g}); scipy and ours adaptive over the same span at "
-                f"rtol = atol = {', '.join(f'{t:.0e}' for t in tols)}.  Quantities are evaluated "
-                f"at {len(times)} sample times (log- and linearly spaced); \"up to 10^k\" = "
-                f"running max over t <= 10^k dt.  Wall: seconds for the whole run, best / median "
-                f"of {repeats} (runs interleaved across solvers).")
-    mark_labels = [f"10^{int(round(np.log10(k)))}" if 10 ** int(round(np.log10(k))) == k
-                   else f"{k:,}" for k in marks_steps]
-    figures = {}
-
-    # -- A: second order, gamma = 0 ----------------------------------------------------------
-    scene = _scene(2, n, dim, t_end, args.seed)
-    runs = solvers_for(2, [dt], tols)
-    flat = measure(runs, scene, times, repeats, lambda text: log(f"longhorizon: {text}"))
-    rows = []
-    for r in runs:
-        if r.status != "ok":
-            rows.append([r.name, r.param, r.status] + ["-"] * (len(marks) + 5))
-            continue
-        t, mats, w, evals = r.out.times, r.out.mats, r.out.w, r.out.evals
-        e = flat.energy(mats, w)
+    def scored(r):
+        t = r.out.times
+        e = flat.energy(r.out.mats, r.out.w)
         drift = np.abs(e - e[0]) / e[0]
         dm = _running_max_at(t, drift, marks)
         p = _growth(t, drift, marks)
-        defect = _defect_series(mats)
+        defect = _defect_series(r.out.mats)
         r.series = (t, drift, defect)
-        rows.append([r.name, r.param] + _wall_cells(r) + [evals] + [f"{v:.1e}" for v in dm]
-                    + ["-" if p is None else f"{p:.2f}", _verdict(dm[-1], p),
-                       f"{defect.max():.1e}"])
-    u0 = flat.unpack(flat.initial(scene))
-    report.text("### A. Second-order model (A-1), gamma = 0: energy (Prop. 2.2 i) "
-                "and orthogonality",
-                "", f"m = kappa = 1, gamma = 0, E(0) = {flat.energy(u0['rot'], u0['w']):.4f}.")
-    report.table(["method", "h or tol", "wall s (best)", "median s", "rhs evals"]
-                 + [f"rel. energy drift up to {lab}" for lab in mark_labels]
-                 + ["growth p (decade windows)", "verdict", "orth. defect (max)"], rows,
-                 caption="gamma = 0: relative energy drift |E(t) - E(0)| / E(0), running max")
-    figures["A"] = [r for r in runs if r.status == "ok"]
+        return ([r.name, r.param] + _wall_cells(r) + [r.out.evals] + [f"{v:.1e}" for v in dm]
+                + ["-" if p is None else f"{p:.2f}", _verdict(dm[-1], p), f"{defect.max():.1e}"])
 
-    # -- B: first order ------------------------------------------------------------------------
-    scene1 = _scene(1, n, dim, t_end, args.seed)
-    runs1 = solvers_for(1, [dt], tols)
-    measure(runs1, scene1, times, repeats, lambda text: log(f"longhorizon: {text}"))
-    rows = []
-    for r in runs1:
-        if r.status != "ok":
-            rows.append([r.name, r.param, r.status] + ["-"] * (len(marks) + 2))
-            continue
-        t, mats, evals = r.out.times, r.out.mats, r.out.evals
-        defect = _defect_series(mats)
+    return _rows(runs, scored, len(marks) + 5)
+
+
+def _first_order(runs, marks):
+    """Rows of table B: the orthogonality defect (Lemma 2.1); ``run.series`` = (t, None,
+    defect)."""
+    def scored(r):
+        t = r.out.times
+        defect = _defect_series(r.out.mats)
         r.series = (t, None, defect)
-        rows.append([r.name, r.param] + _wall_cells(r) + [evals]
-                    + [f"{v:.1e}" for v in _running_max_at(t, defect, marks)])
-    report.text("### B. First-order model (A-2): orthogonality defect")
-    report.table(["method", "h or tol", "wall s (best)", "median s", "rhs evals"]
-                 + [f"orth. defect up to {lab}" for lab in mark_labels], rows,
-                 caption="first order: max_i |O_i^T O_i - I|_F, running max")
-    figures["B"] = [r for r in runs1 if r.status == "ok"]
-    report.text("- Lie methods (lie_*, rkmk4, etd*, lie_verlet, adaptive) stay on SO(d) by "
-                "construction: their defect is accumulated round-off.  Projection baselines "
-                "re-project every step.  scipy's O drifts off SO(d) at a rate set by its "
-                "tolerance, and E is measured on those matrices.",
-                "- growth p: log10 of (max drift over the last decade of t) / (max over the "
-                "decade before); \"bounded\": p < 0.2 (an oscillation that does not grow); "
-                "\"secular\": p >= 0.7 (about linear growth in t, p = 1).")
+        return ([r.name, r.param] + _wall_cells(r) + [r.out.evals]
+                + [f"{v:.1e}" for v in _running_max_at(t, defect, marks)])
 
+    return _rows(runs, scored, len(marks) + 2)
+
+
+def _intro(report, span):
+    s = span
+    report.text(f"N = {s.n} regular {s.dim}-simplices in R^{s.dim}, uniform rotations, "
+                f"{s.steps:,} steps of dt = {s.dt:g} (t = {s.steps * s.dt:g}); scipy and ours "
+                f"adaptive over the same span at rtol = atol = "
+                f"{', '.join(f'{t:.0e}' for t in s.tols)}.  Quantities are evaluated at "
+                f"{len(s.times)} sample times (log- and linearly spaced); \"up to 10^k\" = "
+                f"running max over t <= 10^k dt.  Wall: seconds for the whole run, best / median "
+                f"of {s.repeats} (runs interleaved across solvers).")
+
+
+def _mark_labels(marks_steps):
+    """'10^3' for a power of ten, '2,500' otherwise."""
+    import numpy as np
+
+    return [f"10^{int(round(np.log10(k)))}" if 10 ** int(round(np.log10(k))) == k
+            else f"{k:,}" for k in marks_steps]
+
+
+def _drift_figure(runs_a, runs_b):
     def draw(plt):
+        import numpy as np
+
         fig, axes = plt.subplots(1, 3, figsize=(16, 4.4))
-        panels = [(axes[0], figures["A"], 1), (axes[1], figures["A"], 2),
-                   (axes[2], figures["B"], 2)]
+        panels = [(axes[0], runs_a, 1), (axes[1], runs_a, 2), (axes[2], runs_b, 2)]
         for ax, runs_, which in panels:
             for k, r in enumerate(runs_):
                 t, series = r.series[0], r.series[which]
@@ -220,6 +202,91 @@ def run(args, log):
             ax.grid(True, which="both", alpha=0.3)
             ax.legend(fontsize=6)
         return fig
+    return draw
 
-    report.figure("drift", draw, "energy drift and orthogonality defect over the long horizon")
+
+NOTES = ("- Lie methods (lie_*, rkmk4, etd*, lie_verlet, adaptive) stay on SO(d) by "
+         "construction: their defect is accumulated round-off.  Projection baselines "
+         "re-project every step.  scipy's O drifts off SO(d) at a rate set by its "
+         "tolerance, and E is measured on those matrices.",
+         "- growth p: log10 of (max drift over the last decade of t) / (max over the "
+         "decade before); \"bounded\": p < 0.2 (an oscillation that does not grow); "
+         "\"secular\": p >= 0.7 (about linear growth in t, p = 1).")
+
+
+@dataclass(frozen=True)
+class _Span:
+    """The long horizon every solver runs: ``steps`` of ``dt``, sampled at ``times``."""
+
+    dt: float
+    steps: int
+    times: object
+    tols: list
+    n: int
+    dim: int
+    seed: int
+    repeats: int
+
+    @property
+    def marks_steps(self):
+        return _checkpoints(self.steps)
+
+    @property
+    def marks(self):
+        return [k * self.dt for k in self.marks_steps]
+
+    def measure(self, order, log):
+        """Every solver for the model of ``order`` over the span: (scene, solvers, flat)."""
+        from .solve import measure, solvers_for
+
+        scene = _scene(order, self.n, self.dim, self.steps * self.dt, self.seed)
+        runs = solvers_for(order, [self.dt], self.tols)
+        flat = measure(runs, scene, self.times, self.repeats,
+                       lambda text: log(f"longhorizon: {text}"))
+        return scene, runs, flat
+
+
+def _section_a(report, span, log):
+    """A: second order, gamma = 0; returns the runs that ran."""
+    scene, runs, flat = span.measure(2, log)
+    rows = _second_order(runs, flat, span.marks)
+    u0 = flat.unpack(flat.initial(scene))
+    report.text("### A. Second-order model (A-1), gamma = 0: energy (Prop. 2.2 i) "
+                "and orthogonality",
+                "", f"m = kappa = 1, gamma = 0, E(0) = {flat.energy(u0['rot'], u0['w']):.4f}.")
+    report.table(RUN_HEADER
+                 + [f"rel. energy drift up to {lab}" for lab in _mark_labels(span.marks_steps)]
+                 + ["growth p (decade windows)", "verdict", "orth. defect (max)"], rows,
+                 caption="gamma = 0: relative energy drift |E(t) - E(0)| / E(0), running max")
+    return [r for r in runs if r.ok]
+
+
+def _section_b(report, span, log):
+    """B: first order; returns the runs that ran."""
+    _scene1, runs, _flat = span.measure(1, log)
+    rows = _first_order(runs, span.marks)
+    report.text("### B. First-order model (A-2): orthogonality defect")
+    report.table(RUN_HEADER
+                 + [f"orth. defect up to {lab}" for lab in _mark_labels(span.marks_steps)],
+                 rows,
+                 caption="first order: max_i |O_i^T O_i - I|_F, running max")
+    return [r for r in runs if r.ok]
+
+
+def run(args, log):
+    from .report import Report
+
+    report = Report(NAME, "Long horizons (`polymatch bench longhorizon`)")
+    steps = 1000 if args.quick else args.steps
+    tols = [1e-6] if args.quick else sorted(args.tolerances, reverse=True)
+    # quick: angles, the cheapest steps
+    dt, n, dim = args.dt, args.n, (2 if args.quick else args.dim)
+    repeats = args.repeats or 1
+    span = _Span(dt, steps, _sample_steps(steps) * dt, tols, n, dim, args.seed, repeats)
+    _intro(report, span)
+    runs_a = _section_a(report, span, log)
+    runs_b = _section_b(report, span, log)
+    report.text(*NOTES)
+    report.figure("drift", _drift_figure(runs_a, runs_b),
+                  "energy drift and orthogonality defect over the long horizon")
     return report

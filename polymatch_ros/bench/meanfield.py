@@ -51,95 +51,109 @@ def _sizes(args):
     return [300] if args.quick else args.sizes
 
 
-def run(args, log):
+NAIVE_REPEATS = 3
+
+
+def _mean_field_timings(base, repeats, log):
+    """(representation, Timing, rates W_i as skew matrices) of the mean field in the scene's
+    own representation and, if that is not d x d matrices, in matrices too."""
+    from ..core import System, with_representation
+    from .scenes import representation_label
+    from .timing import measure
+
+    n = base.model.n_agents
+    reps = ([base] if base.model.rotations.name == "matrix"
+            else [base, with_representation(base, "matrix")])
+    out = []
+    for scene in reps:
+        system = System(scene.model)
+        groups = scene.initial.groups
+
+        def mean_field(_, system=system, groups=groups):
+            c = system.couple(groups, first_stage=False)
+            return system.rotation_rate(0, groups[0].rot, c)
+
+        label = representation_label(scene.model.rotations)
+        log(f"meanfield: N = {n}, {label}, {repeats} repeats")
+        t = measure(mean_field, repeats)
+        out.append((label, t, scene.model.rotations.algebra_to_skew(mean_field(None))))
+    return out
+
+
+def _naive_timings(base, idx, full_naive_max, log):
+    """The naive sum on the sampled agents ``idx``: (Timing of the sample, their rates, the
+    Timing scaled to all N, Timing over all agents or None when N > ``full_naive_max``)."""
     import numpy as np
 
-    from ..core import System, with_representation
-    from .report import Report
-    from .scenes import representation_label, timing_scene
-    from .timing import fmt_ms, fmt_time, measure
+    from .timing import measure
 
-    report = Report(NAME, "Mean field vs naive double sum (`polymatch bench meanfield`)")
-    dim = args.dim
-    repeats = args.repeats or (3 if args.quick else 30)
-    naive_repeats = 3
-    sample_size = 20 if args.quick else args.sample
-    rng = np.random.default_rng(0)
+    model = base.model
+    n, k = model.n_agents, len(idx)
+    scale = model.kappa / (2.0 * model.gamma * n)
+    mats = model.rotations.to_matrices(base.initial.groups[0].rot)
+    log(f"meanfield: N = {n}, naive sum over {k} sampled agents, {NAIVE_REPEATS} passes")
+    t_sample = measure(lambda _: naive_rates(mats, idx, scale), NAIVE_REPEATS)
+    naive = naive_rates(mats, idx, scale)
+    full = None
+    if n <= full_naive_max:
+        log(f"meanfield: N = {n}, naive sum over all agents")
+        everyone = np.arange(n)
+        full = measure(lambda _: naive_rates(mats, everyone, scale), NAIVE_REPEATS, warmup=0)
+    return t_sample, naive, t_sample.scaled(n / k), full
+
+
+def _measure_size(n, dim, repeats, sample_size, full_naive_max, rng, log):
+    """Table rows and result records of N = ``n``, one per representation of the mean field."""
+    import numpy as np
+
+    from .scenes import timing_scene
+    from .timing import fmt_ms, fmt_time
+
+    base = timing_scene(n, dim, order=1)
+    mf = _mean_field_timings(base, repeats, log)
+    k = min(sample_size, n)
+    idx = np.sort(rng.choice(n, size=k, replace=False))
+    t_sample, naive, estimate, full = _naive_timings(base, idx, full_naive_max, log)
+    magnitude = float(np.abs(mf[0][2]).max())
     rows, results = [], []
-    for n in _sizes(args):
-        base = timing_scene(n, dim, order=1)
-        model = base.model
-        scale = model.kappa / (2.0 * model.gamma * n)
-        mats = model.rotations.to_matrices(base.initial.groups[0].rot)
-        reps = ([base] if model.rotations.name == "matrix"
-                else [base, with_representation(base, "matrix")])
-        mf = []
-        for scene in reps:
-            system = System(scene.model)
-            groups = scene.initial.groups
+    for label, t, rate in mf:
+        diff = float(np.abs(rate[idx] - naive).max())
+        rows.append([f"{n:,}", label, fmt_ms(t.best), fmt_ms(t.median),
+                     f"{t_sample.best / k * 1e6:.1f} ({k} agents)",
+                     f"{fmt_time(estimate.best)} (x {n:,}/{k})",
+                     fmt_time(full.best) if full is not None else "not run",
+                     f"{estimate.best / t.best:,.0f}x", f"{diff:.1e}"])
+        results.append({"n": n, "rep": label, "mf": t, "naive": estimate, "full": full,
+                        "diff": diff, "magnitude": magnitude})
+    return rows, results
 
-            def mean_field(_, system=system, groups=groups):
-                c = system.couple(groups, first_stage=False)
-                return system.rotation_rate(0, groups[0].rot, c)
 
-            log(f"meanfield: N = {n}, {representation_label(scene.model.rotations)}, "
-                f"{repeats} repeats")
-            t = measure(mean_field, repeats)
-            rate = scene.model.rotations.algebra_to_skew(mean_field(None))
-            mf.append((representation_label(scene.model.rotations), t, rate))
+def _notes(results, dim, repeats, full_naive_max):
+    from .timing import fmt_time
 
-        k = min(sample_size, n)
-        idx = np.sort(rng.choice(n, size=k, replace=False))
-        log(f"meanfield: N = {n}, naive sum over {k} sampled agents, {naive_repeats} passes")
-        t_sample = measure(lambda _, mats=mats, idx=idx, scale=scale:
-                           naive_rates(mats, idx, scale), naive_repeats)
-        naive = naive_rates(mats, idx, scale)
-        estimate = t_sample.scaled(n / k)
-        full = None
-        if n <= args.full_naive_max:
-            log(f"meanfield: N = {n}, naive sum over all agents")
-            everyone = np.arange(n)
-            full = measure(lambda _, mats=mats, rows=everyone, scale=scale:
-                           naive_rates(mats, rows, scale), naive_repeats, warmup=0)
-        magnitude = float(np.abs(mf[0][2]).max())
-        for label, t, rate in mf:
-            diff = float(np.abs(rate[idx] - naive).max())
-            rows.append([f"{n:,}", label, fmt_ms(t.best), fmt_ms(t.median),
-                         f"{t_sample.best / k * 1e6:.1f} ({k} agents)",
-                         f"{fmt_time(estimate.best)} (x {n:,}/{k})",
-                         fmt_time(full.best) if full is not None else "not run",
-                         f"{estimate.best / t.best:,.0f}x", f"{diff:.1e}"])
-            results.append({"n": n, "rep": label, "mf": t, "naive": estimate, "full": full,
-                            "diff": diff, "magnitude": magnitude})
-
-    report.table(["N", "representation", "mean field best ms", "median ms",
-                  "naive µs/agent (sample)", "naive total, scaled", "naive total, measured",
-                  "speed-up (best/best)", "max abs diff"], rows,
-                 caption=f"d = {dim}: System.couple + System.rotation_rate (all agents) vs "
-                         f"sum_k (O_k O_i^T - O_i O_k^T) per agent")
     lines = [f"- The naive double sum is timed on a random sample of agents "
-             f"({naive_repeats} passes, best) and scaled by N / sample; it was run over all N "
+             f"({NAIVE_REPEATS} passes, best) and scaled by N / sample; it was run over all N "
              f"agents only where \"naive total, measured\" has a figure "
-             f"(N <= {args.full_naive_max:,}); speed-ups use the scaled total.",
+             f"(N <= {full_naive_max:,}); speed-ups use the scaled total.",
              f"- Mean field: {repeats} repeats. \"max abs diff\" compares the sampled agents' "
              f"naive rates with the mean-field rates W_i (entries of magnitude up to "
              f"{max(r['magnitude'] for r in results):.2g})."]
-    at = [r for r in results if r["n"] == 10_000 and dim == 3]
-    for r in at:
+    for r in (r for r in results if r["n"] == 10_000 and dim == 3):
         ratio = r["naive"].best / r["mf"].best
         met = "met" if ratio >= TARGET_SPEEDUP else "NOT met"
         lines.append(f"- N = 10,000, d = 3, {r['rep']}: mean field {ratio:,.0f}x faster than "
                      f"the naive sum (target >= {TARGET_SPEEDUP:,.0f}x: {met}; "
                      f"medians: {r['naive'].median / r['mf'].median:,.0f}x)")
-    for r in results:
-        if r["full"] is not None:
-            lines.append(f"- Scaling check at N = {r['n']:,}: extrapolated naive total "
-                         f"{fmt_time(r['naive'].best)}, "
-                         f"measured over all agents {fmt_time(r['full'].best)} "
-                         f"(ratio {r['full'].best / r['naive'].best:.2f}).")
-            break
-    report.text(*lines)
+    checked = next((r for r in results if r["full"] is not None), None)
+    if checked is not None:
+        lines.append(f"- Scaling check at N = {checked['n']:,}: extrapolated naive total "
+                     f"{fmt_time(checked['naive'].best)}, "
+                     f"measured over all agents {fmt_time(checked['full'].best)} "
+                     f"(ratio {checked['full'].best / checked['naive'].best:.2f}).")
+    return lines
 
+
+def _scaling_figure(results, dim):
     def draw(plt):
         fig, ax = plt.subplots(figsize=(6, 4.5))
         for rep in dict.fromkeys(r["rep"] for r in results):
@@ -159,6 +173,30 @@ def run(args, log):
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
         return fig
+    return draw
 
-    report.figure("scaling", draw, "mean field vs naive double sum")
+
+def run(args, log):
+    import numpy as np
+
+    from .report import Report
+
+    report = Report(NAME, "Mean field vs naive double sum (`polymatch bench meanfield`)")
+    dim = args.dim
+    repeats = args.repeats or (3 if args.quick else 30)
+    sample_size = 20 if args.quick else args.sample
+    rng = np.random.default_rng(0)
+    rows, results = [], []
+    for n in _sizes(args):
+        size_rows, size_results = _measure_size(n, dim, repeats, sample_size,
+                                                args.full_naive_max, rng, log)
+        rows += size_rows
+        results += size_results
+    report.table(["N", "representation", "mean field best ms", "median ms",
+                  "naive µs/agent (sample)", "naive total, scaled", "naive total, measured",
+                  "speed-up (best/best)", "max abs diff"], rows,
+                 caption=f"d = {dim}: System.couple + System.rotation_rate (all agents) vs "
+                         f"sum_k (O_k O_i^T - O_i O_k^T) per agent")
+    report.text(*_notes(results, dim, repeats, args.full_naive_max))
+    report.figure("scaling", _scaling_figure(results, dim), "mean field vs naive double sum")
     return report

@@ -28,6 +28,8 @@ Wall times are the best (and median) of interleaved repeats: a burst of load on 
 machine hits every solver alike.
 """
 
+from dataclasses import dataclass
+
 NAME = "precision"
 HELP = ("work-precision: max vertex error over the run vs wall time and evaluations, "
         "all integrators and scipy")
@@ -124,104 +126,6 @@ def _score(cells, times, ref_verts, reference):
         cell.orth = orthogonality(cell.out.mats)
 
 
-# -- tables -----------------------------------------------------------------------------------
-
-def _fmt_err(e):
-    return f"{e:.2e}"
-
-
-def case_table(cells, repeats):
-    from .timing import fmt_ms
-    rows = []
-    for c in cells:
-        if not c.ok:
-            rows.append([c.name, c.param, c.status, "-", "-", "-", "-"])
-            continue
-        rows.append([c.name, c.param, _fmt_err(c.err), fmt_ms(c.best), fmt_ms(c.median),
-                     c.out.evals, f"{c.orth:.1e}"])
-    header = ["method", "h or tol", "max error", f"wall ms (best of {repeats})", "median ms",
-              "rhs evals", "orth. defect"]
-    return header, rows
-
-
-def order_rows(cells, floor):
-    """Observed convergence order of every fixed-step method from consecutive step sizes."""
-    import math
-
-    from ..core import METHODS
-    rows = []
-    for name in dict.fromkeys(c.name for c in cells if c.kind == "fixed"):
-        pts = sorted(((c.value, c.err) for c in cells if c.name == name and c.ok), reverse=True)
-        slopes = []
-        for (h1, e1), (h2, e2) in zip(pts, pts[1:]):
-            if e2 > 100 * floor and e1 > e2:
-                slopes.append(math.log(e1 / e2) / math.log(h1 / h2))
-        nominal = METHODS[name].info.order
-        note = ""
-        if slopes and slopes[-1] < nominal - 0.5:
-            note = "below nominal"
-        elif not slopes:
-            note = "not resolved (errors at the reference floor or refused)"
-        rows.append([name, nominal, ", ".join(f"{s:.2f}" for s in slopes) or "-", note])
-    return rows
-
-
-def frontier_rows(label, cells, targets):
-    from .timing import fmt_ms
-
-    def name(c):
-        return f"{c.name} {c.param}"
-
-    rows = []
-    for target in targets:
-        ok = sorted((c for c in cells if c.ok and c.err <= target), key=lambda c: c.best)
-        if not ok:
-            rows.append([label, f"{target:.0e}", "none", "-", "-", "-", "-", "-", "-"])
-            continue
-        win = ok[0]
-        second = next((c for c in ok if c.name != win.name), None)
-        scipy = next((c for c in ok if c.kind == "scipy"), None)
-        fixed = next((c for c in ok if c.kind == "fixed"), None)
-        fewest = min(ok, key=lambda c: c.out.evals)
-        rows.append([label, f"{target:.0e}", name(win),
-                     f"{fmt_ms(win.best)} / {fmt_ms(win.median)}", win.out.evals,
-                     f"{name(second)} ({fmt_ms(second.best)})" if second else "-",
-                     f"{name(scipy)} ({fmt_ms(scipy.best)})" if scipy else "none",
-                     f"{name(fixed)} ({fmt_ms(fixed.best)})" if fixed else "none",
-                     f"{name(fewest)} ({fewest.out.evals})"])
-    return rows
-
-
-def _figure(label, cells, targets, repeats):
-    def draw(plt):
-        fig, axes = plt.subplots(1, 2, figsize=(12, 4.6), sharey=True)
-        solvers = list(dict.fromkeys(c.name for c in cells))
-        for k, solver in enumerate(solvers):
-            cs = [c for c in cells if c.name == solver and c.ok and c.err > 0]
-            if not cs:
-                continue
-            kind = cs[0].kind
-            style = {"fixed": "o-", "adaptive": "D-", "scipy": "x:"}[kind]
-            if kind == "fixed" and solver.endswith("_proj"):
-                style = "s--"
-            col = "k" if kind == "adaptive" else f"C{k % 10}"
-            err = [c.err for c in cs]
-            axes[0].loglog([c.best * 1e3 for c in cs], err, style, color=col, label=solver, ms=4)
-            axes[1].loglog([c.out.evals for c in cs], err, style, color=col, label=solver, ms=4)
-        for ax in axes:
-            for t in targets:
-                ax.axhline(t, color="r", lw=0.6, ls="--")
-            ax.grid(True, which="both", alpha=0.3)
-        axes[0].set_xlabel(f"wall ms (best of {repeats})")
-        axes[1].set_xlabel("right-hand-side evaluations")
-        axes[0].set_ylabel("max vertex error over the run")
-        axes[0].set_title(f"{label}: error vs wall time")
-        axes[1].set_title("error vs evaluations")
-        axes[1].legend(fontsize=7, loc="best")
-        return fig
-    return draw
-
-
 # -- the benchmark ----------------------------------------------------------------------------
 
 def _check_grid(steps, every, t_end):
@@ -238,15 +142,28 @@ def _check_grid(steps, every, t_end):
             f"bench precision: the sample spacing {every:g} must divide t_end = {t_end:g}")
 
 
-def run(args, log):
-    import numpy as np
+@dataclass(frozen=True)
+class _Settings:
+    """What every case of a run shares."""
 
+    cases: list
+    steps: list
+    tols: list
+    n: int
+    t_end: float
+    every: float
+    ref_tol: float
+    ref_dt: float
+    seed: int
+    repeats: int
+    targets: list
+
+
+def _settings(args):
+    """The run's settings (--quick: two small cases); unknown cases and step grids that miss
+    the sample times are refused."""
     from ..core import PolymatchError
-    from ..core.metrics import vertices
-    from .report import Report
-    from .solve import Solver, measure, solve, solvers_for
 
-    report = Report(NAME, "Work-precision (`polymatch bench precision`)")
     if args.quick:
         cases, steps, tols = QUICK_CASES, [0.1, 0.05], [1e-4, 1e-6]
         n, t_end, every, ref_tol, ref_dt = 6, 1.0, 0.2, 1e-11, 0.01
@@ -260,65 +177,102 @@ def run(args, log):
         raise PolymatchError(
             f"bench precision: unknown case {unknown[0]!r}; known: {', '.join(CASES)}")
     _check_grid(list(steps) + [ref_dt], every, t_end)
-    repeats = args.repeats or (1 if args.quick else 3)
-    targets = sorted(args.targets, reverse=True)
+    return _Settings(cases, steps, tols, n, t_end, every, ref_tol, ref_dt, args.seed,
+                     args.repeats or (1 if args.quick else 3), sorted(args.targets, reverse=True))
 
+
+def _intro(report, s):
     report.text(
-        f"N = {n} congruent regular d-simplices, kappa = gamma = 1 (second order: m as stated, "
-        f"centroid and angular velocities ~ N(0, 0.5^2)), t_end = {t_end:g}.  Error = max over "
-        f"{int(round(t_end / every)) + 1} sample times (every {every:g}) and all vertices of "
-        f"|x^i_a - x^i_a(ref)| (Euclidean, absolute coordinates).  Wall = the whole `simulate` / "
-        f"`solve_ivp` call producing those samples, best (and median) of {repeats} repeats "
-        f"interleaved over every cell of a case.  evals = right-hand-side evaluations (adaptive "
-        f"solvers: including the 3 per step that dense output costs).  orth. defect = max over "
-        f"samples and agents of |O_i^T O_i - I|_F.")
+        f"N = {s.n} congruent regular d-simplices, kappa = gamma = 1 (second order: m as "
+        f"stated, centroid and angular velocities ~ N(0, 0.5^2)), t_end = {s.t_end:g}.  Error = "
+        f"max over {int(round(s.t_end / s.every)) + 1} sample times (every {s.every:g}) and all "
+        f"vertices of |x^i_a - x^i_a(ref)| (Euclidean, absolute coordinates).  Wall = the whole "
+        f"`simulate` / `solve_ivp` call producing those samples, best (and median) of "
+        f"{s.repeats} repeats interleaved over every cell of a case.  evals = right-hand-side "
+        f"evaluations (adaptive solvers: including the 3 per step that dense output costs).  "
+        f"orth. defect = max over samples and agents of |O_i^T O_i - I|_F.")
 
-    frontier, orders, summary = [], [], []
-    for case in cases:
-        label = CASES[case][0]
-        scene = case_scene(case, n, t_end, every, args.seed)
-        times = np.asarray(scene.samples, dtype=float)
-        reference = scene.model.groups[0].reference
-        d0 = rotation_diameter(scene)
-        log(f"precision: {case} ({label}, D0 = {d0:.2f}): references")
-        ref = solve(scene, Solver("adaptive", "adaptive", ref_tol), times)
-        ref_verts = vertices(ref.centroids, ref.mats, reference)
-        check = solve(scene, Solver("rkmk4", "fixed", ref_dt), times)
-        gap = vertex_error(check, ref_verts, reference)
-        cells = solvers_for(scene.model.order, steps, tols)
-        log(f"precision: {case}: {len(cells)} cells x {repeats} interleaved repeats")
-        measure(cells, scene, times, repeats, lambda text: log(f"precision:   {text}"),
-                warmup=True)
-        _score(cells, times, ref_verts, reference)
 
-        m = scene.model
-        params = f"m = {m.mass:g}, " if m.order == 2 else ""
-        report.text(f"### {label}  (`{case}`)",
-                    "",
-                    f"d = {m.dim}, N = {m.n_agents}, {params}D0 = max_ij |O_i - O_j|_F = "
-                    f"{d0:.3f} at t = 0.  Reference: ours adaptive at tol {ref_tol:g} "
-                    f"({ref.steps} steps); rkmk4 at dt = {ref_dt:g} agrees with it to {gap:.1e} "
-                    f"(max vertex distance over the samples): errors near that floor are not "
-                    f"resolved.")
-        header, rows = case_table(cells, repeats)
-        report.table(header, rows, caption=f"{label}: every solver")
-        orows = order_rows(cells, gap)
-        report.table(["method", "nominal order",
-                      "observed order (consecutive h, errors > 100 x floor)", "note"],
-                     orows,
-                     caption=f"{label}: observed convergence order of the fixed-step methods")
-        orders += [[case] + r for r in orows if r[3] == "below nominal"]
-        report.figure(case, _figure(label, cells, targets, repeats),
-                      f"{label}: error vs wall time and evaluations")
-        frontier += frontier_rows(case, cells, targets)
-        refused = sorted(
-            {f"{c.name} h = {c.value:g}" for c in cells if c.status.startswith("refused")})
-        failed = sorted(
-            {f"{c.name} {c.param}: {c.status}" for c in cells if c.status.startswith("failed")})
-        if refused or failed:
-            summary.append(f"- `{case}`: " + "; ".join(
-                ([f"refused (unstable): {', '.join(refused)}"] if refused else []) + failed))
+@dataclass
+class _Case:
+    """One case measured: its scene, the reference, the rkmk4 gap to it and every cell."""
 
+    case: str
+    scene: object
+    d0: float
+    ref: object
+    gap: float
+    cells: list
+
+    @property
+    def label(self):
+        return CASES[self.case][0]
+
+
+def _measure_case(case, s, log):
+    """References, then every solver's cells round-robin, scored against the reference."""
+    import numpy as np
+
+    from ..core.metrics import vertices
+    from .solve import Solver, measure, solve, solvers_for
+
+    label = CASES[case][0]
+    scene = case_scene(case, s.n, s.t_end, s.every, s.seed)
+    times = np.asarray(scene.samples, dtype=float)
+    reference = scene.model.groups[0].reference
+    d0 = rotation_diameter(scene)
+    log(f"precision: {case} ({label}, D0 = {d0:.2f}): references")
+    ref = solve(scene, Solver("adaptive", "adaptive", s.ref_tol), times)
+    ref_verts = vertices(ref.centroids, ref.mats, reference)
+    check = solve(scene, Solver("rkmk4", "fixed", s.ref_dt), times)
+    gap = vertex_error(check, ref_verts, reference)
+    cells = solvers_for(scene.model.order, s.steps, s.tols)
+    log(f"precision: {case}: {len(cells)} cells x {s.repeats} interleaved repeats")
+    measure(cells, scene, times, s.repeats, lambda text: log(f"precision:   {text}"),
+            warmup=True)
+    _score(cells, times, ref_verts, reference)
+    return _Case(case, scene, d0, ref, gap, cells)
+
+
+def _case_section(report, c, s):
+    """The case's heading, its every-solver table, its order table and figure; returns the
+    order rows."""
+    from .precision_tables import case_table, error_figure, order_rows
+
+    m = c.scene.model
+    params = f"m = {m.mass:g}, " if m.order == 2 else ""
+    report.text(f"### {c.label}  (`{c.case}`)",
+                "",
+                f"d = {m.dim}, N = {m.n_agents}, {params}D0 = max_ij |O_i - O_j|_F = "
+                f"{c.d0:.3f} at t = 0.  Reference: ours adaptive at tol {s.ref_tol:g} "
+                f"({c.ref.steps} steps); rkmk4 at dt = {s.ref_dt:g} agrees with it to "
+                f"{c.gap:.1e} (max vertex distance over the samples): errors near that floor are "
+                f"not resolved.")
+    header, rows = case_table(c.cells, s.repeats)
+    report.table(header, rows, caption=f"{c.label}: every solver")
+    orows = order_rows(c.cells, c.gap)
+    report.table(["method", "nominal order",
+                  "observed order (consecutive h, errors > 100 x floor)", "note"],
+                 orows,
+                 caption=f"{c.label}: observed convergence order of the fixed-step methods")
+    report.figure(c.case, error_figure(c.label, c.cells, s.targets, s.repeats),
+                  f"{c.label}: error vs wall time and evaluations")
+    return orows
+
+
+def _problems(case, cells):
+    """A summary line of the case's refused and failed cells, if any."""
+    refused = sorted(
+        {f"{c.name} h = {c.value:g}" for c in cells if c.status.startswith("refused")})
+    failed = sorted(
+        {f"{c.name} {c.param}: {c.status}" for c in cells if c.status.startswith("failed")})
+    if refused or failed:
+        return [f"- `{case}`: " + "; ".join(
+            ([f"refused (unstable): {', '.join(refused)}"] if refused else []) + failed)]
+    return []
+
+
+def _frontier_section(report, frontier, orders, summary):
     report.text("### Frontier")
     report.table(["case", "target", "cheapest (best wall)", "best / median ms", "evals",
                   "runner-up (other method)", "cheapest scipy", "cheapest fixed step",
@@ -338,4 +292,21 @@ def run(args, log):
         notes.append("- Observed order below nominal: "
                      + "; ".join(f"{r[0]} {r[1]} ({r[3]})" for r in orders))
     report.text(*notes)
+
+
+def run(args, log):
+    from .precision_tables import frontier_rows
+    from .report import Report
+
+    report = Report(NAME, "Work-precision (`polymatch bench precision`)")
+    s = _settings(args)
+    _intro(report, s)
+    frontier, orders, summary = [], [], []
+    for case in s.cases:
+        c = _measure_case(case, s, log)
+        orows = _case_section(report, c, s)
+        orders += [[case] + r for r in orows if r[3] == "below nominal"]
+        frontier += frontier_rows(case, c.cells, s.targets)
+        summary += _problems(case, c.cells)
+    _frontier_section(report, frontier, orders, summary)
     return report

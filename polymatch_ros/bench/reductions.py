@@ -70,73 +70,94 @@ def _copy_initial(dst, src):
     return np.asarray(0)
 
 
-def run(args, log):
-    from dataclasses import replace
-
+def _compare(case, repeats, log):
+    """Run a case's full and reduced models alike; its table row."""
     import numpy as np
 
+    name, full, full_method, reduced, reduced_method, expectation, note = case
+    log(note or name)
+    t_full, a = _timed(full, full_method, 0.05, repeats)
+    t_red, b = _timed(reduced, reduced_method, 0.05, repeats)
+    diff = float(np.max(np.abs(_vertices(full, a.final, a.scene.model.rotations)
+                               - _vertices(reduced, b.final, b.scene.model.rotations))))
+    return [name, f"{t_full * 1e3:.1f}", f"{t_red * 1e3:.1f}", f"{t_full / t_red:.1f}x",
+            f"{diff:.1e}", expectation]
+
+
+def _two_groups(m, t_end):
+    """m triangles and m tetrahedra without the inter-group potential (kappa_2 = 0)."""
     from ..core.scene import load_scene
+
+    return load_scene({"dimension": 3, "seed": 5, "model": {"order": 1, "kappa_2": 0.0, "L": 3.0},
+                       "time": {"t_end": t_end, "samples": {"count": 2}},
+                       "groups": [{"name": "tri", "shape": "triangle", "count": m,
+                                   "centroids": {"box": [-2, 2]}},
+                                  {"name": "tet", "shape": "tetrahedron", "count": m,
+                                   "centroids": {"box": [-2, 2]}}]})
+
+
+def _unweighted(n, t_end, like):
+    """``like``'s agents in a scene that states no scale weights."""
+    from ..core.scene import load_scene
+
+    sim = load_scene({"dimension": 3, "seed": 3, "time": {"t_end": t_end, "samples": {"count": 2}},
+                      "groups": [{"name": "a", "shape": "tetrahedron", "count": n,
+                                  "rotations": {"within": 0.8}, "centroids": {"box": [-3, 3]},
+                                  "scales": [1.0] * n}]})
+    _copy_initial(sim, like)
+    return sim
+
+
+def _at_rest_second_order(n, t_end, like):
+    """``like``'s agents under (A-1) with m = 1e-3, starting at rest."""
+    second = _scene(3, n, t_end, order=2, mass=1e-3)
+    _copy_initial(second, like)
+    for g in second.initial.groups:
+        g.v[:] = 0.0
+        g.w[...] = 0.0
+    return second
+
+
+def _cases(n, t_end):
+    """(name, full, its method, reduced, its method, expected difference, log line or None)
+    of every reduction, built one at a time as they are run."""
+    from dataclasses import replace
+
     from ..core.simulate import with_representation
+
+    s2 = _scene(2, n, t_end)
+    yield ("2-D: angles (Kuramoto) vs 2x2 matrices", with_representation(s2, "matrix"), "rkmk4",
+           s2, "rkmk4", "round-off", None)
+    s3 = _scene(3, n, t_end)
+    yield ("3-D: SoA Cayley vs (N,3,3) matrices", with_representation(s3, "matrix"), "rkmk4",
+           s3, "rkmk4", "round-off", None)
+    yield ("congruent: no scale weights vs F-1 weights s_k/s_i = 1", _unweighted(n, t_end, s3),
+           "rkmk4", s3, "rkmk4", "round-off", None)
+    s2nd = _scene(3, n, t_end, order=2, mass=0.5)
+    yield ("centroids: exact flow (Prop. 2.1) vs integrated by rkmk4",
+           replace(s2nd, model=replace(s2nd.model, centroids="integrated")), "rkmk4",
+           s2nd, "rkmk4", "rkmk4's O(dt^4) centroid error", None)
+    m = max(4, n // 5)
+    reduced = _two_groups(m, t_end)
+    # potential on, force ~ 0
+    yield (f"kappa_2 = 0: no inter-group potential ({m} + {m} agents)",
+           replace(reduced, model=replace(reduced.model, kappa_2=1e-300)), "rkmk4",
+           reduced, "rkmk4", "rkmk4's centroid error (with a potential, centroids are integrated)",
+           None)
+    first = _scene(3, n, t_end)
+    yield ("first order (A-2) vs second order m = 1e-3 (etd2 / rkmk4)",
+           _at_rest_second_order(n, t_end, first), "etd2", first, "rkmk4",
+           "O(m/gamma) modelling error", "first order (A-2) vs (A-1) with m = 1e-3")
+
+
+def run(args, log):
     from .report import Report
 
     n = 40 if args.quick else args.agents
     t_end = 0.2 if args.quick else 2.0
     repeats = 1 if args.quick else (args.repeats or 3)
     report = Report(NAME, "Model only what a scene requires (`polymatch bench reductions`)")
-    rows = []
-
-    def case(name, full, reduced, method, dt, expectation):
-        log(f"{name}")
-        t_full, a = _timed(full, method, dt, repeats)
-        t_red, b = _timed(reduced, method if isinstance(method, str) else method, dt, repeats)
-        diff = float(np.max(np.abs(_vertices(full, a.final, a.scene.model.rotations)
-                                   - _vertices(reduced, b.final, b.scene.model.rotations))))
-        rows.append([name, f"{t_full * 1e3:.1f}", f"{t_red * 1e3:.1f}", f"{t_full / t_red:.1f}x",
-                     f"{diff:.1e}", expectation])
-
-    s2 = _scene(2, n, t_end)
-    case("2-D: angles (Kuramoto) vs 2x2 matrices", with_representation(s2, "matrix"), s2,
-         "rkmk4", 0.05, "round-off")
-    s3 = _scene(3, n, t_end)
-    case("3-D: SoA Cayley vs (N,3,3) matrices", with_representation(s3, "matrix"), s3,
-         "rkmk4", 0.05, "round-off")
-    sim = load_scene({"dimension": 3, "seed": 3, "time": {"t_end": t_end, "samples": {"count": 2}},
-                      "groups": [{"name": "a", "shape": "tetrahedron", "count": n,
-                                  "rotations": {"within": 0.8}, "centroids": {"box": [-3, 3]},
-                                  "scales": [1.0] * n}]})
-    _copy_initial(sim, s3)
-    case("congruent: no scale weights vs F-1 weights s_k/s_i = 1", sim, s3, "rkmk4", 0.05,
-         "round-off")
-    s2nd = _scene(3, n, t_end, order=2, mass=0.5)
-    full = replace(s2nd, model=replace(s2nd.model, centroids="integrated"))
-    case("centroids: exact flow (Prop. 2.1) vs integrated by rkmk4", full, s2nd, "rkmk4", 0.05,
-         "rkmk4's O(dt^4) centroid error")
-    m = max(4, n // 5)
-    two = {"dimension": 3, "seed": 5, "model": {"order": 1, "kappa_2": 0.0, "L": 3.0},
-           "time": {"t_end": t_end, "samples": {"count": 2}},
-           "groups": [{"name": "tri", "shape": "triangle", "count": m,
-                       "centroids": {"box": [-2, 2]}},
-                      {"name": "tet", "shape": "tetrahedron", "count": m,
-                       "centroids": {"box": [-2, 2]}}]}
-    reduced = load_scene(two)
-    # potential on, force ~ 0
-    full = replace(reduced, model=replace(reduced.model, kappa_2=1e-300))
-    case(f"kappa_2 = 0: no inter-group potential ({m} + {m} agents)", full, reduced, "rkmk4", 0.05,
-         "rkmk4's centroid error (with a potential, centroids are integrated)")
-    first = _scene(3, n, t_end)
-    second = _scene(3, n, t_end, order=2, mass=1e-3)
-    _copy_initial(second, first)
-    for g in second.initial.groups:
-        g.v[:] = 0.0
-        g.w[...] = 0.0
-    log("first order (A-2) vs (A-1) with m = 1e-3")
-    t_full, a = _timed(second, "etd2", 0.05, repeats)
-    t_red, b = _timed(first, "rkmk4", 0.05, repeats)
-    diff = float(np.max(np.abs(_vertices(second, a.final, a.scene.model.rotations)
-                               - _vertices(first, b.final, b.scene.model.rotations))))
-    rows.append(["first order (A-2) vs second order m = 1e-3 (etd2 / rkmk4)",
-                 f"{t_full * 1e3:.1f}", f"{t_red * 1e3:.1f}", f"{t_full / t_red:.1f}x",
-                 f"{diff:.1e}", "O(m/gamma) modelling error"])
+    rows = [_compare(case, repeats, log) for case in _cases(n, t_end)]
     report.table(["reduction", "full model ms", "reduced ms", "full / reduced",
                   "max vertex difference at t_end", "expected difference"], rows,
                  caption=f"N = {n} agents (first-order model unless stated), t_end = {t_end:g}, "

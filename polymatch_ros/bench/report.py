@@ -35,6 +35,11 @@ class Report:
     def text(self, *lines):
         self.blocks.append(("text", "\n".join(lines)))
 
+    def failures(self, failures):
+        """A 'Failed runs:' list, if there were any: a family reports, never hides, them."""
+        if failures:
+            self.text("Failed runs:", *[f"- {f}" for f in failures])
+
     def table(self, header, rows, caption=None):
         self.blocks.append(("table", caption, list(header), [list(r) for r in rows]))
 

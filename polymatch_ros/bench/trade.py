@@ -13,9 +13,8 @@ rates and injected transport delays.
 """
 
 import os
-import subprocess
-import sys
 import tempfile
+from dataclasses import dataclass
 
 NAME = "trade"
 HELP = (
@@ -43,15 +42,6 @@ ROUNDS = 400
 def add_arguments(p):
     p.add_argument(
         "--t-end", type=float, default=4.0, help="simulated seconds per run (default 4)"
-    )
-
-
-def _cli(env, argv, timeout):
-    return subprocess.run(
-        ["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli"] + argv,
-        env=env,
-        capture_output=True,
-        text=True,
     )
 
 
@@ -86,14 +76,124 @@ def _reference(scene, times):
     return {"times": np.array(traj.times), "verts": [_verts(scene, st) for st in traj.states]}
 
 
-def _agent_records(path):
-    """The agents' run records a `polymatch run --records` wrote (none if the run failed early)."""
-    from ..ros.wire import run_records
+LOCKSTEP_CASES = [(m, h) for m in ("lie_euler", "lie_heun", "rkmk4") for h in (0.1, 0.05, 0.025)]
+REALTIME_CASES = [(10.0, 0.0), (25.0, 0.0), (50.0, 0.0), (100.0, 0.0), (50.0, 0.05),
+                  (50.0, 0.1), (50.0, 0.2)]
+TIME_SCALE = 4.0
 
-    if not os.path.exists(path):
-        return []
-    with open(path, encoding="utf-8") as fh:
-        return [r for r in run_records(fh) if r.role == "agent"]
+
+@dataclass(frozen=True)
+class _Setup:
+    """What every run of the family shares: the scene (file and loaded), its reference and the
+    private ROS environment."""
+
+    quick: bool
+    t_end: float
+    tmp: str
+    path: str
+    scene: object
+    ref: dict
+    env: dict
+
+
+def _lockstep_row(setup, method, dt, log):
+    """One integrator at one dt: its agents' round rate in a real run, its error centrally."""
+    import numpy as np
+
+    from ..core.integrators import METHODS
+    from .ros_runs import agent_records, run_cli
+
+    per_step = METHODS[method].info.rounds
+    t_run = (40 if setup.quick else ROUNDS) * dt / per_step  # enough rounds for a steady rate
+    log(f"lockstep {method} dt = {dt}: {t_run:g} simulated s")
+    records = os.path.join(setup.tmp, f"lockstep_{method}_{dt}.jsonl")
+    run_cli(setup.env, ["run", setup.path, "--integrator", method, "--dt", str(dt),
+                        "--t-end", str(t_run), "--hold", "1e9", "--no-monitor", "--no-compare",
+                        "-q", "--records", records, "--timeout", "300"], 340)
+    rates = [r.rounds_per_second for r in agent_records(records)]
+    rps = float(np.mean(rates)) if rates else float("nan")
+    wall_per_s = per_step / (dt * rps) if rates else float("nan")
+    err = _vertex_error_over_run(setup.scene, method, dt, setup.ref)
+    return [method, dt, per_step, f"{rps:.1f}", f"{wall_per_s:.2f}", f"{err:.1e}"]
+
+
+def _lockstep_table(report, rows, t_end):
+    report.table(
+        ["integrator", "dt", "rounds/step", "rounds/s (mean of 8 agents)",
+         "wall s per simulated s", f"max vertex error over t in [0, {t_end:g}]"],
+        rows,
+        caption="Lockstep, 8 congruent triangles (D0 < 1), one agent per process, no monitor; "
+        f"rates over {ROUNDS} rounds; error against adaptive at tol 1e-12 on 41 sample times",
+    )
+
+
+def _late_share(records):
+    """Share of the agents' ticks that started late, '-' without records."""
+    ticks = [(r.steps, r.late_ticks) for r in records]
+    if not ticks:
+        return "-"
+    return f"{sum(b for _, b in ticks) / max(1, sum(a for a, _ in ticks)):.0%}"
+
+
+def _final_pose_error(scene, npz):
+    """Max vertex error of each agent's saved final pose against the reference at its stamp."""
+    import numpy as np
+
+    data = np.load(npz)
+    times = data["group0_times"]
+    agent_ref = _reference(scene, np.unique(np.append(times, 0.0)))
+    g = scene.model.groups[0]
+    got = data["group0_centroids"][:, None, :] + np.einsum(
+        "nij,aj->nai", data["group0_rotations"], g.reference
+    )
+    err = 0.0
+    for i, t in enumerate(times):
+        k = int(np.argmin(np.abs(agent_ref["times"] - t)))
+        want = agent_ref["verts"][k][i] + scene.origin
+        err = max(err, float(np.max(np.abs(got[i] - want))))
+    return err
+
+
+def _realtime_row(setup, rate, delay, log):
+    """One realtime run at ``rate`` Hz with ``delay`` s injected: late ticks and final error."""
+    from .ros_runs import agent_records, run_cli
+
+    log(f"realtime rate {rate:g} Hz, delay {delay:g} s")
+    npz = os.path.join(setup.tmp, f"rt_{rate}_{delay}.npz")
+    records = os.path.join(setup.tmp, f"rt_{rate}_{delay}.jsonl")
+    out = run_cli(setup.env, ["run", setup.path, "--mode", "realtime", "--rate", str(rate),
+                              "--time-scale", str(TIME_SCALE), "--delay", str(delay),
+                              "--t-end", str(setup.t_end), "--hold", "1e9", "--no-monitor",
+                              "-q", "--records", records, "--save", npz, "--timeout", "200"], 240)
+    late = _late_share(agent_records(records))
+    if not os.path.exists(npz):
+        return [rate, TIME_SCALE / rate, delay, "-", "-",
+                "run failed: " + out.stderr.strip()[-80:]]
+    err = _final_pose_error(setup.scene, npz)
+    return [rate, f"{TIME_SCALE / rate:g}", delay, f"{delay * TIME_SCALE:g}", late, f"{err:.1e}"]
+
+
+def _realtime_table(report, rows, t_end):
+    report.table(
+        ["rate (Hz)", "dt (simulated s)", "injected delay (wall s)", "delay (simulated s)",
+         "ticks started late", "max vertex error at the agents' final stamps"],
+        rows,
+        caption=f"Realtime, 8 congruent triangles (D0 < 1), time scale {TIME_SCALE:g}, "
+        f"rkmk4 per tick, t_end {t_end:g}; each agent's final pose against the reference at "
+        "its own stamp",
+    )
+
+
+def _notes(report):
+    report.text(
+        "- Lockstep equals the centralised trajectory to round-off, so its error is the method's; "
+        "its cost is rounds: a 4-stage method pays 4 rounds per step.",
+        "- Realtime errors combine the step, the stale peer poses (one tick or more) and "
+        "the delay. A peer's pose is a tick old, so the error is first order in the tick (dt) "
+        "however accurate the per-tick method, until the processes cannot keep the rate: "
+        "'ticks started late' counts ticks that began more than one period behind schedule "
+        "(a late agent then steps in a burst on stale poses).",
+    )
 
 
 def run(args, log):
@@ -105,180 +205,19 @@ def run(args, log):
     from ..core.scene import load_scene
     from ..ros.ros_env import private_ros_environment
     from .report import Report
+    from .ros_runs import write_scene
 
     report = Report(NAME, "Speed against accuracy over the ROS node set (`polymatch bench trade`)")
     t_end = 0.5 if args.quick else args.t_end
-    methods = (
-        [("rkmk4", 0.1)]
-        if args.quick
-        else [(m, h) for m in ("lie_euler", "lie_heun", "rkmk4") for h in (0.1, 0.05, 0.025)]
-    )
-    rows = []
+    methods = [("rkmk4", 0.1)] if args.quick else LOCKSTEP_CASES
+    cases = [(50.0, 0.0)] if args.quick else REALTIME_CASES
     with tempfile.TemporaryDirectory() as tmp, domain_id() as dom:
-        path = os.path.join(tmp, "trade_triangles.yaml")
-        with open(path, "w") as fh:
-            fh.write(SCENE_YAML)
+        path = write_scene(tmp, "trade_triangles.yaml", SCENE_YAML)
         scene = replace(load_scene(path), t_end=t_end)
-        ref = _reference(scene, np.linspace(0.0, t_end, 41))
-        env = private_ros_environment(dom)
-        from ..core.integrators import METHODS
-
-        for method, dt in methods:
-            per_step = METHODS[method].info.rounds
-            t_run = (
-                (40 if args.quick else ROUNDS) * dt / per_step
-            )  # enough rounds for a steady rate
-            log(f"lockstep {method} dt = {dt}: {t_run:g} simulated s")
-            records = os.path.join(tmp, f"lockstep_{method}_{dt}.jsonl")
-            _cli(
-                env,
-                [
-                    "run",
-                    path,
-                    "--integrator",
-                    method,
-                    "--dt",
-                    str(dt),
-                    "--t-end",
-                    str(t_run),
-                    "--hold",
-                    "1e9",
-                    "--no-monitor",
-                    "--no-compare",
-                    "-q",
-                    "--records",
-                    records,
-                    "--timeout",
-                    "300",
-                ],
-                340,
-            )
-            rates = [r.rounds_per_second for r in _agent_records(records)]
-            rps = float(np.mean(rates)) if rates else float("nan")
-            wall_per_s = per_step / (dt * rps) if rates else float("nan")
-            err = _vertex_error_over_run(scene, method, dt, ref)
-            rows.append([method, dt, per_step, f"{rps:.1f}", f"{wall_per_s:.2f}", f"{err:.1e}"])
-        report.table(
-            [
-                "integrator",
-                "dt",
-                "rounds/step",
-                "rounds/s (mean of 8 agents)",
-                "wall s per simulated s",
-                f"max vertex error over t in [0, {t_end:g}]",
-            ],
-            rows,
-            caption="Lockstep, 8 congruent triangles (D0 < 1), one agent per process, no monitor; "
-            f"rates "
-            f"over {ROUNDS} rounds; error against adaptive at tol 1e-12 on 41 "
-            "sample times",
-        )
-        rt_rows = []
-        cases = (
-            [(50.0, 0.0)]
-            if args.quick
-            else [
-                (10.0, 0.0),
-                (25.0, 0.0),
-                (50.0, 0.0),
-                (100.0, 0.0),
-                (50.0, 0.05),
-                (50.0, 0.1),
-                (50.0, 0.2),
-            ]
-        )
-        scale = 4.0
-        for rate, delay in cases:
-            log(f"realtime rate {rate:g} Hz, delay {delay:g} s")
-            npz = os.path.join(tmp, f"rt_{rate}_{delay}.npz")
-            records = os.path.join(tmp, f"rt_{rate}_{delay}.jsonl")
-            out = _cli(
-                env,
-                [
-                    "run",
-                    path,
-                    "--mode",
-                    "realtime",
-                    "--rate",
-                    str(rate),
-                    "--time-scale",
-                    str(scale),
-                    "--delay",
-                    str(delay),
-                    "--t-end",
-                    str(t_end),
-                    "--hold",
-                    "1e9",
-                    "--no-monitor",
-                    "-q",
-                    "--records",
-                    records,
-                    "--save",
-                    npz,
-                    "--timeout",
-                    "200",
-                ],
-                240,
-            )
-            ticks = [(r.steps, r.late_ticks) for r in _agent_records(records)]
-            late = (
-                f"{sum(b for _, b in ticks) / max(1, sum(a for a, _ in ticks)):.0%}"
-                if ticks
-                else "-"
-            )
-            if not os.path.exists(npz):
-                rt_rows.append(
-                    [
-                        rate,
-                        scale / rate,
-                        delay,
-                        "-",
-                        "-",
-                        "run failed: " + out.stderr.strip()[-80:],
-                    ]
-                )
-                continue
-            data = np.load(npz)
-            times = data["group0_times"]
-            agent_ref = _reference(scene, np.unique(np.append(times, 0.0)))
-            err = 0.0
-            g = scene.model.groups[0]
-            got = data["group0_centroids"][:, None, :] + np.einsum(
-                "nij,aj->nai", data["group0_rotations"], g.reference
-            )
-            for i, t in enumerate(times):
-                k = int(np.argmin(np.abs(agent_ref["times"] - t)))
-                want = agent_ref["verts"][k][i] + scene.origin
-                err = max(err, float(np.max(np.abs(got[i] - want))))
-            rt_rows.append(
-                [rate, f"{scale / rate:g}", delay, f"{delay * scale:g}", late, f"{err:.1e}"]
-            )
-        report.table(
-            [
-                "rate (Hz)",
-                "dt (simulated s)",
-                "injected delay (wall s)",
-                "delay (simulated s)",
-                "ticks started late",
-                "max vertex error at the agents' final stamps",
-            ],
-            rt_rows,
-            caption=f"Realtime, 8 congruent triangles (D0 < 1), time scale {scale:g}, "
-            "rkmk4 per tick, "
-            f"t_end {t_end:g}; each agent's final pose against the reference at "
-            "its own stamp",
-        )
-    report.text(
-        "- Lockstep equals the centralised trajectory to round-off, so its error is the method's; "
-        "its "
-        "cost is rounds: a 4-stage method pays 4 rounds per step.",
-        "- Realtime errors combine the step, the stale peer poses (one tick or more) and "
-        "the delay. A peer's "
-        "pose is a tick old, so the error is first order in the tick (dt) however "
-        "accurate the per-tick "
-        "method, until the processes cannot keep the rate: 'ticks started late' counts "
-        "ticks that began "
-        "more than one period behind schedule (a late agent then steps in a burst on "
-        "stale poses).",
-    )
+        setup = _Setup(args.quick, t_end, tmp, path, scene,
+                       _reference(scene, np.linspace(0.0, t_end, 41)),
+                       private_ros_environment(dom))
+        _lockstep_table(report, [_lockstep_row(setup, m, dt, log) for m, dt in methods], t_end)
+        _realtime_table(report, [_realtime_row(setup, r, d, log) for r, d in cases], t_end)
+    _notes(report)
     return report
