@@ -34,7 +34,7 @@ EXPECTED = {
                     "slowest match"],
     "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
               "injected delay"],
-    "sweep": ["| solver", "batch (rkmk4)", "scipy DOP853 loop", "max vertex error",
+    "sweep": ["| solver", "batch (rkmk8)", "scipy DOP853 loop", "max vertex error",
               "Speed-up (scipy loop / batch"],
 }
 

@@ -2,15 +2,17 @@
 
 B random ensembles of the Fig. 1 scene (seeds 0 .. B-1 of ``config/congruent_triangles``)
 are integrated to the scene's tolerance (each until its matching diameter is below it at
-a sample) by ``core.sweep.run_batch`` with the scene's integrator.  The same ensembles
+a sample) by ``core.sweep.run_batch``, by default with rkmk8 (DOP853's 8th-order tableau
+as a fixed-step Munthe-Kaas method, ``core.chart_rk``) at the scene's sample interval;
+``--integrator rkmk4 --dt 0.05`` is the scene's own integrator.  The same ensembles
 are then solved one at a time by scipy's DOP853 on the flattened system of
 ``bench/flat.py`` (``bench/solve.py``), each to the time at which the batch saw it match.
 
 Error: the largest vertex error max_{i,a} |x^i_a - x^i_a,ref| over the ensembles and every
-sample up to that time, against a reference of the same batch at dt/16.  scipy's tolerance
-is the loosest of 1e-4, 3e-5, 1e-5, ... 1e-12 whose error on a calibration subset is at
-most the batch's (the same max error); the timed loop runs at that tolerance, and again
-one notch tighter while its own max error (reported) exceeds the batch's.
+sample up to that time, against a reference of the same batch (same method) at dt/16.
+scipy's tolerance is the loosest of 1e-4, 3e-5, 1e-5, ... 1e-12 whose error on a calibration
+subset is at most the batch's (the same max error); the timed loop runs at that tolerance,
+and again one notch tighter while its own max error (reported) exceeds the batch's.
 If a loop of B scipy solves is too long (--scipy-ensembles), a subset is timed and the
 ratio is per ensemble (stated in the output).
 """
@@ -31,7 +33,11 @@ def add_arguments(p):
     p.add_argument("--scipy-ensembles", type=at_least(1), default=1000,
                    help="how many of them scipy solves in the timed loop (default all 1000)")
     p.add_argument("--scene", default="congruent_triangles", help="template scene")
-    p.add_argument("--dt", type=float, help="the batch's step (default: the scene's)")
+    p.add_argument("--integrator", default="rkmk8",
+                   help="the batch's fixed-step integrator (default rkmk8)")
+    p.add_argument("--dt", type=at_least(1e-6, float),
+                   help="the batch's step (default: rkmk8 the scene's sample interval, "
+                        "other integrators the scene's dt)")
 
 
 class SampledVertices:
@@ -65,7 +71,7 @@ def time_key(t):
     return round(float(t), 6)
 
 
-def reference_run(scenes, final_t, sample_times, dt):
+def reference_run(scenes, final_t, sample_times, method, dt):
     """The same ensembles at dt, never leaving the batch, to the last time any matched."""
     from dataclasses import replace
 
@@ -73,7 +79,7 @@ def reference_run(scenes, final_t, sample_times, dt):
     ref = SampledVertices(scenes[0])
     t_end = float(final_t.max())
     run_batch([replace(s, t_end=t_end, tolerance=0.0, samples=sample_times) for s in scenes],
-              dt=dt, observe=ref)
+              method, dt, observe=ref)
     return ref
 
 
@@ -124,13 +130,14 @@ def run(args, log):
     walls = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        batch = run_batch(scenes, dt=args.dt)
+        batch = run_batch(scenes, args.integrator, args.dt)
         walls.append(time.perf_counter() - t0)
     wall = min(walls)
     log(f"batch: {b} ensembles in {wall:.3f} s (best of {repeats})")
     observed = SampledVertices(scenes[0])
-    run_batch(scenes, dt=args.dt, observe=observed)
-    reference = reference_run(scenes, batch.final_t, batch.times, batch.dt / 16)
+    run_batch(scenes, args.integrator, args.dt, observe=observed)
+    reference = reference_run(scenes, batch.final_t, batch.times, args.integrator,
+                              batch.dt / 16)
     err = observed.error(reference)
     cal = min(3 if args.quick else CALIBRATION, b)
     start = len(TOLERANCES) - 1
