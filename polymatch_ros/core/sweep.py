@@ -1,7 +1,8 @@
 """Sweeps: many independent ensembles of one scene kind, integrated together (``core.batch``).
 
 ``run_batch(scenes)`` integrates B single-group scenes that differ only in their initial
-states with the scene's fixed-step integrator, all B along one batch axis, and records
+states with the scene's fixed-step integrator (or another registered one, or rkmk8 of
+``chart_rk``, by default at the sample interval), all B along one batch axis, and records
 per ensemble what ``simulate(scene, stop_when_converged=True)`` would: the first sample
 time at which the matching diameter is below the scene's tolerance (Theorems 4.1/4.2),
 the state there (or at t_end), and the diameters at every sample.  Ensembles that have
