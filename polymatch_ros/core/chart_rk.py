@@ -32,6 +32,7 @@ class ChartRK(RKMK):
         self.weights = np.asarray(self.b)
 
     def stages(self, system, y, h, coupling, centroids):
+        """``Method.stages``: slopes in the chart centred at y, one row per stage."""
         chart = Chart(system, y)
         slopes = np.empty((len(self.b), chart.n))
         slopes[0] = chart.pack(self.slopes(system, y, coupling, None))
