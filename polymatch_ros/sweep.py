@@ -63,7 +63,9 @@ def add_parser(sub):
     for name in ("kappa", "gamma", "mass"):
         p.add_argument(f"--{name}", type=_list(float, 0.0, name), default=(None,),
                        help=f"comma-separated {name} values (default: the scene's)")
-    p.add_argument("--integrator", "-i", metavar="NAME", help="fixed-step integrator")
+    p.add_argument("--integrator", "-i", metavar="NAME",
+                   help="fixed-step integrator (default: the scene's); rkmk8 is DOP853's "
+                        "8th-order tableau on a fixed step, by default the sample interval")
     p.add_argument("--dt", type=positive_float, help="step size")
     p.add_argument("--t-end", type=positive_float, help="override time.t_end")
     p.add_argument("--save", metavar="NPZ", help="save per-ensemble outcomes (npz)")

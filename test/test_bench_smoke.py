@@ -37,7 +37,7 @@ EXPECTED = {
     "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
                "true: median / max", "true / floor", "true below floor from (s)",
                "(A-2) alone (no noise, no lag"],
-    "sweep": ["| solver", "batch (rkmk4)", "scipy DOP853 loop", "max vertex error",
+    "sweep": ["| solver", "batch (rkmk8)", "scipy DOP853 loop", "max vertex error",
               "Speed-up (scipy loop / batch"],
 }
 

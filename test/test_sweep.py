@@ -6,9 +6,11 @@ import sys
 import numpy as np
 import pytest
 
-from polymatch_ros.core import simulate
-from polymatch_ros.core.batch import equilibrium_measures
-from polymatch_ros.core.sweep import classify, run_batch
+from polymatch_ros.core import METHODS, simulate
+from polymatch_ros.core.batch import HalfAngles, equilibrium_measures, pair_diameters
+from polymatch_ros.core.chart_rk import RKMK8
+from polymatch_ros.core.rk import RKMK
+from polymatch_ros.core.sweep import batch_plan, classify, run_batch
 from polymatch_ros.core.sweep_scenes import Cell, cell_scenes, rotations_at_diameter, template
 
 CASES = [  # (template, cell): angles, SO(3) SoA, SO(4) matrices; both model orders
@@ -22,13 +24,20 @@ CASES = [  # (template, cell): angles, SO(3) SoA, SO(4) matrices; both model ord
 @pytest.mark.parametrize("name,cell", CASES)
 def test_batch_equals_separate_simulate_runs(name, cell):
     """The key claim: B ensembles in one batch = B `simulate` runs, to round-off."""
+    scenes = _short_scenes(name, cell)
+    _assert_equals_simulate_runs(scenes, run_batch(scenes))
+
+
+def _short_scenes(name, cell):
     data = template(name)
     data["time"] = dict(data["time"], t_end=8.0)
     data["convergence"] = {"tolerance": 1e-2}      # some ensembles leave the batch early
-    scenes = cell_scenes(data, cell, 5, seed=3)
-    result = run_batch(scenes)
+    return cell_scenes(data, cell, 5, seed=3)
+
+
+def _assert_equals_simulate_runs(scenes, result, method=None, dt=None):
     for b, scene in enumerate(scenes):
-        traj = simulate(scene, stop_when_converged=True)
+        traj = simulate(scene, method, dt, stop_when_converged=True)
         grp = traj.scene.model.rotations
         final = traj.final.groups[0]
         assert result.final_t[b] == traj.times[-1]
@@ -42,6 +51,47 @@ def test_batch_equals_separate_simulate_runs(name, cell):
                                    atol=1e-12)
         assert np.all(np.isnan(result.diameters[t:, b]))
     assert np.any(~np.isnan(result.converged_at))
+
+
+@pytest.mark.parametrize("name,cell", CASES)
+def test_rkmk8_batch_equals_separate_runs_of_its_tableau(name, cell, monkeypatch):
+    """rkmk8 over a batch (stage sums as matrix products, ``ChartRK``) = B `simulate` runs
+    of the plain RKMK of DOP853's tableau (one array update per stage term), to round-off."""
+    monkeypatch.setitem(METHODS, "dop853_tableau", RKMK("dop853_tableau", RKMK8.a, RKMK8.b,
+                                                        8, "the plain RKMK of rkmk8's tableau"))
+    scenes = _short_scenes(name, cell)
+    result = run_batch(scenes, "rkmk8", 0.25)
+    assert (result.method, result.dt, result.rhs_evals) == ("rkmk8", 0.25, 12 * result.steps)
+    _assert_equals_simulate_runs(scenes, result, "dop853_tableau", 0.25)
+
+
+def test_rkmk8_is_eighth_order_and_defaults_to_the_sample_interval():
+    """Halving the step divides rkmk8's error by 2^7 or more (DOP853's order 8; at these
+    steps the run is not yet asymptotic: 2^10 here), as no 4th-6th order method would."""
+    data = template("congruent_triangles")
+    data["time"] = {"t_end": 4.0, "samples": {"every": 1.0}}
+    data["convergence"] = {"tolerance": 1e-14}         # none matches by t = 4
+    scenes = cell_scenes(data, Cell(agents=5), 3, seed=1)
+    assert batch_plan(scenes[0], "rkmk8").dt == 1.0
+    exact = run_batch(scenes, "rkmk8", 1 / 64).final_rot
+    errors = [np.abs(run_batch(scenes, "rkmk8", h).final_rot - exact).max() for h in (1.0, 0.5)]
+    assert errors[0] < 1e-4 and 7.0 < np.log2(errors[0] / errors[1]) < 11.0, errors
+
+
+def test_half_angle_cos_sin_are_np_cos_sin_to_one_ulp():
+    angles = np.concatenate([np.random.default_rng(0).uniform(-60, 60, 100_000),
+                             np.pi / 2 * np.arange(-40, 41), [1e-300, -5e-9]])
+    c, s = HalfAngles()._cos_sin(angles)
+    assert np.abs(c - np.cos(angles)).max() <= 2.3e-16
+    assert np.abs(s - np.sin(angles)).max() <= 2.3e-16
+
+
+def test_pair_diameters_are_the_largest_pair_distance():
+    points = np.random.default_rng(2).standard_normal((7, 5, 3, 4))    # (B, N, vertices, k)
+    laid_out = np.ascontiguousarray(points.transpose(2, 3, 1, 0))      # (vertices, k, N, B)
+    diff = points[:, :, None] - points[:, None]
+    brute = np.sqrt((diff ** 2).sum(-1)).max(axis=(1, 2, 3))
+    np.testing.assert_allclose(pair_diameters(laid_out), brute, rtol=1e-14, atol=0)
 
 
 def test_d0_below_one_all_match_first_order():
@@ -114,3 +164,11 @@ def test_cli_sweep_saves_outcomes(tmp_path):
     data = np.load(out, allow_pickle=False)
     assert list(data["N"]) == [3, 3, 3, 4, 4, 4]
     assert data["outcome"].shape == (6,)
+
+
+def test_cli_sweep_with_rkmk8_steps_by_the_sample_interval():
+    proc = _cli("-B", "3", "--integrator", "rkmk8", "--t-end", "20", "-q")
+    assert proc.returncode == 0, proc.stderr
+    assert "integrator rkmk8 dt = 0.5" in proc.stdout
+    unstable = _cli("-B", "2", "--integrator", "rkmk8", "--dt", "8", "--t-end", "20", "-q")
+    assert unstable.returncode == 2 and "rkmk8 is unstable at dt = 8" in unstable.stderr

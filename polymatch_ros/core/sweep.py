@@ -1,7 +1,8 @@
 """Sweeps: many independent ensembles of one scene kind, integrated together (``core.batch``).
 
 ``run_batch(scenes)`` integrates B single-group scenes that differ only in their initial
-states with the scene's fixed-step integrator, all B along one batch axis, and records
+states with the scene's fixed-step integrator (or another registered one, or rkmk8 of
+``chart_rk``, by default at the sample interval), all B along one batch axis, and records
 per ensemble what ``simulate(scene, stop_when_converged=True)`` would: the first sample
 time at which the matching diameter is below the scene's tolerance (Theorems 4.1/4.2),
 the state there (or at t_end), and the diameters at every sample.  Ensembles that have
@@ -15,6 +16,7 @@ mean field S = sum_k O_k vanishes (splay/twisted states, where the torque is zer
 S is); anything still moving is *too slow* (t_end too short for it).
 """
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -29,8 +31,10 @@ from .batch import (
     stack_states,
     take_ensembles,
 )
+from .chart_rk import RKMK8
 from .errors import ParameterError
-from .simulate import plan, prepare
+from .integrators import check_stability
+from .simulate import Plan, plan, prepare
 from .solver import RUNNING
 
 OUTCOMES = ("matched", "antipodal", "twisted", "other equilibrium", "too slow")
@@ -40,6 +44,8 @@ STILL = 1e-6
 NO_MEAN_FIELD = 1e-3
 #: max_{i,j} |O_i^T O_j - O_j^T O_i| below this: every pair at consensus or a half-turn apart
 SYMMETRIC = 1e-3
+#: fixed-step methods a batch runs besides the registry's (``chart_rk``)
+BATCH_METHODS = {RKMK8.name: RKMK8}
 
 
 @dataclass
@@ -85,6 +91,32 @@ def check_batch(scenes: Sequence) -> None:
                                  "shape, integrator and times")
 
 
+def batch_plan(scene, method: str | None = None, dt: float | None = None) -> Plan:
+    """The batch's fixed-step integrator: ``simulate.plan``'s, or one of BATCH_METHODS.
+
+    A BATCH_METHODS method steps by the scene's smallest sample interval unless ``dt`` is
+    given (its steps end on the samples, where ensembles are tested and leave).
+    """
+    if method not in BATCH_METHODS:
+        plan_ = plan(scene, method, dt)
+        if plan_.dt is None:
+            raise ParameterError("a sweep takes fixed-step integrators (the adaptive one would "
+                                 "share one step size between independent ensembles)")
+        return plan_
+    step = dt if dt is not None else sample_interval(scene)
+    if not (step > 0 and math.isfinite(step)):
+        raise ParameterError(f"dt must be a positive number, got {step}")
+    step = min(step, scene.t_end)
+    check_stability(BATCH_METHODS[method], scene.model, step)
+    return Plan(BATCH_METHODS[method], step, None, "chosen explicitly")
+
+
+def sample_interval(scene) -> float:
+    """The smallest gap between consecutive sample times (from t = 0), or t_end."""
+    times = np.union1d([0.0, scene.t_end], scene.samples)
+    return float(np.diff(times[times <= scene.t_end]).min())
+
+
 def run_batch(scenes: Sequence, method: str | None = None, dt: float | None = None,
               progress: Callable | None = None,
               observe: Callable | None = None) -> BatchResult:
@@ -94,10 +126,7 @@ def run_batch(scenes: Sequence, method: str | None = None, dt: float | None = No
     the stacked state of the ensembles ``live`` (indices into ``scenes``) before any leaves.
     """
     check_batch(scenes)
-    plan_ = plan(scenes[0], method, dt)
-    if plan_.dt is None:
-        raise ParameterError("a sweep takes fixed-step integrators (the adaptive one would "
-                             "share one step size between independent ensembles)")
+    plan_ = batch_plan(scenes[0], method, dt)
     scenes = [prepare(s, plan_) for s in scenes]
     model, grp = scenes[0].model, scenes[0].model.rotations
     b, n, tol = len(scenes), model.n_agents, scenes[0].tolerance
