@@ -5,7 +5,7 @@ import numpy as np
 
 from .base import Array, MeanField, RowsFirstGroup, polar_newton_schulz, rows_product
 from .cayley import cayley_series
-from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split
+from .so4 import cayley4_retract, coupling4, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
 
 
 class SOn(RowsFirstGroup):
@@ -66,10 +66,13 @@ class SOn(RowsFirstGroup):
             rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
             return rot @ g
         if self.dim == 4:
-            return cayley4_retract(self._so4_parts(xi), self._quaternion_pairs(g))
+            out, pair = cayley4_retract(self._so4_parts(xi), self._quaternion_pairs(g))
+            self._retracted = (out, pair)
+            return out
         return cayley_series(xi, g)
 
     _pairs = (None, None)
+    _retracted = (None, None)
     _parts = (None, None)
 
     def _so4_parts(self, xi):
@@ -81,10 +84,16 @@ class SOn(RowsFirstGroup):
         return parts
 
     def _quaternion_pairs(self, g):
-        """O = L(p) R(q) for d = 4, kept while the stages of a step retract around one O."""
+        """O = L(p) R(q) for d = 4, kept while the stages of a step retract around one O.
+
+        The pair of the last retracted O is known (``cayley4_retract``): the O a step ends
+        on is the next step's base, and its pair is renormalised (so that round-off does not
+        build up over steps) instead of read off the matrices again.
+        """
         cached, pairs = self._pairs
         if cached is not g:
-            pairs = quaternion_pairs(g)
+            done, pairs = self._retracted
+            pairs = quaternion_pairs(g) if done is not g else unit_pairs(pairs)
             self._pairs = (g, pairs)
         return pairs
 
@@ -113,6 +122,8 @@ class SOn(RowsFirstGroup):
         if np.ndim(s) == 3:                      # one field per row
             b = g @ np.swapaxes(s, 1, 2)
             return np.swapaxes(b, 1, 2) - b
+        if d == 4:
+            return coupling4(g, s)
         b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T)).reshape(-1, d, d)  # O S^T
         return np.swapaxes(b, 1, 2) - b
 
