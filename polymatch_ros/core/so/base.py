@@ -152,12 +152,29 @@ class RowsFirstGroup(RotationGroup):
 ONE_THREAD_PRODUCT = 1 << 18
 
 
-def rows_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+#: reused temporaries by name, each of the last shape asked for (``scratch``)
+_SCRATCH: dict = {}
+
+
+def scratch(name: str, shape: tuple) -> np.ndarray:
+    """A kept float array of ``shape`` for a temporary that never leaves the call using it.
+
+    A large temporary allocated afresh on every call costs page faults (the allocator hands
+    freed blocks of megabytes back to the system) that can exceed the arithmetic done on it;
+    one kept array per name avoids them.  Contents are undefined; never return it.
+    """
+    buf = _SCRATCH.get(name)
+    if buf is None or buf.shape != shape:
+        buf = _SCRATCH[name] = np.empty(shape)
+    return buf
+
+
+def rows_product(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """a @ b for a long (n, k) a and a small (k, m) b, in row blocks each on one thread."""
     rows = max(1, ONE_THREAD_PRODUCT // (a.shape[1] * b.shape[1]))
     if a.shape[0] <= rows:
-        return a @ b
-    out = np.empty((a.shape[0], b.shape[1]))
+        return np.matmul(a, b, out=out)
+    out = np.empty((a.shape[0], b.shape[1])) if out is None else out
     for start in range(0, a.shape[0], rows):
         np.matmul(a[start:start + rows], b, out=out[start:start + rows])
     return out

@@ -18,6 +18,8 @@ row's result depends on the rest of the batch only below round-off.
 
 import numpy as np
 
+from .base import scratch
+
 #: rows with |W|_F^2 / 8 (a bound of |M|_2) above this are solved by LAPACK
 SERIES_LIMIT = 1.0 / 16.0
 #: the product's remainder |M|^(2^k) must fall below this
@@ -44,13 +46,15 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
     factors, largest = 1, float(np.max(bound, initial=0.0))
     while largest ** (2 ** factors) >= SERIES_ROUNDOFF:     # at most 4: largest <= 1/16
         factors += 1
-    half = 0.5 * w
-    neg_m = half @ half                                 # -M = W^2 / 4
-    y = g + neg_m @ g
+    half = np.multiply(w, 0.5, out=scratch("cayley.half", w.shape))
+    neg_m = np.matmul(half, half, out=scratch("cayley.m", w.shape))   # -M = W^2 / 4
+    spare = scratch("cayley.spare", w.shape)
+    y = neg_m @ g                                       # the result: a fresh array
+    y += g
     for _ in range(factors - 1):
-        neg_m = neg_m @ neg_m
-        y += neg_m @ y
-    y += half @ y                                       # (I + W/2) (I + M)^{-1} G
+        neg_m, spare = np.matmul(neg_m, neg_m, out=spare), neg_m
+        y += np.matmul(neg_m, y, out=spare)
+    y += np.matmul(half, y, out=spare)                  # (I + W/2) (I + M)^{-1} G
     y *= 2.0
     y -= g
     return y

@@ -3,7 +3,8 @@
 
 import numpy as np
 
-from .base import Array, MeanField, RowsFirstGroup, polar_newton_schulz, rows_product
+from .base import (Array, MeanField, RowsFirstGroup, polar_newton_schulz, rows_product,
+                   scratch)
 from .cayley import cayley_series
 from .so4 import cayley4_retract, coupling4, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
 
@@ -102,9 +103,11 @@ class SOn(RowsFirstGroup):
             return a
         if self.dim == 4:
             return dcay_inv4(xi, a, self._so4_parts(xi))
-        half = 0.5 * xi                         # (I - H) A (I + H) = B + B H,  B = A - H A
-        b = a - half @ a
-        b += b @ half
+        # (I - H) A (I + H) = B + B H,  B = A - H A; temporaries kept (``scratch``)
+        half = np.multiply(xi, 0.5, out=scratch("dcay.half", xi.shape))
+        prod = np.matmul(half, a, out=scratch("dcay.product", a.shape))
+        b = a - prod
+        b += np.matmul(b, half, out=prod)
         return b
 
     def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
@@ -124,7 +127,8 @@ class SOn(RowsFirstGroup):
             return np.swapaxes(b, 1, 2) - b
         if d == 4:
             return coupling4(g, s)
-        b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T)).reshape(-1, d, d)  # O S^T
+        b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T),              # O S^T
+                         out=scratch("coupling", (len(g) * d, d))).reshape(-1, d, d)
         return np.swapaxes(b, 1, 2) - b
 
     def tangent(self, a: Array, g: Array) -> Array:
