@@ -12,7 +12,8 @@ d = 4: closed forms through so(4) = so(3) + so(3) (``so4``).
 d >= 5: with M = -W^2/4 (symmetric, 0 <= M <= |W|_F^2/8), (I - W/2)^{-1} =
 (I + W/2)(I + M)^{-1} and (I + M)^{-1} = prod_{j<k} (I + (-M)^(2^j)) to round-off once
 |M|^(2^k) < 2^-60, or = sum_{j<n} (-M)^j (Horner: n - 1 products against 2k - 1) once
-|M|^n < 2^-60, whichever takes fewer products (the sum, for the small W of a step).  A rotation whose |W|_F^2/8 exceeds SERIES_LIMIT is solved by LAPACK
+|M|^n < 2^-60, whichever takes fewer products (the sum, for the small W of a step).
+A rotation whose |W|_F^2/8 exceeds SERIES_LIMIT is solved by LAPACK
 instead (a choice made by that row alone); k follows the largest |W| of the others, so a
 row's result depends on the rest of the batch only below round-off.
 """

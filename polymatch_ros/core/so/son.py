@@ -3,8 +3,7 @@
 
 import numpy as np
 
-from .base import (Array, MeanField, RowsFirstGroup, polar_newton_schulz, rows_product,
-                   scratch)
+from .base import Array, MeanField, RowsFirstGroup, polar_newton_schulz, rows_product, scratch
 from .cayley import cayley_series
 from .so4 import cayley4_retract, coupling4, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
 
