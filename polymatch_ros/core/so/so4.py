@@ -21,7 +21,7 @@ around the same O (the stages of one step).
 
 import numpy as np
 
-from .base import rows_product
+from .base import rows_product, scratch
 
 
 def _quaternion_tables():
@@ -77,8 +77,8 @@ def _cayley_factors(ab):
 
 def pair_matrices(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(4, N) quaternions p, q -> the (N, 4, 4) matrices of x -> p x conj(q)."""
-    outer = (p[:, None, :] * q[None, :, :]).reshape(16, -1)
-    return rows_product(outer.T, _T4).reshape(-1, 4, 4)
+    outer = np.multiply(p[:, None, :], q[None, :, :], out=scratch("so4.outer", (4, 4, p.shape[1])))
+    return rows_product(outer.reshape(16, -1).T, _T4).reshape(-1, 4, 4)
 
 
 def cayley4(w: np.ndarray) -> np.ndarray:
@@ -160,7 +160,8 @@ def coupling4(o: np.ndarray, s: np.ndarray) -> np.ndarray:
 def coupling_parts4(o: np.ndarray, s: np.ndarray) -> np.ndarray:
     """so4_split(S O_i^T - O_i S^T) as (6, N): the same linear map followed by the split."""
     kernel = (_COUPLE @ s.reshape(16)).reshape(16, 16) @ (0.25 * _B4T)
-    return np.ascontiguousarray(rows_product(o.reshape(-1, 16), kernel).T)
+    parts = rows_product(o.reshape(-1, 16), kernel, out=scratch("so4.parts", (len(o), 6)))
+    return np.ascontiguousarray(parts.T)
 
 
 def _cross(u, v):
