@@ -278,7 +278,10 @@ class AdaptiveSolver:
         x(dt) = mean + p(dt) (x - mean) with the flow's own propagator p(dt).
         """
         flow, mean_x = self.system.flows[gi], self.coupling.groups[gi].mean_x
-        decay = np.array([flow.propagator(dt)[1] for dt in dts])[:, None, None]
+        if flow.mass == 0.0:            # propagator(dt)[1] = exp(-kappa dt / gamma), all at once
+            decay = np.exp(-flow.kappa * np.array(dts) / flow.gamma)[:, None, None]
+        else:
+            decay = np.array([flow.propagator(dt)[1] for dt in dts])[:, None, None]
         xs = mean_x + decay * (gs.x - mean_x)
         return [(x, None) for x in xs]
 
