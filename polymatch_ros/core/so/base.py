@@ -180,6 +180,22 @@ def rows_product(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) ->
     return out
 
 
+def row_sum(a: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """sum_k w_k a[k] of a long (n, k) a, in row blocks each on one thread (``rows_product``).
+
+    A single long vector-matrix product is spread by OpenBLAS over threads that stall on a
+    busy machine.
+    """
+    rows = max(1, ONE_THREAD_PRODUCT // a.shape[1])
+    w = np.ones(a.shape[0]) if weights is None else np.asarray(weights, dtype=float)
+    if a.shape[0] <= rows:
+        return w @ a
+    out = w[:rows] @ a[:rows]
+    for start in range(rows, a.shape[0], rows):
+        out += w[start:start + rows] @ a[start:start + rows]
+    return out
+
+
 def polar_newton_schulz(mats: np.ndarray, tol: float = 1e-15, max_iter: int = 12) -> np.ndarray:
     """Polar factor of near-orthogonal (N, d, d) matrices.
 

@@ -3,7 +3,15 @@
 
 import numpy as np
 
-from .base import Array, MeanField, RowsFirstGroup, polar_newton_schulz, rows_product, scratch
+from .base import (
+    Array,
+    MeanField,
+    RowsFirstGroup,
+    polar_newton_schulz,
+    row_sum,
+    rows_product,
+    scratch,
+)
 from .cayley import cayley_series
 from .so4 import cayley4_retract, coupling4, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
 
@@ -110,10 +118,8 @@ class SOn(RowsFirstGroup):
         return b
 
     def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
-        # a BLAS product: summing over the leading axis of (N, d, d) is several times slower
-        n = g.shape[0]
-        w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
-        return (w @ g.reshape(n, -1)).reshape(self.dim, self.dim)
+        # BLAS products on one thread each: summing over the leading axis of (N, d, d) is slower
+        return row_sum(g.reshape(len(g), -1), weights).reshape(self.dim, self.dim)
 
     def neighbour_fields(self, g: Array, weights) -> MeanField:
         d = self.dim
