@@ -133,35 +133,33 @@ def cayley4_retract(ab: np.ndarray, pair: tuple[np.ndarray, np.ndarray]):
     return pair_matrices(*new_pair), new_pair
 
 
-def _coupling_table():
-    """C with (C @ vec(S)).reshape(16, 16) = K(S), vec(S O^T - O S^T) = vec(O) @ K(S).
-
-    d(S O^T - O S^T)_ij / dO_kl = delta_jk S_il - delta_ik S_jl.
-    """
-    eye = np.eye(4)
-    table = (np.einsum("jk,im,ln->klijmn", eye, eye, eye)
-             - np.einsum("ik,jm,ln->klijmn", eye, eye, eye))
-    return np.ascontiguousarray(table.reshape(256, 16))
-
-
-_COUPLE = _coupling_table()
-
-
-def coupling4(o: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """S O_i^T - O_i S^T for (N, 4, 4) rotations and one (4, 4) S: one (N, 16) x (16, 16) product.
-
-    The map O -> S O^T - O S^T is linear: its 16 x 16 matrix is built from S once, and the
-    skew matrices come out contiguous (no transposed copy of an (N, 4, 4) array).
-    """
-    kernel = (_COUPLE @ s.reshape(16)).reshape(16, 16)
-    return rows_product(o.reshape(-1, 16), kernel).reshape(-1, 4, 4)
+#: flat indices of the entries (i, j) above the diagonal of a 4x4 matrix: (0, 1), (0, 2),
+#: (0, 3), (1, 2), (1, 3), (2, 3); and of their transposes (j, i)
+_UPPER = (1, 2, 3, 6, 7, 11)
+_LOWER = (4, 8, 12, 9, 13, 14)
 
 
 def coupling_parts4(o: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """so4_split(S O_i^T - O_i S^T) as (6, N): the same linear map followed by the split."""
-    kernel = (_COUPLE @ s.reshape(16)).reshape(16, 16) @ (0.25 * _B4T)
-    parts = rows_product(o.reshape(-1, 16), kernel, out=scratch("so4.parts", (len(o), 6)))
-    return np.ascontiguousarray(parts.T)
+    """so4_split(S O_i^T - O_i S^T) as (6, N), for (N, 4, 4) rotations and one (4, 4) S.
+
+    B = O S^T by one (4N, 4) x (4, 4) product; the kernel's entries above the diagonal are
+    w_ij = B_ji - B_ij, one subtraction each (exactly 0 where S O^T is symmetric, e.g. one
+    agent), and so4_split reads them in pairs: a = -(w01 + w23, w02 - w13, w03 + w12) / 2,
+    b = (w01 - w23, w02 + w13, w03 - w12) / 2.  No transposed (N, 4, 4) copy is made.
+    """
+    n = len(o)
+    b = rows_product(o.reshape(-1, 4), np.ascontiguousarray(s.T),
+                     out=scratch("so4.product", (4 * n, 4))).reshape(n, 16).T
+    w = scratch("so4.upper", (6, n))
+    for k, (up, low) in enumerate(zip(_UPPER, _LOWER)):
+        np.subtract(b[low], b[up], out=w[k])
+    out = np.empty((6, n))
+    for k, (first, second, sign) in enumerate(((0, 5, 1.0), (1, 4, -1.0), (2, 3, 1.0))):
+        np.add(w[first], sign * w[second], out=out[k])
+        np.subtract(w[first], sign * w[second], out=out[k + 3])
+    out[:3] *= -0.5
+    out[3:] *= 0.5
+    return out
 
 
 def _cross(u, v):

@@ -13,7 +13,7 @@ from .base import (
     scratch,
 )
 from .cayley import cayley_series
-from .so4 import cayley4_retract, coupling4, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
+from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
 
 
 class SOn(RowsFirstGroup):
@@ -130,8 +130,6 @@ class SOn(RowsFirstGroup):
         if np.ndim(s) == 3:                      # one field per row
             b = g @ np.swapaxes(s, 1, 2)
             return np.swapaxes(b, 1, 2) - b
-        if d == 4:
-            return coupling4(g, s)
         b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T),              # O S^T
                          out=scratch("coupling", (len(g) * d, d))).reshape(-1, d, d)
         return np.swapaxes(b, 1, 2) - b
