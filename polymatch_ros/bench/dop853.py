@@ -352,10 +352,9 @@ def run(args, log):
                   "A: ours/scipy (median)", "B: ours ms", "B: scipy ms", "B: ours/scipy (best)",
                   "B: ours/scipy (median)"],
                  _target_ratio_rows(results, ours, theirs, RATIO_TARGETS),
-                 caption=f"{ours} against {theirs} at each error target: wall interpolated at "
-                         f"that max error; best: of the best of {repeats} walls, median: of "
-                         f"the {repeats} sweeps' own ratios (\"-\": the sweep does not bracket "
-                         "the target)")
+                 caption=f"{ours} against {theirs} at each error target, walls interpolated; "
+                         f"best: of best walls; median: of the {repeats} sweeps' own ratios "
+                         "(\"-\": the sweep does not bracket the target)")
     report.text(
         '- "wall ms interpolated": log(wall) linear in log(error) between the two sweep points '
         f'around {target:.0e} ("-": the sweep does not bracket the target).',
