@@ -1,5 +1,6 @@
 """The interface of the batched SO(d) representations, and the polar factor they share."""
 
+import threading
 from collections.abc import Sequence
 
 import numpy as np
@@ -152,8 +153,8 @@ class RowsFirstGroup(RotationGroup):
 ONE_THREAD_PRODUCT = 1 << 18
 
 
-#: reused temporaries by name, each of the last shape asked for (``scratch``)
-_SCRATCH: dict = {}
+#: reused temporaries by name, each of the last shape asked for, one set per thread (``scratch``)
+_SCRATCH = threading.local()
 
 
 def scratch(name: str, shape: tuple) -> np.ndarray:
@@ -161,11 +162,12 @@ def scratch(name: str, shape: tuple) -> np.ndarray:
 
     A large temporary allocated afresh on every call costs page faults (the allocator hands
     freed blocks of megabytes back to the system) that can exceed the arithmetic done on it;
-    one kept array per name avoids them.  Contents are undefined; never return it.
+    one kept array per name (and thread) avoids them.  Contents are undefined; never return it.
     """
-    buf = _SCRATCH.get(name)
+    kept = _SCRATCH.__dict__
+    buf = kept.get(name)
     if buf is None or buf.shape != shape:
-        buf = _SCRATCH[name] = np.empty(shape)
+        buf = kept[name] = np.empty(shape)
     return buf
 
 
