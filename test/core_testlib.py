@@ -40,9 +40,30 @@ def skew_matrices(rep, a):
         out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -z, y, -x
         out[:, 1, 0], out[:, 2, 0], out[:, 2, 1] = z, -y, x
         return out
+    if rep.name == "matrix" and rep.dim == 4 and np.ndim(a) == 2:
+        return _so4_hat(np.asarray(a, dtype=float))
     if rep.name == "matrix":
         return np.array(a, dtype=float)
     raise AssertionError(f"unknown representation {rep.name}")
+
+
+def _hamilton(u, v):
+    """Quaternion products u v of (4, N) arrays: (u0 v0 - u.v, u0 v + v0 u + u x v)."""
+    return np.concatenate([(u[0] * v[0] - np.sum(u[1:] * v[1:], axis=0))[None],
+                           u[0] * v[1:] + v[0] * u[1:] + np.cross(u[1:], v[1:], axis=0)])
+
+
+def _so4_hat(parts):
+    """so(4) held as self-dual parts (6, N) = (a, b) -> (N, 4, 4): W x = a x - x b."""
+    n = parts.shape[1]
+    a = np.concatenate([np.zeros((1, n)), parts[:3]])
+    b = np.concatenate([np.zeros((1, n)), parts[3:]])
+    out = np.empty((n, 4, 4))
+    for j in range(4):                            # column j: the image of the unit e_j
+        e = np.zeros((4, n))
+        e[j] = 1.0
+        out[:, :, j] = (_hamilton(a, e) - _hamilton(e, b)).T
+    return out
 
 
 def defect(mats):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from polymatch_ros.core.so import SOn
+from polymatch_ros.core.so import SO4, SOn, group_for
 from polymatch_ros.core.so.cayley import SERIES_LIMIT, cayley_series
 from polymatch_ros.core.so.so4 import cayley4, dcay_inv4, pair_matrices, quaternion_pairs
 
@@ -90,3 +90,34 @@ def test_so4_rotations_are_unit_quaternion_pairs_and_retractions_stay_in_so4():
         rot = grp.retract(_skew(rng, 200, 4, 0.3), rot)
     assert np.max(np.abs(np.swapaxes(rot, 1, 2) @ rot - np.eye(4))) < 1e-14
     assert np.all(np.linalg.det(rot) > 0)
+
+
+def test_so4_self_dual_algebra_agrees_with_the_skew_matrix_representation():
+    """SO4 (so(4) as (6, N) parts) and SOn(4) (skew matrices) are the same maps to round-off."""
+    rng = np.random.default_rng(6)
+    g, w, x = _rotations(rng, 100, 4), _skew(rng, 100, 4, 0.3), _skew(rng, 100, 4, 1.0)
+    soa, mat = SO4(), SOn(4)
+    xi, a = soa.algebra_from_skew(w), soa.algebra_from_skew(x)
+    assert xi.shape == (6, 100)
+    np.testing.assert_allclose(soa.algebra_to_skew(xi), w, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(soa.algebra_sq_norm(xi), mat.algebra_sq_norm(w), rtol=1e-14)
+    np.testing.assert_allclose(soa.retract(xi, g), mat.retract(w, g), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(soa.algebra_to_skew(soa.dpsi_inv(xi, a)), mat.dpsi_inv(w, x),
+                               rtol=0, atol=1e-14)
+    s, fields = mat.mean_field(g), g[::-1].copy()          # one field, and one per row
+    for field in (s, fields):
+        np.testing.assert_allclose(soa.algebra_to_skew(soa.coupling(g, field)),
+                                   mat.coupling(g, field), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(soa.tangent(xi, g), mat.tangent(w, g), rtol=0, atol=1e-15)
+    assert group_for(4).__class__ is SO4 and group_for(4, "matrix").__class__ is SO4
+
+
+def test_so4_steps_hand_on_their_quaternion_pairs_without_drifting_off_so4():
+    """Each retraction's pair is the next base's pair (renormalised): no round-off build-up."""
+    rng = np.random.default_rng(7)
+    grp, rot = SO4(), _rotations(rng, 200, 4)
+    for _ in range(300):
+        rot = grp.retract(grp.algebra_from_skew(_skew(rng, 200, 4, 0.3)), rot)
+    assert np.max(np.abs(np.swapaxes(rot, 1, 2) @ rot - np.eye(4))) < 1e-14
+    p, q = grp._quaternion_pairs(rot)
+    np.testing.assert_allclose(pair_matrices(p, q), rot, rtol=0, atol=1e-14)

@@ -15,10 +15,10 @@ follow the exact linear flow of Proposition 2.1 and cost O(N d) per step.
 Representations compared at d = 3: "so3" (default: 3x3 matrices in
 structure-of-arrays layout, Cayley map in closed form), "so3-exp" (same
 layout, Rodrigues' exp) and "matrix" (N x d x d arrays, the representation
-used for d >= 4: the Cayley map in closed form through so(4) = so(3) + so(3)
-for d = 4, by batched matrix products otherwise).  A table times d = 3, 4, 10
-side by side at one N and reports each cost against the previous d's.  ``lie_euler`` (1
-evaluation) and ``rk4_proj`` (classical RK4 in R^{dxd} + polar projection)
+used for d >= 4: for d = 4 so(4) = so(3) + so(3) held as six length-N rows and the
+Cayley map through quaternion pairs, by batched matrix products otherwise).  A table
+times d = 3, 4, 10 side by side at one N and reports each cost against the previous d's.
+``lie_euler`` (1 evaluation) and ``rk4_proj`` (classical RK4 in R^{dxd} + polar projection)
 are shown for comparison.  Each repeat starts from a fresh copy of the
 initial state, so no cached mean field is reused.
 """
@@ -258,8 +258,8 @@ def dimension_ratios(args, log, report):
                          f"dimensions interleaved ({repeats} repeats each)")
     report.text("- A step costs O(N d^3): the ratio to the previous dimension should stay near "
                 "or below (d / previous d)^3; d = 3 (closed-form SoA) to d = 4 (matrices, "
-                "closed-form Cayley through so(4) = so(3) + so(3)) is the change of "
-                "representation.")
+                "so(4) = so(3) + so(3) as (6, N) rows, Cayley through quaternion pairs) is the "
+                "change of representation.")
     return dict(zip(dims, timings))
 
 

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.integrate import DOP853
 
-from .adaptive_chart import Chart
+from .adaptive_chart import Chart, RotationRates
 from .centroids import CentroidFlow
 from .errors import PolymatchError, StepLimitError
 from .model import GroupState, Model, State, System
@@ -136,6 +136,8 @@ class AdaptiveSolver:
         self.cap = self._check_stiffness()
         self.coupling = system.couple(state.groups)
         self.chart = Chart(system, state)
+        #: the one-group, rotations-only evaluation without state objects, where it applies
+        self.fast = RotationRates(self.chart) if RotationRates.applies(self.chart) else None
         # stage slopes, reused by every attempt; the last rows hold the dense-output stages
         self.K = np.empty((N_DENSE, self.chart.n))
         self.rotation_scale = np.full(self.chart.n, method.atol + method.rtol * 1.0)
@@ -172,11 +174,22 @@ class AdaptiveSolver:
                 "integrator.max_steps, loosen the tolerance or use a fixed dt")
 
 
-    def _fun(self, chart, vec):
+    def _fun(self, chart, vec, full=False):
+        """(flat chart rates, raw rates, stage State) at the increment ``vec``; one evaluation.
+
+        ``full=False``: the flat rates only where ``self.fast`` applies (raw and stage None).
+        """
+        self.nfev += 1
+        fast = self.fast
+        if fast is not None:
+            k, rot, rate = fast(chart, vec)
+            if not full:
+                return k, None, None
+            stage, raw = fast.stage(chart, rot, rate)
+            return k, raw, stage
         stage, thetas = chart.state(vec)
         system = chart.system
         raw = system.rates(stage, system.couple(stage.groups, first_stage=False))
-        self.nfev += 1
         return chart.pack(system.in_chart(raw, thetas)), raw, stage
 
     def _error_norm(self, K, h, scale):
@@ -189,12 +202,12 @@ class AdaptiveSolver:
         return abs(h) * n5 / math.sqrt((n5 + 0.01 * n3) * len(scale))
 
     def _attempt(self, chart, h, k0):
-        meth, K = self.method, self.K
+        meth, K, fun = self.method, self.K, self._fun
         K[0] = k0
         for s, row in enumerate(meth.rows, start=1):
-            K[s] = self._fun(chart, (row @ K[:s]) * h)[0]
+            K[s] = fun(chart, (row @ K[:s]) * h)[0]
         theta = (K[:N_STAGES].T @ meth.B) * h
-        K[N_STAGES], raw_new, y_new = self._fun(chart, theta)
+        K[N_STAGES], raw_new, y_new = fun(chart, theta, full=True)
         if chart.rotations_only:                     # rotations have unit size: a fixed scale
             scale = self.rotation_scale
         else:
@@ -265,7 +278,10 @@ class AdaptiveSolver:
         x(dt) = mean + p(dt) (x - mean) with the flow's own propagator p(dt).
         """
         flow, mean_x = self.system.flows[gi], self.coupling.groups[gi].mean_x
-        decay = np.array([flow.propagator(dt)[1] for dt in dts])[:, None, None]
+        if flow.mass == 0.0:            # propagator(dt)[1] = exp(-kappa dt / gamma), all at once
+            decay = np.exp(-flow.kappa * np.array(dts) / flow.gamma)[:, None, None]
+        else:
+            decay = np.array([flow.propagator(dt)[1] for dt in dts])[:, None, None]
         xs = mean_x + decay * (gs.x - mean_x)
         return [(x, None) for x in xs]
 

@@ -6,11 +6,9 @@ offsets.  ``Chart.state`` turns an increment into the stage state the right-hand
 ``Chart.pack`` the right-hand side's rates into one flat vector.
 """
 
-import copy
-
 import numpy as np
 
-from .model import GroupState, State
+from .model import Coupling, GroupCoupling, GroupState, State
 
 
 class Chart:
@@ -57,7 +55,8 @@ class Chart:
 
     def at(self, y):
         """The same layout centred at another state of the ensemble (the next step's chart)."""
-        chart = copy.copy(self)
+        chart = Chart.__new__(Chart)                 # a shallow copy (copy.copy costs more)
+        chart.__dict__.update(self.__dict__)
         if self.rotations_only:
             chart.y = y
         else:
@@ -98,3 +97,49 @@ class Chart:
         for gi, kind, _shape, sl in self.parts:
             out[sl] = rates[gi][self._INDEX[kind]].reshape(-1)
         return out
+
+
+class RotationRates:
+    """Chart rates of a one-group, rotations-only first-order chart, without state objects.
+
+    For such a chart (no graph: one mean field for the group) ``Chart.state``,
+    ``System.couple(first_stage=False)``, ``System.rates`` and ``System.in_chart`` reduce to
+
+        O = psi(Theta) O_n,  S = sum_k [s_k] O_k,  k = dpsi^{-1}_Theta(W(O))   (A-2), (F-1),
+
+    and this makes exactly those calls, in that order, so its rates are bitwise the general
+    path's; it only skips building a State, GroupState and Coupling for every stage.
+    """
+
+    def __init__(self, chart):
+        system = chart.system
+        self.gi, _, self.shape, _ = chart.parts[0]
+        self.group, self.system = system.group, system
+        self.scales = system.model.groups[self.gi].scales
+        self.slot = [None] * len(chart.y.groups)
+
+    @staticmethod
+    def applies(chart) -> bool:
+        model = chart.system.model
+        return (chart.single_part and model.order == 1 and model.centroids_exact
+                and model.groups[chart.parts[0][0]].graph is None)
+
+    def __call__(self, chart, vec):
+        """(flat chart rates, stage rotations, raw rate W) at the increment ``vec``."""
+        grp, gi = self.group, self.gi
+        theta = vec.reshape(self.shape)
+        rot = grp.retract(theta, chart.y.groups[gi].rot)
+        slot = self.slot
+        slot[gi] = GroupCoupling(grp.mean_field(rot, self.scales), grp.count(rot))
+        rate = self.system.rotation_rate(gi, rot, Coupling(tuple(slot)))
+        k = rate if grp.abelian else grp.dpsi_inv(theta, rate)
+        return k.reshape(-1), rot, rate
+
+    def stage(self, chart, rot, rate):
+        """(State, raw rates) of the stage at rotations ``rot``: what ``Chart.state`` and
+        ``System.rates`` return there."""
+        groups, raw = list(chart.y.groups), [None] * len(chart.y.groups)
+        gs = groups[self.gi]
+        groups[self.gi] = GroupState(gs.x, rot, gs.v, gs.w)
+        raw[self.gi] = (rate, None, None, None)
+        return State(chart.y.t, tuple(groups)), raw

@@ -28,28 +28,32 @@ Representations
 ``SOn``  any d >= 2: matrices (N, d, d); so(d) as skew matrices (N, d, d).
          Cayley map without per-matrix solves (``cayley``): closed forms through
          so(4) = so(3) + so(3) for d = 4, batched matrix products otherwise.
+``SO4``  d = 4: matrices (N, 4, 4) as in ``SOn``; so(4) as its self-dual parts (6, N),
+         structure-of-arrays, so a step's increments never pass through 4x4 skew matrices.
 """
 
 from .base import RotationGroup, polar_newton_schulz
 from .so2 import SO2
 from .so3 import SO3
+from .so4_group import SO4
 from .son import SOn
 
-__all__ = ["SO2", "SO3", "SOn", "RotationGroup", "group_for", "polar_newton_schulz"]
+__all__ = ["SO2", "SO3", "SO4", "SOn", "RotationGroup", "group_for", "polar_newton_schulz"]
 
 
 def group_for(dim: int, representation: str = "auto") -> RotationGroup:
     """The cheapest exact representation of SO(dim), or the one asked for.
 
     ``auto``: angles for d = 2, SoA Cayley for d = 3, matrices for d >= 4.
-    ``matrix``: the general (N, d, d) representation for any d (the full model).
+    ``matrix``: the general (N, d, d) representation for any d (the full model); for d = 4
+    its algebra is held in self-dual coordinates (``SO4``).
     """
     if representation == "auto":
         if dim == 2:
             return SO2()
         if dim == 3:
             return SO3("cayley")
-        return SOn(dim)
+        return SO4() if dim == 4 else SOn(dim)
     if representation == "angle":
         if dim != 2:
             raise ValueError("the angle representation exists only for d = 2")
@@ -59,5 +63,5 @@ def group_for(dim: int, representation: str = "auto") -> RotationGroup:
             raise ValueError("the so3 representation exists only for d = 3")
         return SO3("exp" if representation == "so3-exp" else "cayley")
     if representation == "matrix":
-        return SOn(dim)
+        return SO4() if dim == 4 else SOn(dim)
     raise ValueError(f"unknown rotation representation {representation!r}")

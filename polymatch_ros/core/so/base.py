@@ -1,5 +1,6 @@
 """The interface of the batched SO(d) representations, and the polar factor they share."""
 
+import threading
 from collections.abc import Sequence
 
 import numpy as np
@@ -152,14 +153,48 @@ class RowsFirstGroup(RotationGroup):
 ONE_THREAD_PRODUCT = 1 << 18
 
 
-def rows_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+#: reused temporaries by name, each of the last shape asked for, one set per thread (``scratch``)
+_SCRATCH = threading.local()
+
+
+def scratch(name: str, shape: tuple) -> np.ndarray:
+    """A kept float array of ``shape`` for a temporary that never leaves the call using it.
+
+    A large temporary allocated afresh on every call costs page faults (the allocator hands
+    freed blocks of megabytes back to the system) that can exceed the arithmetic done on it;
+    one kept array per name (and thread) avoids them.  Contents are undefined; never return it.
+    """
+    kept = _SCRATCH.__dict__
+    buf = kept.get(name)
+    if buf is None or buf.shape != shape:
+        buf = kept[name] = np.empty(shape)
+    return buf
+
+
+def rows_product(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """a @ b for a long (n, k) a and a small (k, m) b, in row blocks each on one thread."""
     rows = max(1, ONE_THREAD_PRODUCT // (a.shape[1] * b.shape[1]))
     if a.shape[0] <= rows:
-        return a @ b
-    out = np.empty((a.shape[0], b.shape[1]))
+        return np.matmul(a, b, out=out)
+    out = np.empty((a.shape[0], b.shape[1])) if out is None else out
     for start in range(0, a.shape[0], rows):
         np.matmul(a[start:start + rows], b, out=out[start:start + rows])
+    return out
+
+
+def row_sum(a: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """sum_k w_k a[k] of a long (n, k) a, in row blocks each on one thread (``rows_product``).
+
+    A single long vector-matrix product is spread by OpenBLAS over threads that stall on a
+    busy machine.
+    """
+    rows = max(1, ONE_THREAD_PRODUCT // a.shape[1])
+    w = np.ones(a.shape[0]) if weights is None else np.asarray(weights, dtype=float)
+    if a.shape[0] <= rows:
+        return w @ a
+    out = w[:rows] @ a[:rows]
+    for start in range(rows, a.shape[0], rows):
+        out += w[start:start + rows] @ a[start:start + rows]
     return out
 
 

@@ -11,12 +11,16 @@ d = 4: closed forms through so(4) = so(3) + so(3) (``so4``).
 
 d >= 5: with M = -W^2/4 (symmetric, 0 <= M <= |W|_F^2/8), (I - W/2)^{-1} =
 (I + W/2)(I + M)^{-1} and (I + M)^{-1} = prod_{j<k} (I + (-M)^(2^j)) to round-off once
-|M|^(2^k) < 2^-60.  A rotation whose |W|_F^2/8 exceeds SERIES_LIMIT is solved by LAPACK
+|M|^(2^k) < 2^-60, or = sum_{j<n} (-M)^j (Horner: n - 1 products against 2k - 1) once
+|M|^n < 2^-60, whichever takes fewer products (the sum, for the small W of a step).
+A rotation whose |W|_F^2/8 exceeds SERIES_LIMIT is solved by LAPACK
 instead (a choice made by that row alone); k follows the largest |W| of the others, so a
 row's result depends on the rest of the batch only below round-off.
 """
 
 import numpy as np
+
+from .base import scratch
 
 #: rows with |W|_F^2 / 8 (a bound of |M|_2) above this are solved by LAPACK
 SERIES_LIMIT = 1.0 / 16.0
@@ -41,16 +45,24 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
         if np.any(near):
             out[near] = cayley_series(w[near], g[near])
         return out
-    factors, largest = 1, float(np.max(bound, initial=0.0))
+    factors, terms, largest = 1, 2, float(np.max(bound, initial=0.0))
     while largest ** (2 ** factors) >= SERIES_ROUNDOFF:     # at most 4: largest <= 1/16
         factors += 1
-    half = 0.5 * w
-    neg_m = half @ half                                 # -M = W^2 / 4
-    y = g + neg_m @ g
-    for _ in range(factors - 1):
-        neg_m = neg_m @ neg_m
-        y += neg_m @ y
-    y += half @ y                                       # (I + W/2) (I + M)^{-1} G
+    while largest ** terms >= SERIES_ROUNDOFF and terms < 2 ** factors:
+        terms += 1
+    half = np.multiply(w, 0.5, out=scratch("cayley.half", w.shape))
+    neg_m = np.matmul(half, half, out=scratch("cayley.m", w.shape))   # -M = W^2 / 4
+    spare = scratch("cayley.spare", w.shape)
+    y = neg_m @ g                                       # the result: a fresh array
+    y += g
+    if terms - 1 < 2 * factors - 1:     # small W: G - M (G - M (G ...)), fewer products
+        for _ in range(terms - 2):
+            np.add(g, np.matmul(neg_m, y, out=spare), out=y)
+    else:
+        for _ in range(factors - 1):
+            neg_m, spare = np.matmul(neg_m, neg_m, out=spare), neg_m
+            y += np.matmul(neg_m, y, out=spare)
+    y += np.matmul(half, y, out=spare)                  # (I + W/2) (I + M)^{-1} G
     y *= 2.0
     y -= g
     return y

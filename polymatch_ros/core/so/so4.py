@@ -21,12 +21,11 @@ around the same O (the stages of one step).
 
 import numpy as np
 
-from .base import rows_product
+from .base import rows_product, scratch
 
 
 def _quaternion_tables():
-    """(T, B, M): T[(alpha, beta), (i, j)] = L(e_alpha) R(e_beta); B: the so(4) basis L_c, R_c;
-    M[gamma, (alpha, beta)]: the product e_alpha e_beta has e_gamma-component M."""
+    """(T, B): T[(alpha, beta), (i, j)] = L(e_alpha) R(e_beta); B: the so(4) basis L_c, R_c."""
     # e_alpha e_beta = sum_gamma mult[alpha, beta, gamma] e_gamma (Hamilton's table)
     mult = np.zeros((4, 4, 4))
     prod = {(0, 0): (1, 0), (1, 1): (-1, 0), (2, 2): (-1, 0), (3, 3): (-1, 0),
@@ -41,10 +40,10 @@ def _quaternion_tables():
     right = np.einsum("abg,b->bga", mult, conj)                  # R(e_b)[g, a]: x -> x conj(e_b)
     t = np.einsum("aik,bkj->abij", left, right).reshape(16, 16)
     basis = np.concatenate([left[1:], right[1:]]).reshape(6, 16)
-    return t, basis, np.ascontiguousarray(mult.reshape(16, 4).T)
+    return t, basis
 
 
-_T4, _B4, _MULT = _quaternion_tables()
+_T4, _B4 = _quaternion_tables()
 _B4T = np.ascontiguousarray(_B4.T)
 _T4T = np.ascontiguousarray(_T4.T)
 
@@ -78,8 +77,8 @@ def _cayley_factors(ab):
 
 def pair_matrices(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(4, N) quaternions p, q -> the (N, 4, 4) matrices of x -> p x conj(q)."""
-    outer = (p[:, None, :] * q[None, :, :]).reshape(16, -1)
-    return rows_product(outer.T, _T4).reshape(-1, 4, 4)
+    outer = np.multiply(p[:, None, :], q[None, :, :], out=scratch("so4.outer", (4, 4, p.shape[1])))
+    return rows_product(outer.reshape(16, -1).T, _T4).reshape(-1, 4, 4)
 
 
 def cayley4(w: np.ndarray) -> np.ndarray:
@@ -102,15 +101,65 @@ def quaternion_pairs(o: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p, q
 
 
+def unit_pairs(pair: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The pair (p, q) of (4, N) quaternions scaled to unit length."""
+    return tuple(u * (1.0 / np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + u[3] * u[3]))
+                 for u in pair)
+
+
 def quaternion_product(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Hamilton products u v of (4, N) quaternion arrays (one outer product, one small product)."""
-    return _MULT @ (u[:, None, :] * v[None, :, :]).reshape(16, -1)
+    """Hamilton products u v of (4, N) quaternion arrays, component by component.
+
+    (u0 v0 - u.v, u0 v + v0 u + u x v) on length-N rows: no product of a (4, 16) table with a
+    (16, N) array, which BLAS would spread over threads that stall on a busy machine.
+    """
+    u0, u1, u2, u3 = u
+    v0, v1, v2, v3 = v
+    out = np.empty((4, u.shape[1]))
+    out[0] = u0 * v0 - u1 * v1 - u2 * v2 - u3 * v3
+    out[1] = u0 * v1 + u1 * v0 + u2 * v3 - u3 * v2
+    out[2] = u0 * v2 - u1 * v3 + u2 * v0 + u3 * v1
+    out[3] = u0 * v3 + u1 * v2 - u2 * v1 + u3 * v0
+    return out
 
 
-def cayley4_retract(ab: np.ndarray, pair: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """cay(W) O for ab = so4_split(W) and O = L(p) R(q), ``pair = (p, q)``: L(P p) R(Q q)."""
+def cayley4_retract(ab: np.ndarray, pair: tuple[np.ndarray, np.ndarray]):
+    """(cay(W) O, its pair) for ab = so4_split(W) and O = L(p) R(q), ``pair = (p, q)``.
+
+    cay(W) O = L(P p) R(Q q): the pair (P p, Q q) of the result comes for free.
+    """
     big_p, big_q = _cayley_factors(ab)
-    return pair_matrices(quaternion_product(big_p, pair[0]), quaternion_product(big_q, pair[1]))
+    new_pair = (quaternion_product(big_p, pair[0]), quaternion_product(big_q, pair[1]))
+    return pair_matrices(*new_pair), new_pair
+
+
+#: flat indices of the entries (i, j) above the diagonal of a 4x4 matrix: (0, 1), (0, 2),
+#: (0, 3), (1, 2), (1, 3), (2, 3); and of their transposes (j, i)
+_UPPER = (1, 2, 3, 6, 7, 11)
+_LOWER = (4, 8, 12, 9, 13, 14)
+
+
+def coupling_parts4(o: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """so4_split(S O_i^T - O_i S^T) as (6, N), for (N, 4, 4) rotations and one (4, 4) S.
+
+    B = O S^T by one (4N, 4) x (4, 4) product; the kernel's entries above the diagonal are
+    w_ij = B_ji - B_ij, one subtraction each (exactly 0 where S O^T is symmetric, e.g. one
+    agent), and so4_split reads them in pairs: a = -(w01 + w23, w02 - w13, w03 + w12) / 2,
+    b = (w01 - w23, w02 + w13, w03 - w12) / 2.  No transposed (N, 4, 4) copy is made.
+    """
+    n = len(o)
+    b = rows_product(o.reshape(-1, 4), np.ascontiguousarray(s.T),
+                     out=scratch("so4.product", (4 * n, 4))).reshape(n, 16).T
+    w = scratch("so4.upper", (6, n))
+    for k, (up, low) in enumerate(zip(_UPPER, _LOWER)):
+        np.subtract(b[low], b[up], out=w[k])
+    out = np.empty((6, n))
+    for k, (first, second, sign) in enumerate(((0, 5, 1.0), (1, 4, -1.0), (2, 3, 1.0))):
+        np.add(w[first], sign * w[second], out=out[k])
+        np.subtract(w[first], sign * w[second], out=out[k + 3])
+    out[:3] *= -0.5
+    out[3:] *= 0.5
+    return out
 
 
 def _cross(u, v):
@@ -124,14 +173,19 @@ def dcay_inv4(w: np.ndarray, x: np.ndarray, ab: np.ndarray | None = None) -> np.
     ``ab``: so4_split(W) when the caller has it already.
     """
     ab = so4_split(w) if ab is None else ab
-    ce = so4_split(x)
+    return so4_join(dcay_inv_parts(ab, so4_split(x)))
+
+
+def dcay_inv_parts(ab: np.ndarray, ce: np.ndarray) -> np.ndarray:
+    """``dcay_inv4`` in self-dual coordinates: (6, N) parts of W and of A -> (6, N) parts."""
     a, b, c, e = ab[:3], ab[3:], ce[:3], ce[3:]
     a2 = np.einsum("in,in->n", a, a)
     b2 = np.einsum("in,in->n", b, b)
     half_ac = 0.5 * np.einsum("in,in->n", a, c)
     half_be = 0.5 * np.einsum("in,in->n", b, e)
     quarter = 0.25 * (b2 - a2)
-    out = np.empty_like(ab)
-    out[:3] = (1.0 + quarter) * c - _cross(a, c) + (half_ac + half_be) * a
-    out[3:] = (1.0 - quarter) * e - _cross(b, e) + (half_be + half_ac) * b
-    return so4_join(out)
+    mixed = half_ac + half_be
+    out = np.empty_like(ce)
+    out[:3] = (1.0 + quarter) * c - _cross(a, c) + mixed * a
+    out[3:] = (1.0 - quarter) * e - _cross(b, e) + mixed * b
+    return out

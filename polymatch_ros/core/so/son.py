@@ -3,9 +3,17 @@
 
 import numpy as np
 
-from .base import Array, MeanField, RowsFirstGroup, polar_newton_schulz, rows_product
+from .base import (
+    Array,
+    MeanField,
+    RowsFirstGroup,
+    polar_newton_schulz,
+    row_sum,
+    rows_product,
+    scratch,
+)
 from .cayley import cayley_series
-from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split
+from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
 
 
 class SOn(RowsFirstGroup):
@@ -66,10 +74,13 @@ class SOn(RowsFirstGroup):
             rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
             return rot @ g
         if self.dim == 4:
-            return cayley4_retract(self._so4_parts(xi), self._quaternion_pairs(g))
+            out, pair = cayley4_retract(self._so4_parts(xi), self._quaternion_pairs(g))
+            self._retracted = (out, pair)
+            return out
         return cayley_series(xi, g)
 
     _pairs = (None, None)
+    _retracted = (None, None)
     _parts = (None, None)
 
     def _so4_parts(self, xi):
@@ -81,10 +92,16 @@ class SOn(RowsFirstGroup):
         return parts
 
     def _quaternion_pairs(self, g):
-        """O = L(p) R(q) for d = 4, kept while the stages of a step retract around one O."""
+        """O = L(p) R(q) for d = 4, kept while the stages of a step retract around one O.
+
+        The pair of the last retracted O is known (``cayley4_retract``): the O a step ends
+        on is the next step's base, and its pair is renormalised (so that round-off does not
+        build up over steps) instead of read off the matrices again.
+        """
         cached, pairs = self._pairs
         if cached is not g:
-            pairs = quaternion_pairs(g)
+            done, pairs = self._retracted
+            pairs = quaternion_pairs(g) if done is not g else unit_pairs(pairs)
             self._pairs = (g, pairs)
         return pairs
 
@@ -93,16 +110,16 @@ class SOn(RowsFirstGroup):
             return a
         if self.dim == 4:
             return dcay_inv4(xi, a, self._so4_parts(xi))
-        half = 0.5 * xi                         # (I - H) A (I + H) = B + B H,  B = A - H A
-        b = a - half @ a
-        b += b @ half
+        # (I - H) A (I + H) = B + B H,  B = A - H A; temporaries kept (``scratch``)
+        half = np.multiply(xi, 0.5, out=scratch("dcay.half", xi.shape))
+        prod = np.matmul(half, a, out=scratch("dcay.product", a.shape))
+        b = a - prod
+        b += np.matmul(b, half, out=prod)
         return b
 
     def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
-        # a BLAS product: summing over the leading axis of (N, d, d) is several times slower
-        n = g.shape[0]
-        w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
-        return (w @ g.reshape(n, -1)).reshape(self.dim, self.dim)
+        # BLAS products on one thread each: summing over the leading axis of (N, d, d) is slower
+        return row_sum(g.reshape(len(g), -1), weights).reshape(self.dim, self.dim)
 
     def neighbour_fields(self, g: Array, weights) -> MeanField:
         d = self.dim
@@ -113,7 +130,8 @@ class SOn(RowsFirstGroup):
         if np.ndim(s) == 3:                      # one field per row
             b = g @ np.swapaxes(s, 1, 2)
             return np.swapaxes(b, 1, 2) - b
-        b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T)).reshape(-1, d, d)  # O S^T
+        b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T),              # O S^T
+                         out=scratch("coupling", (len(g) * d, d))).reshape(-1, d, d)
         return np.swapaxes(b, 1, 2) - b
 
     def tangent(self, a: Array, g: Array) -> Array:
