@@ -133,12 +133,12 @@ def _bridge_run(env, scene_path, case, t_end, workdir):
     """``polymatch run --mode bridge`` of one case (sigma, lag, rate): (log dir, the agents'
     run records, the runner's error or None)."""
     from ..ros.wire import run_records
-    from .trade import _cli
+    from .ros_runs import run_cli
 
     sigma, lag, rate = case
     logs = tempfile.mkdtemp(prefix=f"s{sigma:g}_l{lag:g}_r{rate:g}_", dir=workdir)
     records = os.path.join(logs, "records.jsonl")
-    out = _cli(env, ["run", scene_path, "--mode", "bridge", "--rate", repr(rate),
+    out = run_cli(env, ["run", scene_path, "--mode", "bridge", "--rate", repr(rate),
                      "--lag", repr(lag), "--position-noise", repr(sigma),
                      "--angle-noise", repr(sigma), "--t-end", repr(t_end), "--hold", "1e9",
                      "--ensemble", "bench_bridge", "-q", "--records", records,
