@@ -14,10 +14,6 @@ MODULE_LINES = 400
 FUNCTION_LINES = 60
 LAYERS = ("core", "ros", "bench")
 
-# Benchmark modules whose functions are exempt from the function limit while they are being
-# rewritten; each is removed from this list once it keeps the limit.
-PENDING = frozenset({"step.py", "dop853.py", "sweep.py"})
-
 
 def long_functions(source, limit=FUNCTION_LINES):
     """(name, first line, lines) of every function in ``source`` longer than ``limit`` lines."""
@@ -27,19 +23,14 @@ def long_functions(source, limit=FUNCTION_LINES):
             and node.end_lineno - node.lineno + 1 > limit]
 
 
-def checked_modules(layer):
-    """The layer's modules under the function limit (the bench without PENDING)."""
-    paths = sorted((PACKAGE / layer).rglob("*.py"))
-    if layer == "bench":
-        paths = [p for p in paths if p.name not in PENDING]
-    return paths
+def layer_modules(layer):
+    """The layer's modules, all of them under the function limit."""
+    return sorted((PACKAGE / layer).rglob("*.py"))
 
 
-def test_every_layer_has_modules_and_pending_names_real_files():
+def test_every_layer_has_modules():
     for layer in LAYERS:
-        assert checked_modules(layer), f"polymatch_ros/{layer} has no modules"
-    for name in PENDING:
-        assert (PACKAGE / "bench" / name).is_file(), f"PENDING names a missing file {name}"
+        assert layer_modules(layer), f"polymatch_ros/{layer} has no modules"
 
 
 @pytest.mark.parametrize("path", sorted(PACKAGE.rglob("*.py")),
@@ -49,7 +40,7 @@ def test_module_is_at_most_400_lines(path):
     assert lines <= MODULE_LINES, f"{path.relative_to(PACKAGE)}: {lines} lines"
 
 
-@pytest.mark.parametrize("path", [p for layer in LAYERS for p in checked_modules(layer)],
+@pytest.mark.parametrize("path", [p for layer in LAYERS for p in layer_modules(layer)],
                          ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_functions_are_at_most_60_lines(path):
     found = long_functions(path.read_text(encoding="utf-8"))

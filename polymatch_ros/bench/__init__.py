@@ -41,7 +41,8 @@ from .timing import machine_lines
 #: modules of this package that are helpers, not families
 HELPERS = frozenset({"report", "timing", "scenes", "options", "flat", "solve", "extremes_lib",
                       "extremes_cases", "extremes_stiff", "extremes_geometry", "netns",
-                      "netns_run", "lossy_tables", "precision_tables", "ros_runs"})
+                      "netns_run", "lossy_tables", "precision_tables", "ros_runs",
+                      "dop853_tables"})
 
 
 def families():

@@ -30,6 +30,8 @@ tolerance, solvers interleaved; ours/scipy at each target 1e-4 ... 1e-10 is give
 walls and as the median of the sweeps' own ratios.
 """
 
+from dataclasses import dataclass
+
 NAME = "dop853"
 HELP = "adaptive Lie DOP853 vs scipy solve_ivp DOP853 on congruent_triangles, cost per max error"
 ORDER = 30
@@ -100,18 +102,6 @@ def _check_scene(scene):
         )
 
 
-def _interpolate(points, target):
-    """log-log interpolation of wall time at error = target from (error, wall) points, or None."""
-    import math
-
-    pts = sorted(p for p in points if p[0] > 0)
-    for (e1, w1), (e2, w2) in zip(pts, pts[1:]):
-        if e1 <= target <= e2 and e1 < e2:
-            f = (math.log(target) - math.log(e1)) / (math.log(e2) - math.log(e1))
-            return math.exp(math.log(w1) + f * (math.log(w2) - math.log(w1)))
-    return None
-
-
 class _Reference:
     """Vertex positions of the tight adaptive reference (ours at ref_tol) at any times."""
 
@@ -131,52 +121,6 @@ class _Reference:
         )
         v = _verts(self.scene, out)
         return v if ts[0] == 0 else v[1:]
-
-
-def _ratio_rows(results, ours, theirs, tols):
-    """Per tolerance: best walls of ``ours`` and ``theirs`` and their ratio, A and B."""
-    from .timing import fmt_ms
-    by = {(r["solver"], r["tol"]): r for r in results}
-    rows = []
-    for tol in tols:
-        a, b = by[ours, tol], by[theirs, tol]
-        rows.append([f"{tol:.0e}", fmt_ms(a["wall"]), fmt_ms(b["wall"]),
-                     f"{a['wall'] / b['wall']:.2f}", f"{a['err']:.1e} / {b['err']:.1e}",
-                     fmt_ms(a["wall_end"]), fmt_ms(b["wall_end"]),
-                     f"{a['wall_end'] / b['wall_end']:.2f}",
-                     f"{a['err_own']:.1e} / {b['err_own']:.1e}"])
-    return rows
-
-
-def _target_ratio_rows(results, ours, theirs, targets):
-    """Per error target: walls interpolated at that max error (log-log) and their ratio, A, B.
-
-    Two ratios: of the best walls, and the median over repeats of each repeat's own ratio
-    (one repeat is one interleaved sweep of every tolerance and solver, so load that comes and
-    goes within a sweep hits both alike).
-    """
-    import numpy as np
-
-    from .timing import fmt_ms
-    rows = []
-    for target in targets:
-        row = [f"{target:.0e}"]
-        for wall_key, err_key, walls_key in (("wall", "err", "walls"),
-                                             ("wall_end", "err_own", "walls_end")):
-            runs = [[r for r in results if r["solver"] == label] for label in (ours, theirs)]
-            walls = [_interpolate([(r[err_key], r[wall_key]) for r in rs], target)
-                     for rs in runs]
-            per_repeat = []
-            for k in range(min(len(rs[0][walls_key]) for rs in runs)):
-                pair = [_interpolate([(r[err_key], r[walls_key][k]) for r in rs], target)
-                        for rs in runs]
-                if all(pair):
-                    per_repeat.append(pair[0] / pair[1])
-            row += [fmt_ms(w) if w else "-" for w in walls]
-            row.append(f"{walls[0] / walls[1]:.2f}" if all(walls) else "-")
-            row.append(f"{np.median(per_repeat):.2f}" if per_repeat else "-")
-        rows.append(row)
-    return rows
 
 
 # -- the benchmark ----------------------------------------------------------------------------
@@ -200,9 +144,11 @@ def _row(label, sc, scene, tol, runs, ref_dense, ref):
     import numpy as np
 
     from ..core.metrics import orthogonality
+    from .timing import Timing
 
     dense_w = [a.wall for a, _ in runs]
     end_w = [b.wall for _, b in runs]
+    dense_t, end_t = Timing(tuple(dense_w)), Timing(tuple(end_w))
     out, out_end = runs[-1]
     if sc is None:  # t_eval does not change scipy's steps
         own_t, own_v, own_m = out_end.times, _verts(scene, out_end), out_end.mats
@@ -215,15 +161,15 @@ def _row(label, sc, scene, tol, runs, ref_dense, ref):
     return {
         "solver": label,
         "tol": tol,
-        "wall": min(dense_w),
-        "wall_med": float(np.median(dense_w)),
+        "wall": dense_t.best,
+        "wall_med": dense_t.median,
         "walls": dense_w,
         "walls_end": end_w,
         "evals": out.evals,
         "steps": steps,
         "err": err,
-        "wall_end": min(end_w),
-        "wall_end_med": float(np.median(end_w)),
+        "wall_end": end_t.best,
+        "wall_end_med": end_t.median,
         "evals_end": out_end.evals,
         "steps_end": out_end.steps,
         "err_own": err_own,
@@ -231,44 +177,24 @@ def _row(label, sc, scene, tol, runs, ref_dense, ref):
     }
 
 
-def _target_rows(results, solvers, target, wall_key, err_key, evals_key):
-    from .timing import fmt_ms
+@dataclass(frozen=True)
+class _Settings:
+    """The run's scene, tolerances, sample count, references and repeats (--quick: tiny)."""
 
-    rows = []
-    for label in solvers:
-        rs = [r for r in results if r["solver"] == label]
-        ok = [r for r in rs if r[err_key] <= target]
-        interp = _interpolate([(r[err_key], r[wall_key]) for r in rs], target)
-        if ok:
-            b = max(ok, key=lambda r: r["tol"])
-            rows.append(
-                [
-                    label,
-                    f"{b['tol']:.0e}",
-                    f"{b[err_key]:.1e}",
-                    fmt_ms(b[wall_key]),
-                    b[evals_key],
-                    f"{b[wall_key] / b[evals_key] * 1e6:.1f}",
-                    fmt_ms(interp) if interp else "-",
-                ]
-            )
-        else:
-            rows.append(
-                [label, "none in the sweep", "-", "-", "-", "-", fmt_ms(interp) if interp else "-"]
-            )
-    return rows
+    scene: object
+    tols: list
+    n_samples: int
+    ref_dt: float
+    ref_tol: float
+    repeats: int
+    target: float
 
 
-def run(args, log):
-    import numpy as np
-
-    from ..core import load_scene, with_representation
+def _settings(args):
+    """Settings from the options; a scene the scipy right-hand side cannot model is refused."""
+    from ..core import load_scene
     from ..core.scene import resolve_scene_path
-    from .report import Report
-    from .solve import Solver, solve
-    from .timing import fmt_ms
 
-    report = Report(NAME, "Adaptive Lie DOP853 vs scipy DOP853 (`polymatch bench dop853`)")
     t_end = args.t_end if args.t_end is not None else (5.0 if args.quick else None)
     scene = load_scene(resolve_scene_path(args.scene), {"time.t_end": t_end})
     _check_scene(scene)
@@ -277,122 +203,72 @@ def run(args, log):
     else:
         tols = list(args.tolerances)
         n_samples, ref_dt, ref_tol = args.samples, args.ref_dt, args.ref_tol
-    repeats = args.repeats or (1 if args.quick else 9)
-    times = np.linspace(0.0, scene.t_end, n_samples)
+    return _Settings(scene, tols, n_samples, ref_dt, ref_tol,
+                     args.repeats or (1 if args.quick else 9), args.target)
 
-    log(f"dop853: reference rkmk4 dt = {ref_dt:g} on {scene.name}")
-    ref1 = solve(scene, Solver("rkmk4", "fixed", ref_dt), times)
-    wall_ref, ref_t, ref_dense = ref1.wall, ref1.times, _verts(scene, ref1)
-    ref = _Reference(scene, ref_tol)
-    ref_gap = float(np.abs(ref.at(times) - ref_dense).max())
-    shift = float(np.abs(ref_t - times).max())
 
-    solvers = {
-        "ours (angle)": scene,
-        "ours (matrix, Cayley)": with_representation(scene, "matrix"),
-        "scipy DOP853": None,
-    }
-    runs = {(label, tol): [] for label in solvers for tol in tols}
-    for k in range(repeats):
-        log(f"dop853: sweep {k + 1} of {repeats}: every tolerance, solvers interleaved")
-        # round-robin: a burst of machine load hits every solver alike
-        for tol in tols:
-            for label, sc in solvers.items():
-                runs[label, tol].append(_runs(sc, scene, tol, times))
-    results = [_row(label, sc, scene, tol, runs[label, tol], ref_dense, ref)
-               for label, sc in solvers.items() for tol in tols]
+def _intro(report, s, wall_ref, ref_gap, shift):
+    """The scene, the two error measures and how far the two references agree."""
+    from .timing import fmt_ms
 
+    scene = s.scene
     report.text(
         f"Scene `{scene.name}`: d = {scene.dim}, N = {scene.model.n_agents}, first-order model "
         f"(A-2), t_end = {scene.t_end:g}.  Error = max over time and all vertices of "
-        f"|x^i_a - x^i_a(ref)|: (A) on {n_samples} sample times, (B) on the solver's own "
+        f"|x^i_a - x^i_a(ref)|: (A) on {s.n_samples} sample times, (B) on the solver's own "
         "accepted steps.",
         "",
-        f"References: rkmk4 at dt = {ref_dt:g} ({fmt_ms(wall_ref)} ms) on the sample times; ours "
-        f"at tol = {ref_tol:g} at any time.  They differ by at most {ref_gap:.1e} on the sample "
-        "times, so errors well above that are resolved."
+        f"References: rkmk4 at dt = {s.ref_dt:g} ({fmt_ms(wall_ref)} ms) on the sample times; "
+        f"ours at tol = {s.ref_tol:g} at any time.  They differ by at most {ref_gap:.1e} on the "
+        "sample times, so errors well above that are resolved."
         + (f"  WARNING: the rkmk4 sample times are rounded to its steps (shift {shift:.1e})."
            if shift > 1e-12 else ""),
     )
-    rows = [[r["solver"], f"{r['tol']:.0e}", fmt_ms(r["wall"]), r["evals"], r["steps"],
-             f"{r['err']:.2e}", fmt_ms(r["wall_end"]), fmt_ms(r["wall_end_med"]), r["evals_end"],
-             r["steps_end"], f"{r['err_own']:.2e}", f"{r['orth']:.1e}"] for r in results]
-    report.table(
-        ["solver", "rtol=atol", f"A: wall ms, best of {repeats}", "A: evals", "A: steps",
-         f"A: max err ({n_samples} times)", f"B: wall ms, best of {repeats}", "B: median ms",
-         "B: evals", "B: steps", "B: max err (own steps)", "orth. defect"],
-        rows,
-        caption=f"Tolerance sweep. A: outputs at {n_samples} sample times; B: final state only "
-        "(error on its own steps); repeats interleaved across solvers. "
-        "orth. defect: max_i |O_i^T O_i - I|_F at t_end",
-    )
 
-    target = args.target
-    header = ["solver", "loosest tol", "its max error", "wall ms (best)", "rhs evals", "µs/eval",
-              "wall ms interpolated"]
-    report.table(
-        header,
-        _target_rows(results, solvers, target, "wall_end", "err_own", "evals_end"),
-        caption=f"Cheapest run with max error <= {target:.0e}, "
-        "B (final state only, error on own steps)",
-    )
-    report.table(
-        header,
-        _target_rows(results, solvers, target, "wall", "err", "evals"),
-        caption=f"Cheapest run with max error <= {target:.0e}, A ({n_samples} outputs)",
-    )
-    ours, theirs = "ours (angle)", "scipy DOP853"
-    report.table(["rtol=atol", "A: ours ms", "A: scipy ms", "A: ours/scipy",
-                  "A: max err ours / scipy", "B: ours ms", "B: scipy ms", "B: ours/scipy",
-                  "B: max err ours / scipy"],
-                 _ratio_rows(results, ours, theirs, tols),
-                 caption=f"{ours} against {theirs} at each tolerance: best of {repeats} "
-                         "interleaved repeats (ratio < 1: ours is faster)")
-    report.table(["target max error", "A: ours ms", "A: scipy ms", "A: ours/scipy (best)",
-                  "A: ours/scipy (median)", "B: ours ms", "B: scipy ms", "B: ours/scipy (best)",
-                  "B: ours/scipy (median)"],
-                 _target_ratio_rows(results, ours, theirs, RATIO_TARGETS),
-                 caption=f"{ours} against {theirs} at each error target, walls interpolated; "
-                         f"best: of best walls; median: of the {repeats} sweeps' own ratios "
-                         "(\"-\": the sweep does not bracket the target)")
-    report.text(
-        '- "wall ms interpolated": log(wall) linear in log(error) between the two sweep points '
-        f'around {target:.0e} ("-": the sweep does not bracket the target).',
-        "- A: both interpolate the sample times with DOP853's 7th-order continuous extension "
-        "(ours in the Cayley/angle chart of each step; 3 extra evaluations per step that contains "
-        "samples).  B is the integrators' own cost for their accuracy.",
-        "- scipy's DOP853 integrates O in R^{2x2}: its orthogonality defect follows the "
-        "tolerance; ours keeps O in SO(2) (angles: exactly; Cayley: to round-off) at every "
-        "tolerance.",
-        "- ours advances the centroids by their exact flow (Prop. 2.1, no evaluations); scipy "
-        "integrates them as part of y.",
-    )
 
-    def draw_wp(plt):
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-        curves = (("err_own", "wall_end", "o-", "B: final state only"),
-                  ("err", "wall", "x:", f"A: {n_samples} outputs"))
-        for k, label in enumerate(solvers):
-            rs = [r for r in results if r["solver"] == label]
-            col = f"C{k}"
-            for err_key, wall_key, style, what in curves:
-                axes[0].loglog([r[err_key] for r in rs], [r[wall_key] * 1e3 for r in rs], style,
-                               color=col, label=f"{label}, {what}")
-            axes[1].loglog([r["tol"] for r in rs], [max(r["orth"], 1e-17) for r in rs], "o-",
-                           color=col, label=label)
-        axes[0].axvline(target, color="r", ls="--", lw=1, label=f"target {target:.0e}")
-        axes[0].set_xlabel("max vertex error over time")
-        axes[0].set_ylabel(f"wall ms (best of {repeats})")
-        axes[0].set_title(f"work-precision, {scene.name}")
-        axes[1].set_xlabel("rtol = atol")
-        axes[1].set_ylabel("final max |O^T O - I|_F")
-        axes[1].set_title("orthogonality defect (Lemma 2.1)")
-        for ax in axes:
-            ax.grid(True, which="both", alpha=0.3)
-            ax.legend(fontsize=7)
-        return fig
+def _sweeps(s, solvers, times, log):
+    """``s.repeats`` sweeps of every tolerance, solvers round-robin (a burst of machine load
+    hits every solver alike); (label, tol) -> that solver's (A, B) runs."""
+    runs = {(label, tol): [] for label in solvers for tol in s.tols}
+    for k in range(s.repeats):
+        log(f"dop853: sweep {k + 1} of {s.repeats}: every tolerance, solvers interleaved")
+        for tol in s.tols:
+            for label, sc in solvers.items():
+                runs[label, tol].append(_runs(sc, s.scene, tol, times))
+    return runs
 
-    report.figure(
-        "work_precision", draw_wp, "wall time against max error, and orthogonality defect"
-    )
+
+def run(args, log):
+    from functools import partial
+
+    import numpy as np
+
+    from ..core import with_representation
+    from . import dop853_tables as tables
+    from .report import Report
+    from .solve import Solver, solve
+
+    report = Report(NAME, "Adaptive Lie DOP853 vs scipy DOP853 (`polymatch bench dop853`)")
+    s = _settings(args)
+    scene = s.scene
+    times = np.linspace(0.0, scene.t_end, s.n_samples)
+    log(f"dop853: reference rkmk4 dt = {s.ref_dt:g} on {scene.name}")
+    ref1 = solve(scene, Solver("rkmk4", "fixed", s.ref_dt), times)
+    ref_dense, ref = _verts(scene, ref1), _Reference(scene, s.ref_tol)
+    ref_gap = float(np.abs(ref.at(times) - ref_dense).max())
+    shift = float(np.abs(ref1.times - times).max())
+    solvers = {tables.OURS: scene, "ours (matrix, Cayley)": with_representation(scene, "matrix"),
+               tables.THEIRS: None}
+    runs = _sweeps(s, solvers, times, log)
+    results = [_row(label, sc, scene, tol, runs[label, tol], ref_dense, ref)
+               for label, sc in solvers.items() for tol in s.tols]
+    _intro(report, s, ref1.wall, ref_gap, shift)
+    tables.sweep_table(report, results, s.repeats, s.n_samples)
+    tables.target_tables(report, results, solvers, s.target, s.n_samples)
+    tables.ratio_tables(report, results, s.tols, RATIO_TARGETS, s.repeats)
+    tables.notes(report, s.target)
+    report.figure("work_precision",
+                  partial(tables.draw_work_precision, results, solvers, s.target, s.repeats,
+                          scene.name, s.n_samples),
+                  "wall time against max error, and orthogonality defect")
     return report
