@@ -148,6 +148,23 @@ class RowsFirstGroup(RotationGroup):
     def algebra_concat(self, parts: Sequence[Array]) -> Array:
         return np.concatenate(parts, axis=0)
 
+class ComponentAlgebra:
+    """A mixin for algebra arrays that hold component k of every agent in row k: (rows, N).
+
+    SO(3) (3 rows) and SO(4) (6 rows) keep their Lie algebra so, structure of arrays."""
+
+    algebra_rows = 0
+
+    def algebra_zeros(self, n: int) -> Array:
+        return np.zeros((self.algebra_rows, n))
+
+    def algebra_take(self, a: Array, idx) -> Array:
+        return a[:, idx]
+
+    def algebra_concat(self, parts: Sequence[Array]) -> Array:
+        return np.concatenate(parts, axis=1)
+
+
 #: multiply-adds below which OpenBLAS runs a product on one thread (2^18); a threaded product
 #: of a long, thin matrix stalls whenever the machine's cores are busy
 ONE_THREAD_PRODUCT = 1 << 18

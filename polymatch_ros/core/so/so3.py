@@ -4,7 +4,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .base import Array, MeanField, RotationGroup, polar_newton_schulz
+from .base import Array, ComponentAlgebra, MeanField, RotationGroup, polar_newton_schulz
 
 
 def _hat3(w):
@@ -20,7 +20,7 @@ def _cross3(a, b):
                      a[0] * b[1] - a[1] * b[0]])
 
 
-class SO3(RotationGroup):
+class SO3(ComponentAlgebra, RotationGroup):
     """SO(3) in structure-of-arrays layout with closed-form maps.
 
     ``retraction="cayley"`` (default): cay(w) = I + c (W + W^2 / 2), c = 1 / (1 + |w|^2 / 4),
@@ -30,6 +30,7 @@ class SO3(RotationGroup):
 
     dim = 3
     name = "so3"
+    algebra_rows = 3
 
     def __init__(self, retraction: str = "cayley"):
         if retraction not in ("cayley", "exp"):
@@ -62,15 +63,6 @@ class SO3(RotationGroup):
 
     def rotate(self, g: Array, r: np.ndarray) -> np.ndarray:
         return np.einsum("ijn,j->ni", g, r)
-
-    def algebra_zeros(self, n: int) -> Array:
-        return np.zeros((3, n))
-
-    def algebra_take(self, a: Array, idx) -> Array:
-        return a[:, idx]
-
-    def algebra_concat(self, parts: Sequence[Array]) -> Array:
-        return np.concatenate(parts, axis=1)
 
     def algebra_from_skew(self, w: np.ndarray) -> Array:
         w = np.asarray(w, dtype=float)

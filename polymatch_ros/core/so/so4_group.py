@@ -10,16 +10,14 @@ is two quaternion products per rotation (``cayley4_retract``).  Rotations stay (
 matrices, read by every other part of the package as for any d.
 """
 
-from collections.abc import Sequence
-
 import numpy as np
 
-from .base import Array, MeanField
+from .base import Array, ComponentAlgebra, MeanField
 from .so4 import cayley4_retract, coupling_parts4, dcay_inv_parts, so4_join, so4_split
 from .son import SOn
 
 
-class SO4(SOn):
+class SO4(ComponentAlgebra, SOn):
     """SO(4): rotations (N, 4, 4), so(4) as (6, N) self-dual parts; Cayley map in closed form.
 
     ``name`` stays "matrix": the rotations are the matrices of ``SOn``, only the algebra
@@ -28,19 +26,12 @@ class SO4(SOn):
     for the next step: arrays handed to ``retract`` must not be modified in place afterwards.
     """
 
+    algebra_rows = 6
+
     def __init__(self):
         super().__init__(4)
 
     # -- Lie algebra: (6, N) ----------------------------------------------
-    def algebra_zeros(self, n: int) -> Array:
-        return np.zeros((6, n))
-
-    def algebra_take(self, a: Array, idx) -> Array:
-        return a[:, idx]
-
-    def algebra_concat(self, parts: Sequence[Array]) -> Array:
-        return np.concatenate(parts, axis=1)
-
     def algebra_from_skew(self, w: np.ndarray) -> Array:
         return so4_split(np.asarray(w, dtype=float))
 
