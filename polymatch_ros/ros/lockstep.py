@@ -23,6 +23,7 @@ from .exchange import RoundTimeout, lean_node, quiet_events
 # round they already have as what it is (``repeats``), not as a drop.
 RESEND_AFTER = 1.0  # s
 
+
 class LockstepExchange:
     """Stage rounds: publish the local stage rows, wait for every peer's message of the same round.
 
