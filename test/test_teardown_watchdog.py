@@ -2,7 +2,8 @@
 
 Fast DDS 2.14 can, rarely, spin forever inside ``rmw_destroy_node`` holding the GIL.  The
 stand-in here is a pure-Python busy loop, which also holds the GIL: only a watchdog that
-needs no GIL (faulthandler's C thread) can end it.
+needs no GIL can end it: faulthandler's C thread
+dumps the stack, a POSIX timer's libc thread exits with the code the process had decided on.
 """
 
 import subprocess
@@ -18,7 +19,7 @@ HUNG = textwrap.dedent("""
     rounds=20)
     print(rec.describe(), flush=True)
     print(rec.to_json(), flush=True)
-    with teardown_watchdog(0.5):
+    with teardown_watchdog(0.5, exit_code=EXIT_CODE):
         while True:
             pass
 """)
@@ -27,22 +28,36 @@ CLEAN = textwrap.dedent("""
     import time
     from polymatch_ros.ros.ros_env import teardown_watchdog
     print("agent 3: finished", flush=True)
-    with teardown_watchdog(0.3):
+    with teardown_watchdog(0.3, exit_code=5):
         pass
-    time.sleep(0.8)          # past the watchdog's deadline: it must have been disarmed
+    time.sleep(1.2)          # past the watchdog's deadline: it must have been disarmed
     print("still alive", flush=True)
 """)
 
 
-def _run(code):
+def _run(code, exit_code=0):
+    code = code.replace("EXIT_CODE", str(exit_code))
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
     return proc.returncode, (proc.stdout + proc.stderr).splitlines()
 
 
-def test_hung_teardown_is_ended_by_the_watchdog():
-    code, lines = _run(HUNG)
+def test_hung_teardown_is_ended_by_the_watchdog_with_the_process_s_own_exit_code():
+    for wanted in (0, 3):
+        code, lines = _run(HUNG, exit_code=wanted)
+        assert code == wanted
+        assert any(line.startswith("Timeout (") for line in lines)
+        assert hung_in_teardown(code, lines)
+
+
+def test_without_a_native_timer_faulthandler_ends_the_hung_teardown_with_1():
+    no_timer = HUNG.replace(
+        "from polymatch_ros.ros.ros_env import teardown_watchdog",
+        "import polymatch_ros.ros.exit_timer as t\n"
+        "t.native_exit_timer = lambda *a: None\n"
+        "from polymatch_ros.ros.ros_env import teardown_watchdog",
+    )
+    code, lines = _run(no_timer)
     assert code == 1
-    assert any(line.startswith("Timeout (") for line in lines)
     assert hung_in_teardown(code, lines)
 
 

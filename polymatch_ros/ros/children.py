@@ -79,7 +79,7 @@ class Child:
         return hung_in_teardown(self.proc.poll(), list(self.lines))
 
     def ended_well(self):
-        return self.proc.poll() == 0 or self.hung_in_teardown()
+        return self.proc.poll() == 0 or (self.proc.poll() == 1 and self.hung_in_teardown())
 
     def records(self):
         """The run records this child printed (``wire.run_records``)."""

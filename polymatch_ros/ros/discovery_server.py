@@ -82,7 +82,7 @@ def serve(args, directory):
     end = time.monotonic() + args.seconds
     while not stop and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.2)
-    with teardown_watchdog():
+    with teardown_watchdog(exit_code=0):
         node.destroy_node()
         rclpy.try_shutdown()
 

@@ -56,7 +56,7 @@ def ros_main(factory, label, argv=None):
         if app is not None and hasattr(app, "report"):
             app.report()
         sys.stdout.flush()
-        with teardown_watchdog():
+        with teardown_watchdog(exit_code=code):
             if app is not None and hasattr(app, "destroy"):
                 app.destroy()
             if rclpy.ok():

@@ -67,33 +67,44 @@ def reserved_domain_id():
 
 TEARDOWN_SECONDS = 10.0
 TEARDOWN_MARK = "Timeout ("  # the first line faulthandler writes when the watchdog fires
+EXIT_GRACE = 0.5  # between the stack dump and the hard exit
 
 
 @contextlib.contextmanager
-def teardown_watchdog(seconds=TEARDOWN_SECONDS):
-    """Bound the DDS teardown inside the block: past ``seconds``, end the process.
+def teardown_watchdog(seconds=TEARDOWN_SECONDS, exit_code=1):
+    """Bound the DDS teardown inside the block: past ``seconds``, end the process with
+    ``exit_code`` (the code the process had decided on before its teardown).
 
     With Fast DDS 2.14 the last node's teardown can, rarely, spin forever at 100% CPU
     in ``DomainParticipant::set_listener`` (inside ``rmw_destroy_node``), holding the GIL and
-    deaf to SIGINT/SIGTERM.  faulthandler's watchdog is a C thread that needs no GIL:
-    it writes ``Timeout (...)!`` and the Python stack to stderr and exits with code 1.
+    deaf to SIGINT/SIGTERM, so no Python thread or signal handler can run.  Two watchdogs
+    that need no GIL end it: faulthandler's C thread writes ``Timeout (...)!`` and the
+    Python stack to stderr; ``EXIT_GRACE`` later a POSIX timer calls ``_exit(exit_code)``
+    (``native_exit_timer``), so a run that succeeded still exits 0.  Where no such timer
+    can be made, faulthandler ends the process itself, with code 1.
     Enter it after the work is done and reported, around the teardown only.
     """
     import faulthandler
 
-    faulthandler.dump_traceback_later(seconds, exit=True)
+    from .exit_timer import native_exit_timer
+
+    timer = native_exit_timer(seconds + EXIT_GRACE, exit_code or 0)
+    faulthandler.dump_traceback_later(seconds, exit=timer is None)
     try:
         yield
     finally:
         faulthandler.cancel_dump_traceback_later()
+        if timer is not None:
+            timer.cancel()
 
 
 def hung_in_teardown(code, lines):
-    """True when a child printed its final run record, then was ended by the teardown watchdog."""
+    """True when a child printed its final run record, then was ended by the teardown watchdog:
+    with its own exit code (the native timer), or with faulthandler's 1 where there is none."""
     from .wire import run_records
 
     return (
-        code == 1
+        code is not None
         and any(line.startswith(TEARDOWN_MARK) for line in lines)
         and any(rec.finished for rec in run_records(lines))
     )

@@ -299,7 +299,7 @@ def _run(args, scene, scene_path, the_plan, env, domain, envs=None):
     finally:
         sys.stdout.flush()
         sys.stderr.flush()
-        with teardown_watchdog():
+        with teardown_watchdog(exit_code=code):
             if watcher is not None:
                 watcher.destroy()
             if rclpy.ok():
