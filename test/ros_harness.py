@@ -65,13 +65,6 @@ class Ros:
         self.procs = []
         self.shm_before = set(glob.glob("/dev/shm/fastrtps_*"))
 
-    def realtime(self):
-        """From now on start processes with the environment of a realtime ensemble (transports)."""
-        from polymatch_ros.ros.ros_env import ros_environment
-
-        self.env = ros_environment(self.domain, base=self.env, mode="realtime")
-        return self
-
     def start(self, argv, timeout, name=""):
         """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file."""
         log = open(

@@ -46,6 +46,7 @@ groups:
 """
 
 # four triangles close to each other: robots reach the noise floor in a few seconds
+PROBE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "service_probe.py")
 SCENE_ROBOTS = """\
 name: robot_triangles
 description: four congruent triangles driven as robots (A-2)
@@ -232,6 +233,13 @@ def _twists(text):
     return np.array(out).reshape(-1, 6)
 
 
+def _probe(ros, *actions):
+    """What ``test/service_probe.py`` printed (service calls, as ``ros2 service call``)."""
+    proc = ros.start([PY, PROBE, *actions], timeout=70, name="probe")
+    assert ros.wait(proc, 80) == 0, ros.output(proc)
+    return ros.output(proc)
+
+
 def _wait(predicate, timeout):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -250,8 +258,9 @@ def _robot(ros, scene, agent, **params):
 
 
 @needs_ros
-def test_runtime_gain_change_and_a_killed_robot_gets_one_zero_command(ros, tmp_path):
-    ros.realtime()
+def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
+    """A gain set at runtime, a pause (one zero command, then quiet), a killed robot (one zero
+    command, then quiet) and the same robot restarted (driven again)."""
     scene = _scene(tmp_path, SCENE_ROBOTS.format(t_end=80.0, count=2))
     robots = [_robot(ros, scene, a, position_noise=0.0005) for a in range(2)]
     agents = []
@@ -277,6 +286,20 @@ def test_runtime_gain_change_and_a_killed_robot_gets_one_zero_command(ros, tmp_p
     ok, reason = _set_parameter(ros, "/polymatch/agent_0", "scene", "other.yaml")
     assert not ok and "read-only" in reason.lower(), reason
 
+    # paused through the agent's own service (std_srvs/SetBool): one zero command at once, then
+    # quiet; resumed: it commands again
+    said = _probe(ros, "call /polymatch/agent_0/pause true")
+    assert "RESULT /polymatch/agent_0/pause True paused" in said, said
+    assert _wait(lambda: "robot stopped: paused" in ros.output(agents[0]), 5)
+    time.sleep(0.5)
+    paused = _twists(ros.output(echo))
+    assert np.all(paused[-1] == 0.0), paused[-3:]
+    time.sleep(1.0)
+    assert len(_twists(ros.output(echo))) == len(paused), "commands while paused"
+    assert "resumed" in _probe(ros, "call /polymatch/agent_0/pause false")
+    assert _wait(lambda: len(_twists(ros.output(echo))) > len(paused) + 3, 10)
+    assert np.abs(_twists(ros.output(echo))[-1]).max() > 0.0
+
     # the robot dies: the agent sends one zero command, then stays quiet
     ros.kill(robots[0])
     assert _wait(lambda: "robot stopped: measured pose older than" in ros.output(agents[0]), 10)
@@ -286,6 +309,13 @@ def test_runtime_gain_change_and_a_killed_robot_gets_one_zero_command(ros, tmp_p
     time.sleep(1.5)
     assert len(_twists(ros.output(echo))) == len(seen), "commands after the zero command"
     assert agents[0].poll() is None and agents[1].poll() is None
+
+    # the robot restarted (at its initial pose): its agent drives it again, non-zero commands
+    robots[0] = _robot(ros, scene, 0, position_noise=0.0005)
+    assert _wait(lambda: len(_twists(ros.output(echo))) > len(seen) + 5, 20), (
+        ros.output(agents[0])[-2000:]
+    )
+    assert np.abs(_twists(ros.output(echo))[-1]).max() > 0.0
 
 
 @needs_ros

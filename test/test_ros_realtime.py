@@ -47,7 +47,6 @@ RUN_BOUND = 180  # s: only a hang takes this long; the run itself ends at t_end 
 
 
 def test_realtime_converges_survives_sigkill_and_rejoin_theorem_4_2(ros):
-    ros.realtime()  # the transports a realtime ensemble runs on
     start = time.time() + 10.0  # every process is up well before t = 0
     common = dict(
         mode="realtime", rate=RATE, time_scale=3.0, start_time=start, t_end=90.0, peer_timeout=1.0

@@ -289,7 +289,7 @@ def run(args, log):
     found, notes = {}, []
     with tempfile.TemporaryDirectory(prefix="bench_bridge_") as workdir, domain_id() as dom:
         scene, scene_path = _scene(scene_path, t_end, workdir)
-        env = private_ros_environment(dom, mode="realtime")
+        env = private_ros_environment(dom)
         for case in grid + rates:
             if case not in found:
                 log(f"sigma {case[0]:g}, lag {case[1]:g} s, rate {case[2]:g} Hz: "

@@ -8,8 +8,8 @@ name the remap rules give it (``__node``; the runner uses ``agent_<i>``); its to
 relative (``wire.TOPICS``).  One class per mode: ``lockstep.LockstepAgent`` exchanges every
 integrator stage so the trajectory equals ``polymatch simulate`` to round-off;
 ``realtime.RealtimeAgent`` steps on a wall-clock timer with the latest pose of each peer.
-What both need is here: scene and layout, publishers, the control topic, diagnostics,
-the run record, discovery.
+What both need is here: scene and layout, publishers, the control topic and services
+(``control``), diagnostics, the run record, discovery.
 """
 
 import sys
@@ -19,6 +19,7 @@ from ..core.errors import ParameterError, PolymatchError
 from ..core.model import GroupState, State, System
 from ..core.simulate import plan, prepare
 from . import wire
+from .control import AgentControl, offer_agent_services, parse_command
 from .exchange import DropCounter, Layout
 from .params import AGENT, RUNTIME, declare
 from .process import NodeApp, ros_main
@@ -78,9 +79,7 @@ class AgentBase(NodeApp):
         self.system = System(self.model, self.layout.rows)
         self.state = local_state(scene, self.layout)
         self.drops = DropCounter(self.log)
-        self.stop_requested = False
-        self.start_epoch = None
-        self.final_received = False  # the host with the summary has every final pose
+        self.control = AgentControl(self.mode, self.on_pause)
         self.rounds = self.steps = self.late_ticks = 0
         self.round_time = 0.0
         self.finished = False
@@ -102,20 +101,33 @@ class AgentBase(NodeApp):
         self.diag_pub = wire.publisher(node, "diagnostics")
         self.status_pub = wire.publisher(node, "status")
         wire.subscription(node, "control", self._control)
+        self.services = offer_agent_services(node, self.control, self.log)
         self._last_diag = 0.0
 
+    # -- control: the ensemble's commands (control topic) and this process's services -------
     def _control(self, msg):
-        words = msg.data.strip().lower().split()
-        if words == ["stop"] and not self.stop_requested:
-            self.log.info("stop requested")
-            self.stop_requested = True
-        elif words == ["received"]:
-            self.final_received = True
-        elif len(words) == 2 and words[0] == "start" and self.start_epoch is None:
-            try:
-                self.start_epoch = float(words[1])
-            except ValueError:
-                self.drops("control", f"bad command {msg.data!r}")
+        command = parse_command(msg.data)
+        if command is None:
+            self.drops("control", f"bad command {msg.data[:80]!r}")
+            return
+        ok, message = self.control.command(*command)
+        if command[0] != "received":
+            self.log.info(f"control {command[0]}: {message}")
+
+    def on_pause(self, paused):
+        """Called when a pause or resume arrives (bridge agents command zero at once)."""
+
+    @property
+    def stop_requested(self):
+        return self.control.stop_requested
+
+    @property
+    def start_epoch(self):
+        return self.control.start_epoch
+
+    @property
+    def paused(self):
+        return self.control.paused
 
     # -- publishing ------------------------------------------------------------------------------
     def publish_state(self, final=False):
@@ -273,7 +285,7 @@ class AgentBase(NodeApp):
         our final-pose writers only after we published: a writer that ended by then is gone
         with its sample."""
         deadline = time.monotonic() + self.params["hold_final"]
-        while not self.final_received and time.monotonic() < deadline:
+        while not self.control.final_received and time.monotonic() < deadline:
             self.spin_once(0.05)
 
     def final_record(self):

@@ -14,7 +14,9 @@ peers' latest poses (``core.command``), saturated, in the world or the robot's b
 Safety: a measured pose older than ``pose_timeout``, a non-finite pose or command, and the
 end of the run (t_end, 'stop', shutdown) publish one zero command; the agent then stays quiet
 (no command, no relayed pose: its peers drop it after their peer timeout) until a fresh pose
-arrives.  The reason is in the diagnostics.
+arrives.  A pause (``control``) publishes one zero command at once and keeps relaying the
+measured pose, so that the peers keep the robot; resume goes on at the next tick.  The reason
+is in the diagnostics.
 """
 
 import time
@@ -186,6 +188,11 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.state = self._state_at(max(0.0, self.state.t), own)
         super().publish_state(final)
 
+    def on_pause(self, paused):
+        """A pause commands zero at once, not at the next tick."""
+        if paused:
+            self._hold("paused")
+
     def diagnostic_note(self):
         note, extra = super().diagnostic_note()
         extra["commands"] = self.commands
@@ -204,7 +211,11 @@ class BridgeAgent(RuntimeParams, AgentBase):
             t = time.time() - start
             if t >= self.scene.t_end:
                 break
-            if t >= 0.0:
+            if self.paused:  # zero command; the measured pose still relayed to the peers
+                self._hold("paused")
+                self.state.t = max(t, 0.0)
+                self.publish_state()
+            elif t >= 0.0:
                 self.tick(t)
                 self.steps += 1
                 self.rounds += 1

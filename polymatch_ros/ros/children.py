@@ -242,23 +242,20 @@ class Supervision:
         self.graph_checked = self.watcher.check_graph(names)
 
     def start_clock(self):
-        """Realtime: once every agent is up, 'start <epoch>' for all; repeated (same epoch) each
-        second while an agent has not begun stepping - one whose control reader matched late
-        would otherwise wait forever (agents take the first 'start' only)."""
+        """Realtime: once every agent is up, call the ensemble's ``start`` service (t = 0 on every
+        agent ``control.START_LEAD`` s later); again each second while an agent has not begun
+        stepping - the service re-sends the same epoch to one whose control reader matched late
+        (agents take the first start only)."""
         now = time.monotonic()
-        if self.epoch is None:
-            if self.watcher.agents_up():
-                self.epoch, self.start_sent = time.time() + 0.5, now
-                self.watcher.start(self.epoch)
-        elif now - self.start_sent > 1.0 and any(
-            r.steps == 0 and not r.finished for r in self.watcher.agents.values()
-        ):
-            self.start_sent = now
-            self.watcher.start(self.epoch)
+        if not self.watcher.agents_up() or now - self.start_sent <= 1.0:
+            return
+        waiting = any(r.steps == 0 and not r.finished for r in self.watcher.agents.values())
+        if (waiting or not self.started) and self.watcher.start():
+            self.started, self.start_sent = True, now
 
     def watch(self, interrupted, start):
         watcher, args = self.watcher, self.args
-        self.epoch, self.start_sent, self.received_sent = None, 0.0, False
+        self.started, self.start_sent, self.received_sent = False, 0.0, False
         while True:
             watcher.spin(0.05)
             if args.mode != "lockstep" and args.lead:

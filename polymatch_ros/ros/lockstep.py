@@ -57,6 +57,7 @@ class LockstepExchange:
         self.inbox = defaultdict(dict)  # agent -> {(step, stage): Stage}
         self.current = (0, 0)
         self.stop_step = None  # graph runs: the step after which every agent stops
+        self.paused = lambda: False  # the agent serves its control topic and answers this
         self.subs = [
             wire.subscription(
                 self.node,
@@ -172,15 +173,18 @@ class LockstepExchange:
         t1 = time.perf_counter()
         self.publish_time += t1 - t0
         waiting = [a for a in self.layout.peers if key not in self.inbox[a]]
-        resend_at = RESEND_AFTER
+        resend_at, paused_for = RESEND_AFTER, 0.0
         while waiting:
             waited = time.perf_counter() - t1
             if waited >= resend_at:
-                self.resend(key, waiting, waited)
                 resend_at = waited + RESEND_AFTER
-            left = timeout - waited
+                if self.paused():  # a paused ensemble's waits neither count nor re-send
+                    paused_for += RESEND_AFTER
+                else:
+                    self.resend(key, waiting, waited)
+            left = timeout - (waited - paused_for)
             if left <= 0:
-                self._give_up_if_gone(key, timeout, waiting, waited)
+                self._give_up_if_gone(key, timeout, waiting, waited - paused_for)
             wait = min(resend_at - waited, 0.5)
             self.executor.spin_once(timeout_sec=min(wait, left) if left > 0 else wait)
             waiting = [a for a in waiting if key not in self.inbox[a]]
@@ -260,6 +264,13 @@ class LockstepAgent(AgentBase):
             node, self.layout, params["run_id"], rot_tol, self.drops, self.scene.t_end,
             params["stall_timeout"],
         )
+        self.exchange.paused = self._serve_control
+
+    def _serve_control(self):
+        """Inside a long round wait: take control messages and service calls; paused?"""
+        for _ in range(4):  # what is ready: control messages, service calls, parameters
+            self.spin_once(0.0)
+        return self.paused
 
     def step_size(self, p):
         return p["dt"] or None
@@ -323,6 +334,9 @@ class LockstepAgent(AgentBase):
             if now - last_spin > 0.1:
                 self.spin_once(0.0)
                 last_spin = now
+            while self.paused and not self.stop_requested:  # no new round while paused
+                self.spin_once(0.05)
+                self.exchange.spin_once(0.05)  # the peers' stages of the next round wait here
             if stop:
                 break
         self.exchange.flush()

@@ -14,6 +14,8 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
                       orthogonality defect, agents heard, dropped messages
   markers             visualization_msgs/MarkerArray: each polytope's edges (LINE_LIST),
                       one colour per group, lifetime = peer_timeout so silent agents fade
+  start, stop, reset  std_srvs/Trigger  the ensemble's services (``control``), broadcast
+  pause               std_srvs/SetBool  to every agent on the control topic
 In lockstep it reports each step once every agent's pose for that simulated time
 has arrived; in realtime at ``rate`` Hz from the latest poses.  The headline
 topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo` still
@@ -27,6 +29,7 @@ from dataclasses import replace
 from ..core.metrics import ensemble_metrics
 from ..core.model import GroupState, State
 from . import wire
+from .control import EnsembleControl
 from .exchange import DropCounter
 from .monitor_output import diagnostics, markers
 from .params import MONITOR, declare
@@ -79,6 +82,7 @@ class MonitorNode(NodeApp):
         self.diag_pub = wire.publisher(node, "diagnostics")
         self.status_pub = wire.publisher(node, "status")
         self.marker_pub = wire.publisher(node, "markers") if self.params["markers"] else None
+        self.control = EnsembleControl(node, self.params["mode"])
 
     def _decode(self, agent, kind, msg):
         got, reason = wire.decode_motion(

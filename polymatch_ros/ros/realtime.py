@@ -15,7 +15,7 @@ import numpy as np
 from ..core.model import System
 from ..core.simulate import drive
 from . import wire
-from .agent_node import AgentBase
+from .agent_node import AgentBase, local_state
 from .clock_offset import ClockOffsets
 from .runtime_params import RuntimeParams
 
@@ -222,10 +222,12 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             self._wait_tick(next_tick, period)
             if self.apply_runtime():  # kappa, gamma, rate set while running
                 h, period = self.step_size(self.params), 1.0 / self.params["rate"]
-            alive = self.peers.active()
-            self.state.coupling = None
             t = self.state.t
             step = min(h, self.scene.t_end - t)  # the last tick ends the run at t_end exactly
+            if self._held(t + step):
+                continue
+            alive = self.peers.active()
+            self.state.coupling = None
             self.state = drive(
                 self.plan.method,
                 self.system,
@@ -238,6 +240,19 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             self.rounds += 1
             self.round_time = time.monotonic() - t0
             self.publish_state()
+
+    def _held(self, t_next):
+        """Reset and pause (``control.AgentControl``): back to the initial state at the tick
+        past the reset epoch; while paused, the state held and published at the tick's time.
+        True if this tick does not step."""
+        if self.control.take_reset(time.time()):
+            self.state = local_state(self.scene, self.layout)
+            self.log.info(f"reset: back to the initial state at t = {t_next:.4g}")
+        if not self.paused:
+            return False
+        self.state.t = t_next
+        self.publish_state()
+        return True
 
     def _join_clock(self, start, period, h):
         """Set the initial simulated time of a realtime run; return the monotonic time of tick 0.

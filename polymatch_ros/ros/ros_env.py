@@ -14,25 +14,26 @@ PROFILE = os.path.join(
 )
 
 
-# Realtime ensembles run over UDP (on loopback) only.  Fast DDS 2.14's shared-memory transport
-# does not survive a SIGKILLed participant: a process killed while it writes into a peer's
-# shared-memory port can leave that port broken, after which the peer hears only processes
-# started later (measured: the monitor's reports stopped reaching a /diagnostics echo after one
-# agent was killed and restarted, in 3 of 3 runs; 0 of 3 with UDPv4).  Realtime agents are meant
-# to be killed and to rejoin; a lockstep run ends when any agent dies, so it keeps the faster
-# shared memory.  A user's own FASTDDS_BUILTIN_TRANSPORTS wins.
-REALTIME_TRANSPORTS = "UDPv4"
+# Every polymatch process runs over UDP (on loopback) only.  Fast DDS 2.14's shared-memory
+# transport can leave a peer's port broken, after which messages between two live processes stop
+# for good while every other link works:
+# - a process SIGKILLed while it writes into a peer's port (measured: the monitor's reports
+#   stopped reaching a /diagnostics echo after one agent was killed and restarted, in 3 of 3 runs;
+#   0 of 3 with UDPv4); Fast DDS issue #5053;
+# - a lockstep process paused for two seconds (``control``) while its seven peers waited for it
+#   and re-sent their rounds: the paused process's stages never reached one peer again, and
+#   service answers stopped reaching new clients (2 of 2 runs; 0 of 2 with UDPv4).
+# Over loopback UDP lockstep runs as fast (8 agents, `polymatch run congruent_triangles
+# --t-end 10`: 96 and 101 rounds/s against 105 and 92 with shared memory).  A user's own
+# FASTDDS_BUILTIN_TRANSPORTS wins.
+TRANSPORTS = "UDPv4"
 
 
-def ros_environment(domain_id=None, base=None, mode="lockstep"):
-    """A copy of the environment with discovery on loopback and the given domain id.
-
-    ``mode="realtime"`` also selects the transports a realtime ensemble runs on
-    (``REALTIME_TRANSPORTS``).
-    """
+def ros_environment(domain_id=None, base=None):
+    """A copy of the environment with discovery on loopback, the given domain id, and the
+    transports every polymatch process uses (``TRANSPORTS``)."""
     env = dict(os.environ if base is None else base)
-    if mode == "realtime":
-        env.setdefault("FASTDDS_BUILTIN_TRANSPORTS", REALTIME_TRANSPORTS)
+    env.setdefault("FASTDDS_BUILTIN_TRANSPORTS", TRANSPORTS)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
     if os.path.isfile(PROFILE):
@@ -43,12 +44,12 @@ def ros_environment(domain_id=None, base=None, mode="lockstep"):
     return env
 
 
-def private_ros_environment(domain_id, mode="lockstep"):
+def private_ros_environment(domain_id):
     """``ros_environment`` of a domain reserved for one run (a benchmark, a test): the user's
     own ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE do not carry over."""
     user = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
     base = {k: v for k, v in os.environ.items() if k not in user}
-    return ros_environment(domain_id, base=base, mode=mode)
+    return ros_environment(domain_id, base=base)
 
 
 @contextlib.contextmanager

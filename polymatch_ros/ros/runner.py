@@ -83,8 +83,7 @@ def cmd_run(args):
     with reserved_domain_id() as domain, tempfile.TemporaryDirectory(
         prefix="polymatch_run_"
     ) as directory:
-        transports = "lockstep" if args.mode == "lockstep" else "realtime"
-        env = ros_environment(domain, mode=transports)
+        env = ros_environment(domain)
         envs = None if spec.kind == "localhost" else discovery_environments(spec, directory)
         args.agents_per_process = _agents_per_process(
             args, len(args.agents), envs is None and _localhost(env)
@@ -279,6 +278,8 @@ def _run(args, scene, scene_path, the_plan, env, domain, envs=None):
     try:
         name = "runner" if here == n else f"runner_{args.agents[0]}"
         watcher = Watcher(scene, args.ensemble, name)
+        if args.lead and not args.monitor:
+            watcher.host_ensemble_services(args.mode)
         if args.mode == "bridge":
             robots = bridge_run.robots(args, scene_path, env)
         monitor, children = _start(args, scene, scene_path, the_plan, env, envs)

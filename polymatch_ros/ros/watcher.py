@@ -1,8 +1,10 @@
-"""The runner's own small node: progress, control, the agents' final poses, the graph check."""
+"""The runner's own small node: progress, the ensemble's services, the agents' final poses, the
+graph check."""
 
 from ..core.errors import PolymatchError
 from ..core.model import GroupState, State
 from . import wire
+from .control import ControlClient
 
 
 class Watcher:
@@ -10,9 +12,10 @@ class Watcher:
     a host that runs some of the agents).
 
     It hears the headline diameter and every process's run record (``status``: progress,
-    agents up), publishes the control topic, and takes each agent's *final* pose from its
-    latched ``final_pose``/``final_twist`` topics for the summary - not the per-step poses,
-    so supervising a run adds no load to the lockstep rounds.
+    agents up), calls the ensemble's start and stop services (``control``), and takes each
+    agent's *final* pose from its latched ``final_pose``/``final_twist`` topics for the
+    summary - not the per-step poses, so supervising a run adds no load to the lockstep
+    rounds.
     """
 
     def __init__(self, scene, ensemble, name="runner"):
@@ -31,7 +34,8 @@ class Watcher:
         node, dim = self.node, self.model.dim
         wire.subscription(node, "diameter", self._diam)
         wire.subscription(node, "status", self._status)
-        self.control = wire.publisher(node, "control")
+        self.control = wire.publisher(node, "control")  # the 'received' handshake
+        self.services = ControlClient(node)  # start and stop: the ensemble's services
         for a in range(self.model.n_agents):
             wire.subscription(node, "final_pose", self._pose(a), dim, a)
             if self.model.order == 2:
@@ -108,9 +112,8 @@ class Watcher:
         )
 
     def stop(self):
-        from std_msgs.msg import String
-
-        self.control.publish(String(data="stop"))
+        """The ensemble's ``stop`` service; False while it is not up yet."""
+        return self.services.call("stop")
 
     def received(self):
         """'received' on the control topic: every final pose is here (runs across hosts)."""
@@ -120,10 +123,15 @@ class Watcher:
         self.control.publish(String(data="received"))
         self.control.wait_for_all_acked(Duration(seconds=2.0))
 
-    def start(self, epoch):
-        from std_msgs.msg import String
+    def start(self):
+        """The ensemble's ``start`` service; False while it is not up yet."""
+        return self.services.call("start")
 
-        self.control.publish(String(data=f"start {epoch!r}"))
+    def host_ensemble_services(self, mode):
+        """On a host that runs every agent and no monitor: this node offers them."""
+        from .control import EnsembleControl
+
+        self.ensemble_control = EnsembleControl(self.node, mode)
 
     def final_state(self):
         """The final pose of every agent as a core State (None if some agent never reported)."""
