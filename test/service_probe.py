@@ -10,6 +10,11 @@ Actions (each word-separated inside one argument):
   t                        prints ``T <the slowest agent's time>``
   sleep S                  spin for S seconds
   pose AGENT               prints ``POSE <stamp> <x...>`` of AGENT's newest pose
+  silent AGENT S           prints ``SILENT <True|False>``: no pose of AGENT for S seconds
+  lifecycle NODE LABEL     a lifecycle transition (configure, activate, deactivate, cleanup,
+                           shutdown); prints ``LIFECYCLE LABEL <success>``
+  state NODE               prints ``STATE <label>`` (lifecycle_msgs GetState)
+  publishers TOPIC N       waits (10 s at most) for N publishers; prints ``PUBLISHERS <count>``
 Every wait is bounded (60 s): the probe exits 3 when one runs out.
 """
 
@@ -77,21 +82,68 @@ class Probe:
         self.wait(lambda: self.slowest() is not None and self.slowest() >= float(t), f"t {t}")
 
     def pose(self, agent):
-        topic = f"/polymatch/agent_{agent}/pose"
-        if topic not in self.poses:
-            self.poses[topic] = None
-
-            def keep(msg, topic=topic):
-                self.poses[topic] = msg
-
-            self.node.create_subscription(PoseStamped, topic, keep, 10)
-        self.poses[topic] = None
+        topic = self._subscribe_pose(agent)
         self.wait(lambda: self.poses[topic] is not None, f"a pose on {topic}")
         msg = self.poses[topic]
         p, q = msg.pose.position, msg.pose.orientation
         stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
         print(f"POSE {stamp!r} " + " ".join(repr(v) for v in values), flush=True)
+
+
+    def _subscribe_pose(self, agent):
+        topic = f"/polymatch/agent_{agent}/pose"
+        if topic not in self.poses:
+
+            def keep(msg, topic=topic):
+                self.poses[topic] = msg
+
+            self.node.create_subscription(PoseStamped, topic, keep, 10)
+        self.poses[topic] = None
+        return topic
+
+    def silent(self, agent, seconds):
+        topic = self._subscribe_pose(agent)
+        self.spin(float(seconds))
+        print(f"SILENT {self.poses[topic] is None}", flush=True)
+
+    def _lifecycle_call(self, kind, name, request):
+        client = self.node.create_client(kind, name)
+        self.wait(client.service_is_ready, f"service {name}")
+        future = client.call_async(request)
+        self.wait(future.done, f"answer of {name}")
+        return future.result()
+
+    def lifecycle(self, node, label):
+        from lifecycle_msgs.msg import Transition
+        from lifecycle_msgs.srv import ChangeState, GetState
+
+        state = self._lifecycle_call(GetState, f"{node}/get_state", GetState.Request())
+        ids = {"configure": Transition.TRANSITION_CONFIGURE,
+               "cleanup": Transition.TRANSITION_CLEANUP,
+               "activate": Transition.TRANSITION_ACTIVATE,
+               "deactivate": Transition.TRANSITION_DEACTIVATE,
+               "shutdown": {"unconfigured": Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
+                            "inactive": Transition.TRANSITION_INACTIVE_SHUTDOWN,
+                            "active": Transition.TRANSITION_ACTIVE_SHUTDOWN}
+               .get(state.current_state.label)}
+        request = ChangeState.Request()
+        request.transition.id = ids[label]
+        answer = self._lifecycle_call(ChangeState, f"{node}/change_state", request)
+        print(f"LIFECYCLE {label} {answer.success}", flush=True)
+
+    def state(self, node):
+        from lifecycle_msgs.srv import GetState
+
+        answer = self._lifecycle_call(GetState, f"{node}/get_state", GetState.Request())
+        print(f"STATE {answer.current_state.label}", flush=True)
+
+    def publishers(self, topic, wanted):
+        """Wait (at most 10 s) until ``topic`` has ``wanted`` publishers; print the count."""
+        end = time.monotonic() + 10.0
+        while self.node.count_publishers(topic) != int(wanted) and time.monotonic() < end:
+            rclpy.spin_once(self.node, timeout_sec=0.1)
+        print(f"PUBLISHERS {self.node.count_publishers(topic)}", flush=True)
 
 
 def main(actions):
@@ -108,8 +160,8 @@ def main(actions):
             print(f"T {probe.slowest()!r}", flush=True)
         elif verb == "sleep":
             probe.spin(float(args[0]))
-        elif verb == "pose":
-            probe.pose(*args)
+        elif verb in ("pose", "silent", "lifecycle", "state", "publishers"):
+            getattr(probe, verb)(*args)
         else:
             print(f"unknown action {action!r}", flush=True)
             return 2

@@ -110,3 +110,35 @@ def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converge
     rc = ros.wait(run, BOUND + 30)
     out = ros.output(run)
     assert rc == 0 and "converged" in out, out[-3000:]
+
+
+def test_lifecycle_agent_walks_every_transition_and_steps_only_when_active(ros):
+    """A managed agent (autostart off) through lifecycle_msgs ChangeState: unconfigured it has
+    no pose topic; configured it has one but is silent; cleanup removes it; active it moves;
+    deactivated it holds its pose on the clock; activated again it moves; shutdown ends it."""
+    realtime = dict(mode="realtime", start_time=0.0, rate=20.0, t_end=1000.0, timeout=BOUND)
+    managed = ros.agent(SCENE, 0, autostart=False, **realtime)
+    ros.agent(SCENE, 1, **realtime)  # a peer, so that agent 0 has something to match
+    node, topic = "/polymatch/agent_0", "/polymatch/agent_0/pose"
+    text = _probe(
+        ros,
+        f"state {node}", f"publishers {topic} 0",
+        f"lifecycle {node} configure", f"state {node}", f"publishers {topic} 1", "silent 0 1.5",
+        f"lifecycle {node} cleanup", f"state {node}", f"publishers {topic} 0",
+        f"lifecycle {node} configure", f"lifecycle {node} activate", f"state {node}",
+        "pose 0", "sleep 1", "pose 0",
+        f"lifecycle {node} deactivate", "sleep 0.5", "pose 0", "sleep 1", "pose 0",
+        f"lifecycle {node} activate", "sleep 1", "pose 0",
+        f"lifecycle {node} shutdown",
+    )
+    states = re.findall(r"^STATE (\S+)$", text, re.M)
+    assert states == ["unconfigured", "inactive", "unconfigured", "active"], text
+    assert re.findall(r"^PUBLISHERS (\d+)$", text, re.M) == ["0", "1", "0"], text
+    assert "SILENT True" in text, text
+    transitions = re.findall(r"^LIFECYCLE (\S+) (\S+)$", text, re.M)
+    assert len(transitions) == 7 and all(ok == "True" for _, ok in transitions), text
+    moving_a, moving_b, held_a, held_b, again = _poses(text)
+    assert moving_a[1:] != moving_b[1:], text
+    assert held_a[1:] == held_b[1:] and held_b[0] > held_a[0], text
+    assert again[1:] != held_b[1:], text
+    assert ros.wait(managed, 30) == 0, ros.output(managed)[-2000:]

@@ -48,15 +48,17 @@ class AgentBase(NodeApp):
 
     mode = None
 
-    def __init__(self, node, params):
+    def __init__(self, node, params, executor=None):
         from rclpy.executors import SingleThreadedExecutor
 
         self.node, self.params = node, params
         self.created = time.monotonic()
         self.matched_after = None
         self.log = node.get_logger()
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(node)
+        self.executor = executor
+        if executor is None:  # a managed agent (``managed``) brings the one its node spins in
+            self.executor = SingleThreadedExecutor()
+            self.executor.add_node(node)
         self._configure(params)
         self._make_publishers()
 
@@ -291,36 +293,41 @@ class AgentBase(NodeApp):
     def final_record(self):
         return self.record() if self.finished else None
 
+    def release(self):
+        """What the agent built beside its node (lifecycle cleanup): nothing here."""
 
-def make_agent(argv=None):
-    """The agent of the mode the parameters ask for (checked before any topic is created)."""
-    from rclpy.node import Node
 
-    node = Node(
-        "agent",
-        namespace=wire.namespace(wire.DEFAULT_ENSEMBLE),
-        automatically_declare_parameters_from_overrides=False,
-    )
-    mode = declare(node, [p for p in AGENT if p.name == "mode"])["mode"]
-    rest = [p for p in AGENT if p.name != "mode"]
-    params = dict(declare(node, rest, RUNTIME if mode != "lockstep" else ()), mode=mode)
+def agent_class(mode):
+    """The agent class of a mode (imported on demand: each mode's module is its own)."""
     if mode == "lockstep":
         from .lockstep import LockstepAgent
 
-        if params["kappa"] or params["gamma"]:
-            raise ParameterError(
-                "parameters 'kappa', 'gamma': realtime and bridge only (lockstep runs the "
-                "scene's model, to equal the centralised simulation)"
-            )
-
-        return LockstepAgent(node, params)
+        return LockstepAgent
     if mode == "bridge":
         from .bridge import BridgeAgent
 
-        return BridgeAgent(node, params)
+        return BridgeAgent
     from .realtime import RealtimeAgent
 
-    return RealtimeAgent(node, params)
+    return RealtimeAgent
+
+
+def make_agent(argv=None):
+    """The managed agent of the mode the parameters ask for (checked before any topic is
+    created); its lifecycle node configures and activates itself unless ``autostart`` is off."""
+    from .managed import ManagedAgent, lifecycle_node
+
+    node = lifecycle_node("agent", wire.namespace(wire.DEFAULT_ENSEMBLE))
+    mode = declare(node, [p for p in AGENT if p.name == "mode"])["mode"]
+    rest = [p for p in AGENT if p.name != "mode"]
+    params = dict(declare(node, rest, RUNTIME if mode != "lockstep" else ()), mode=mode)
+    if mode == "lockstep" and (params["kappa"] or params["gamma"]):
+        raise ParameterError(
+            "parameters 'kappa', 'gamma': realtime and bridge only (lockstep runs the "
+            "scene's model, to equal the centralised simulation)"
+        )
+    cls = agent_class(mode)
+    return ManagedAgent(node, lambda n, ex: cls(n, params, ex), params["autostart"])
 
 
 def main(args=None):

@@ -76,8 +76,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
 
     mode = "bridge"
 
-    def __init__(self, node, params):
-        super().__init__(node, params)
+    def __init__(self, node, params, executor=None):
+        super().__init__(node, params, executor)
         self.peers = PeerTable.of_agent(self)
         self.measured = None  # SimpleNamespace(x, rot, heard) of the last good measured pose
         self.holding = "no measured pose yet"

@@ -256,8 +256,8 @@ class LockstepAgent(AgentBase):
 
     mode = "lockstep"
 
-    def __init__(self, node, params):
-        super().__init__(node, params)
+    def __init__(self, node, params, executor=None):
+        super().__init__(node, params, executor)
         projection = self.plan.method.info.family == "projection"
         rot_tol = wire.PROJECTION_STAGE_TOL if projection else wire.ROTATION_TOL
         self.exchange = LockstepExchange(
@@ -340,6 +340,10 @@ class LockstepAgent(AgentBase):
             if stop:
                 break
         self.exchange.flush()
+
+    def release(self):
+        """The exchange's lean node (lifecycle cleanup)."""
+        self.exchange.destroy()
 
     def destroy(self):
         self.exchange.destroy()

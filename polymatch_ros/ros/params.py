@@ -45,6 +45,8 @@ AGENT = (
         (1, 1_000_000),
     ),
     Param("mode", "lockstep", "lockstep | realtime | bridge", choices=MODES),
+    Param("autostart", True, "configure and activate the (lifecycle) agent by itself; false: "
+          "wait for the lifecycle transitions (`ros2 lifecycle set`)"),
     Param("integrator", "", "integrator name ('' = the scene's, see `polymatch integrators`)"),
     Param("dt", 0.0, "lockstep step size (0 = the scene's)", (0.0, 1e6)),
     Param("t_end", 0.0, "end time (0 = the scene's)", (0.0, 1e12)),

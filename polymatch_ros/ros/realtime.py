@@ -156,8 +156,8 @@ class RealtimeAgent(RuntimeParams, AgentBase):
 
     mode = "realtime"
 
-    def __init__(self, node, params):
-        super().__init__(node, params)
+    def __init__(self, node, params, executor=None):
+        super().__init__(node, params, executor)
         self.clock = ClockOffsets(params["time_scale"], params["clock_offset_warn"])
         self.peers = PeerTable.of_agent(self, self.clock)
         self.watch_parameters()
