@@ -74,3 +74,41 @@ def test_failure_before_the_final_line_is_not_a_teardown_hang():
     assert not hung_in_teardown(1, ["agent 0: finished"])
     unfinished = '{"polymatch_run_record": 1, "role": "agent", "mode": "lockstep", "t": 0.5}'
     assert not hung_in_teardown(1, [unfinished, "Timeout (0:00:10)!"])
+
+
+def _child(code):
+    from polymatch_ros.ros.children import Child
+
+    return Child("agent_3", [sys.executable, "-c", code], env=None)
+
+
+def test_runner_ends_a_process_that_overstays_after_its_final_record():
+    """Belt and braces: even if a process's own watchdog never fires, the runner ends a child
+    that printed its finished record and kept running, and counts it as ended well."""
+    import time
+
+    stuck = HUNG.replace("with teardown_watchdog(0.5, exit_code=EXIT_CODE):", "if True:")
+    child = _child(stuck)
+    try:
+        deadline = time.monotonic() + 20
+        while child.reported_at is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert child.reported_at is not None
+        assert not child.end_if_overstaying(30.0)  # not yet overdue
+        time.sleep(0.6)
+        assert child.end_if_overstaying(0.5)
+        assert child.poll() is not None and child.ended_well() and child.hung_in_teardown()
+    finally:
+        child.stop(grace=0.5)
+
+
+def test_runner_leaves_a_process_without_its_final_record_alone():
+    import time
+
+    child = _child("import time\nprint('agent 3: stepping', flush=True)\ntime.sleep(30)")
+    try:
+        time.sleep(0.8)
+        assert not child.end_if_overstaying(0.1)
+        assert child.poll() is None and not child.ended_well()
+    finally:
+        child.stop(grace=0.5)

@@ -11,7 +11,11 @@ from collections import deque
 
 from ..core.errors import ParameterError, PolymatchError
 from . import wire
-from .ros_env import hung_in_teardown
+from .ros_env import EXIT_GRACE, TEARDOWN_SECONDS, hung_in_teardown
+
+# A process that reported its result ends within its teardown watchdog (TEARDOWN_SECONDS +
+# EXIT_GRACE); one still running this long after its final run record is ended by the runner.
+OVERSTAY_SECONDS = 2 * TEARDOWN_SECONDS + EXIT_GRACE
 
 
 def _die_with_parent():
@@ -41,12 +45,19 @@ class Child:
             preexec_fn=_die_with_parent,
         )
         self.lines = deque(maxlen=200)
+        self.reported_at = None  # monotonic time its finished run record arrived
+        self.ended_by_runner = False  # it reported, then overstayed, and the runner ended it
         self.thread = threading.Thread(target=self._read, daemon=True)
         self.thread.start()
 
     def _read(self):
         for line in self.proc.stdout:
-            self.lines.append(line.rstrip("\n"))
+            line = line.rstrip("\n")
+            self.lines.append(line)
+            if self.reported_at is None and line.startswith("{"):
+                rec = wire.RunRecord.from_json(line)
+                if rec is not None and rec.finished:
+                    self.reported_at = time.monotonic()
 
     @property
     def pid(self):
@@ -75,11 +86,25 @@ class Child:
         return list(self.lines)[-n:]
 
     def hung_in_teardown(self):
-        """Reported its final line, then its DDS teardown hung and its watchdog ended it."""
-        return hung_in_teardown(self.proc.poll(), list(self.lines))
+        """Reported its final line, then its DDS teardown hung and its watchdog (or, past
+        ``OVERSTAY_SECONDS``, the runner) ended it."""
+        return self.ended_by_runner or hung_in_teardown(self.proc.poll(), list(self.lines))
 
     def ended_well(self):
-        return self.proc.poll() == 0 or (self.proc.poll() == 1 and self.hung_in_teardown())
+        code = self.proc.poll()
+        return code == 0 or (code is not None and self.hung_in_teardown())
+
+    def end_if_overstaying(self, seconds):
+        """A process that printed its finished run record and is still running ``seconds``
+        later is stuck in its teardown (its own watchdog did not end it): end it by its PID.
+        Its result is in; True if it was ended here."""
+        if self.reported_at is None or self.proc.poll() is not None:
+            return False
+        if time.monotonic() - self.reported_at < seconds:
+            return False
+        self.ended_by_runner = True
+        self.stop(grace=1.0)
+        return True
 
     def records(self):
         """The run records this child printed (``wire.run_records``)."""
@@ -268,6 +293,8 @@ class Supervision:
             if failed:
                 self.progress.done()
                 return failed
+            for c in self.children:
+                c.end_if_overstaying(OVERSTAY_SECONDS)
             if args.lead and not self.received_sent and watcher.have_final():
                 watcher.received()  # the agents hold their final poses until this
                 self.received_sent = True

@@ -54,10 +54,28 @@ class NativeExitTimer:
             self._id = None
 
 
-def native_exit_timer(seconds, exit_code):
-    """A ``NativeExitTimer`` armed for ``seconds``, or None where libc has no POSIX timers."""
+def _load_libc():
+    """glibc by its soname (no ``find_library``: that runs ``ldconfig`` in a subprocess, which
+    a process ending with DDS threads alive must not depend on), else by search; or None."""
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        return ctypes.CDLL("libc.so.6", use_errno=True)
+    except OSError:
+        pass
+    try:
+        name = ctypes.util.find_library("c")
+        return ctypes.CDLL(name, use_errno=True) if name else None
+    except OSError:
+        return None
+
+
+_LIBC = _load_libc()  # loaded with the module, before any teardown needs it
+
+
+def native_exit_timer(seconds, exit_code, libc=_LIBC):
+    """A ``NativeExitTimer`` armed for ``seconds``, or None where libc has no POSIX timers."""
+    if libc is None:
+        return None
+    try:
         libc.timer_delete.argtypes = [ctypes.c_void_p]
         libc.timer_settime.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p,
                                        ctypes.c_void_p]

@@ -7,7 +7,10 @@ the user has set them.  The shipped Fast DDS profile shortens discovery.
 """
 
 import contextlib
+import faulthandler
 import os
+
+from .exit_timer import native_exit_timer
 
 PROFILE = os.path.join(
     os.path.dirname(os.path.abspath(__file__)), "resources", "fastdds_profile.xml"
@@ -85,10 +88,6 @@ def teardown_watchdog(seconds=TEARDOWN_SECONDS, exit_code=1):
     can be made, faulthandler ends the process itself, with code 1.
     Enter it after the work is done and reported, around the teardown only.
     """
-    import faulthandler
-
-    from .exit_timer import native_exit_timer
-
     timer = native_exit_timer(seconds + EXIT_GRACE, exit_code or 0)
     faulthandler.dump_traceback_later(seconds, exit=timer is None)
     try:

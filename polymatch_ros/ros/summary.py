@@ -30,9 +30,10 @@ def report(args, scene, the_plan, watcher, children, monitor, progress, code, me
         print(f"polymatch: error: {message}", file=sys.stderr)
     for c in children + ([monitor] if monitor is not None else []):
         if c.hung_in_teardown():
+            who = "the runner" if c.ended_by_runner else "its watchdog"
             print(
                 f"note: {c.name} reported its result, then its DDS teardown hung (a rare Fast DDS "
-                f"shutdown spin); its watchdog ended it",
+                f"shutdown spin); {who} ended it",
                 file=sys.stderr,
             )
 
