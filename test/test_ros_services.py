@@ -88,6 +88,7 @@ def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converge
     text = _probe(
         ros,
         "until_t 2",
+        "state /polymatch/agent_0",  # the runner configured and activated it (autostart off)
         "call /polymatch/pause true",
         "sleep 1",
         "pose 0",
@@ -101,6 +102,7 @@ def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converge
         "pose 0",
     )
     assert all(ok for _, ok, _ in _results(text)), text
+    assert re.findall(r"^STATE (\S+)$", text, re.M) == ["active"], text
     held_a, held_b, reset, resumed = _poses(text)
     assert held_a[1:] == held_b[1:] and held_b[0] > held_a[0], text  # held, on the clock
     scene = load_scene(scene_path(SCENE))

@@ -281,8 +281,13 @@ class Supervision:
     def watch(self, interrupted, start):
         watcher, args = self.watcher, self.args
         self.started, self.start_sent, self.received_sent = False, 0.0, False
+        by_name = {c.name: c for c in self.children}
+        lifecycle = watcher.drive_lifecycle(
+            list(by_name), lambda name: " | ".join(by_name[name].tail(2)).strip()
+        )
         while True:
             watcher.spin(0.05)
+            lifecycle.step()
             if args.mode != "lockstep" and args.lead:
                 self.start_clock()
             self.check_graph()

@@ -164,6 +164,8 @@ def _node_args(args, scene, scene_path, the_plan):
         "-p",
         f"pose_subscribers:={1 if args.monitor else 0}",
         "-p",
+        "autostart:=false",  # the runner drives the lifecycle (``lifecycle_driver``)
+        "-p",
         f"integrator:={the_plan.name}",
         "-p",
         f"round_timeout:={args.round_timeout!r}",

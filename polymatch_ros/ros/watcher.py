@@ -127,6 +127,14 @@ class Watcher:
         """The ensemble's ``start`` service; False while it is not up yet."""
         return self.services.call("start")
 
+    def drive_lifecycle(self, names, last_words):
+        """A ``LifecycleDriver`` that configures and activates the agent nodes ``names``
+        (``last_words(name)``: that process's last line, for the error of a refused
+        transition)."""
+        from .lifecycle_driver import LifecycleDriver
+
+        return LifecycleDriver(self.node, self.node.get_namespace(), names, last_words)
+
     def host_ensemble_services(self, mode):
         """On a host that runs every agent and no monitor: this node offers them."""
         from .control import EnsembleControl
