@@ -112,7 +112,7 @@ class AgentBase(NodeApp):
         if command is None:
             self.drops("control", f"bad command {msg.data[:80]!r}")
             return
-        ok, message = self.control.command(*command)
+        _, message = self.control.command(*command)
         if command[0] != "received":
             self.log.info(f"control {command[0]}: {message}")
 

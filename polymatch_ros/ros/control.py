@@ -44,6 +44,18 @@ def parse_command(text):
     return words[0], epoch
 
 
+LOCKSTEP_START = "lockstep agents start once every peer is matched"
+
+
+def reset_refusal(mode):
+    """Why ``reset`` does not apply in this mode, or None (realtime)."""
+    if mode == "lockstep":
+        return "a lockstep run is reproducible: start a new run to begin again"
+    if mode == "bridge":
+        return "a bridged agent's state is its robot's measured pose: move the robot"
+    return None
+
+
 class AgentControl:
     """What an agent process was told, by the control topic or by its own services.
 
@@ -87,17 +99,16 @@ class AgentControl:
 
     def _start(self, epoch):
         if self.mode == "lockstep":
-            return True, "lockstep agents start once every peer is matched"
+            return True, LOCKSTEP_START
         if self.start_epoch is None:
             self.start_epoch = epoch
             return True, f"t = 0 at {epoch:.3f}"
         return True, f"already started (t = 0 at {self.start_epoch:.3f})"
 
     def _reset(self, epoch):
-        if self.mode == "lockstep":
-            return False, "a lockstep run is reproducible: start a new run to begin again"
-        if self.mode == "bridge":
-            return False, "a bridged agent's state is its robot's measured pose: move the robot"
+        refusal = reset_refusal(self.mode)
+        if refusal:
+            return False, refusal
         self.reset_epoch = epoch
         return True, f"back to the initial state at the first tick past {epoch:.3f}"
 
@@ -172,7 +183,7 @@ class EnsembleControl:
 
     def _start(self):
         if self.mode == "lockstep":
-            return True, "lockstep agents start once every peer is matched"
+            return True, LOCKSTEP_START
         again = self.epoch is not None
         if not again:
             self.epoch = time.time() + START_LEAD
@@ -188,10 +199,9 @@ class EnsembleControl:
         return True, f"{'pause' if on else 'resume'} sent to every agent"
 
     def _reset(self):
-        if self.mode == "lockstep":
-            return False, "a lockstep run is reproducible: start a new run to begin again"
-        if self.mode == "bridge":
-            return False, "bridged agents' states are their robots' measured poses: move them"
+        refusal = reset_refusal(self.mode)
+        if refusal:
+            return False, refusal
         self._send(f"reset {time.time() + START_LEAD!r}")
         return True, "reset sent: realtime agents go back to their initial state"
 
