@@ -29,9 +29,7 @@ import sys
 from xml.etree import ElementTree
 
 from ..core.errors import ParameterError
-from .ros_env import PROFILE
-
-NETWORK_PROFILE = os.path.join(os.path.dirname(PROFILE), "fastdds_profile_network.xml")
+from .ros_env import NETWORK_PROFILE, PROFILE
 
 KINDS = ("localhost", "subnet", "server", "peers")
 DEFAULT_SERVER_HOST = "127.0.0.1"

@@ -15,20 +15,21 @@ from .exit_timer import native_exit_timer
 PROFILE = os.path.join(
     os.path.dirname(os.path.abspath(__file__)), "resources", "fastdds_profile.xml"
 )
+# Discovery beyond loopback (a user's own ROS_AUTOMATIC_DISCOVERY_RANGE, --discovery): the same
+# discovery settings without the loopback-only transport, plus faster repairs on lossy links.
+NETWORK_PROFILE = os.path.join(os.path.dirname(PROFILE), "fastdds_profile_network.xml")
 
 
-# Every polymatch process runs over UDP (on loopback) only.  Fast DDS 2.14's shared-memory
-# transport can leave a peer's port broken, after which messages between two live processes stop
-# for good while every other link works:
-# - a process SIGKILLed while it writes into a peer's port (measured: the monitor's reports
-#   stopped reaching a /diagnostics echo after one agent was killed and restarted, in 3 of 3 runs;
-#   0 of 3 with UDPv4); Fast DDS issue #5053;
-# - a lockstep process paused for two seconds (``control``) while its seven peers waited for it
-#   and re-sent their rounds: the paused process's stages never reached one peer again, and
-#   service answers stopped reaching new clients (2 of 2 runs; 0 of 2 with UDPv4).
-# Over loopback UDP lockstep runs as fast (8 agents, `polymatch run congruent_triangles
-# --t-end 10`: 96 and 101 rounds/s against 105 and 92 with shared memory).  A user's own
-# FASTDDS_BUILTIN_TRANSPORTS wins.
+# Every polymatch process runs over UDP only: Fast DDS 2.14's shared-memory transport can leave
+# a peer's port broken, after which messages between two live processes stop for good while
+# every other link works (Fast DDS issue #5053): a lockstep round then waits for ever for one
+# peer, or the runner never hears the agents' final poses.  Measured with two 8-agent lockstep
+# runs side by side, over and over, on 2 busy cores (notes in README, "Transport"): 8 failures
+# in 44 runs over shared memory, none over UDP.  Under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+# FASTDDS_BUILTIN_TRANSPORTS does not remove shared memory (its listener threads and
+# /dev/shm segments are there), so the loopback profile (``PROFILE``) names the transport
+# itself: UDPv4 on 127.0.0.1 for discovery and data.  The variable still selects UDPv4 under the
+# network profile.  A user's own FASTDDS_BUILTIN_TRANSPORTS and profile file win.
 TRANSPORTS = "UDPv4"
 
 
@@ -39,8 +40,10 @@ def ros_environment(domain_id=None, base=None):
     env.setdefault("FASTDDS_BUILTIN_TRANSPORTS", TRANSPORTS)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
-    if os.path.isfile(PROFILE):
-        env.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", PROFILE)
+    loopback = env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    profile = PROFILE if loopback else NETWORK_PROFILE
+    if os.path.isfile(profile):
+        env.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", profile)
     if domain_id is not None:
         env["ROS_DOMAIN_ID"] = str(domain_id)
     env.setdefault("PYTHONUNBUFFERED", "1")
