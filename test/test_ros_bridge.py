@@ -15,6 +15,7 @@ import yaml
 from ros_harness import PY, needs_ros, scene_path
 
 from polymatch_ros.core.command import (
+    ZERO,
     bridge_model,
     bridge_system,
     command_from_ensemble,
@@ -27,6 +28,7 @@ from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState, State
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
+from polymatch_ros.ros.bridge import BridgeAgent
 from polymatch_ros.ros.params import AGENT, check
 from polymatch_ros.ros.robot_sim import SimulatedRobot
 from polymatch_ros.ros.runtime_params import validate
@@ -127,11 +129,9 @@ def test_saturation_keeps_the_direction_and_body_frame_is_r_transpose():
         twist_command(np.zeros(2), np.zeros((2, 2)), np.eye(2), frame="robot")
 
 
-def test_bridge_refuses_d4_and_second_order():
+def test_bridge_refuses_d4():
     with pytest.raises(ParameterError, match="d = 4"):
         bridge_model(load_scene(scene_path("simplices_4d")).model)
-    with pytest.raises(ParameterError, match="second-order"):
-        bridge_model(load_scene(scene_path("congruent_triangles_second_order")).model)
 
 
 @pytest.mark.parametrize("frame", ["world", "body"])
@@ -159,6 +159,38 @@ def test_ideal_robots_driven_by_the_command_follow_the_model(tmp_path, frame):
                                grp.to_matrices(ref.groups[0].rot), atol=5e-3)
     d0 = ensemble_metrics(model, scene.initial).diameter
     assert ensemble_metrics(model, final).diameter < 0.8 * d0
+
+
+def test_second_order_hold_brakes_a_moving_robot_then_sends_one_zero():
+    """Pause (or a non-finite command): the damped stop each tick while the measured velocity is
+    fresh and above STILL, then one zero and quiet; a stale pose: one zero at once."""
+    model = bridge_model(load_scene(scene_path("congruent_triangles_second_order")).model)
+    grp, sent = model.rotations, []
+    agent = object.__new__(BridgeAgent)  # the hold logic alone, without a node
+    agent.model, agent.grp, agent.zero_sent, agent.holding = model, grp, False, ""
+    agent.params = check(AGENT, {"scene": "x", "mode": "bridge", "pose_type": "odometry"})
+    agent.cmd_pub = SimpleNamespace(publish=sent.append)
+    agent._message = lambda command: command
+    agent.log = SimpleNamespace(warning=lambda text: None)
+
+    def measure(v, omega, heard):
+        w = grp.algebra_from_skew(np.array([[[0.0, -omega], [omega, 0.0]]]))
+        agent.measured = SimpleNamespace(x=np.zeros(2), rot=grp.from_matrices(np.eye(2)[None]),
+                                         v=np.array(v), w=w, heard=heard)
+
+    measure([0.4, 0.0], 0.5, time.monotonic())
+    agent._hold("paused", brake=True)
+    rate = model.gamma / model.mass
+    np.testing.assert_allclose(sent[-1].linear, [-rate * 0.4, 0.0, 0.0])
+    np.testing.assert_allclose(sent[-1].angular, [0.0, 0.0, -rate * 0.5])
+    measure([0.0, 1e-4], 0.0, time.monotonic())  # at rest: one zero, then quiet
+    agent._hold("paused", brake=True)
+    agent._hold("paused", brake=True)
+    assert len(sent) == 2 and sent[-1] is ZERO and agent.holding == "paused"
+    measure([0.4, 0.0], 0.5, time.monotonic() - 10.0)  # stale: no velocity to brake on
+    agent.zero_sent = False
+    agent._hold("measured pose older than 0.5 s", brake=True)
+    assert len(sent) == 3 and sent[-1] is ZERO
 
 
 def test_noise_floor_grows_with_the_noise():
@@ -335,3 +367,26 @@ def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
     assert tolerance == pytest.approx(noise_floor(0.002, 0.002, radius, 2), rel=1e-5)
     final = re.search(rf"^triangles +{count} +\S+ +\S+ +(\S+) ", text, re.M)
     assert final and float(final.group(1)) < tolerance, text[-2000:]
+
+
+@needs_ros
+def test_second_order_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
+    """The shipped second-order scene (A-1): 8 double-integrator robots commanded accelerations
+    on cmd_accel from their Odometry, matched to the noise floor; every robot moved."""
+    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", "congruent_triangles_second_order",
+                      "--mode", "bridge", "--t-end", "30", "--rate", "10", "--position-noise",
+                      "0.002", "--angle-noise", "0.002", "--lag", "0.2", "--robot-log",
+                      str(tmp_path), "--timeout", "90"], timeout=110)
+    rc = ros.wait(proc, 120)
+    text = ros.output(proc)
+    assert rc == 0, text[-3000:]
+    found = re.search(r"converged: matching diameter < (\S+) from t = (\S+)", text)
+    assert found, text[-3000:]
+    scene = load_scene(scene_path("congruent_triangles_second_order"))
+    radius = np.linalg.norm(scene.model.groups[0].reference, axis=1).max()
+    assert float(found.group(1)) == pytest.approx(noise_floor(0.002, 0.002, radius, 2), rel=1e-5)
+    final = re.search(r"^triangles +8 +\S+ +\S+ +(\S+) ", text, re.M)
+    assert final and float(final.group(1)) < float(found.group(1)), text[-2000:]
+    for agent in range(8):
+        true_x = np.loadtxt(tmp_path / f"robot_{agent}.txt")[:, 1:3]
+        assert np.linalg.norm(true_x[-1] - true_x[0]) > 0.1, f"robot {agent} did not move"

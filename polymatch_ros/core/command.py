@@ -1,4 +1,5 @@
-"""Velocity commands for robots that follow the first-order model (A-2), and the noise floor.
+"""Robot commands: velocities for the first-order model (A-2), accelerations for the second-order
+model (A-1), and the noise floor.
 
 A robot that tracks its commanded velocity moves as agent i of (A-2):
 
@@ -9,7 +10,19 @@ A robot that tracks its commanded velocity moves as agent i of (A-2):
 communication graphs come for free); ``twist_command`` turns them into a twist: linear =
 xbar_i', angular = the axial vector of the spatial angular velocity W_i (2-D: only z), in the
 world frame or in the robot's body frame (R^T v, R^T omega), each part saturated by norm (the
-direction is kept).  No ROS here: the bridge agent and the tests call the same functions.
+direction is kept).
+
+A robot that tracks its commanded acceleration (a double integrator) moves as agent i of (A-1):
+
+    m xbar_i'' = -gamma xbar_i' + (kappa / N) sum_k (xbar_k - xbar_i)            (linear)
+    O_i' = W_i O_i,  m W_i' = -gamma W_i + kappa/(2N) (S O_i^T - O_i S^T)      (angular)
+
+``model_accelerations`` takes both from the core's ``System.rates`` at the robot's measured
+velocities; ``accel_command`` maps them like a twist: linear = xbar_i'', angular = the axial
+vector of W_i' (world frame, or R^T of both in the body frame: the body-frame components of
+the angular acceleration are exactly R^T omega', those of the linear one are R^T xbar_i'').
+``brake_command`` is (A-1) with the coupling off, a = -(gamma/m) v: the damped stop.
+No ROS here: the bridge agent and the tests call the same functions.
 """
 
 import math
@@ -18,15 +31,17 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .errors import ParameterError
-from .model import System
+from .model import GroupState, State, System
 
 FRAMES = ("world", "body")
+#: m/s and rad/s: a braking robot slower than this, in both parts, is at rest
+STILL = 1e-3
 
 
 @dataclass(frozen=True)
 class Twist:
-    """A command: linear and angular (axial vector) velocity, 3 components each; ``saturated``
-    when a speed limit cut it."""
+    """A command: linear and angular (axial vector) velocity or acceleration, 3 components each;
+    ``saturated`` when a limit cut it."""
 
     linear: np.ndarray
     angular: np.ndarray
@@ -41,16 +56,17 @@ ZERO = Twist(np.zeros(3), np.zeros(3))
 
 
 def bridge_model(model):
-    """The model a bridged agent evaluates: first order, centroids by their force (no closed-form
-    flow: a robot's centroid is measured, never advanced); refuses what a twist cannot carry."""
+    """The model a bridged agent evaluates: centroids by their force (no closed-form flow: a
+    robot's centroid is measured, never advanced); refuses what a robot cannot carry out (d >= 4;
+    second order without damping)."""
     if model.dim >= 4:
         raise ParameterError(
             f"mode bridge: d = {model.dim}: a twist carries d <= 3 (robots live in 2-D or 3-D)"
         )
-    if model.order != 1:
+    if model.order == 2 and not model.gamma > 0:
         raise ParameterError(
-            "mode bridge: second-order scenes need acceleration commands; use a first-order "
-            "scene (A-2: mass 0)"
+            "mode bridge: a second-order scene needs gamma > 0 (without damping (A-1) never "
+            "brings a robot to rest)"
         )
     return replace(model, centroids="integrated")
 
@@ -105,17 +121,55 @@ def twist_command(velocity, skew, rot, frame="world", max_linear=math.inf, max_a
     return Twist(linear, angular, cut_linear or cut_angular)
 
 
+def _own_rows(system, gi, row, ensemble):
+    """(coupling, x (1, d), rotation (one row)) of local row ``row`` of group gi in
+    ``ensemble``."""
+    coupling = system.couple(ensemble, first_stage=True)
+    index = getattr(ensemble[gi], "index", None)
+    k = row if index is None else int(np.flatnonzero(np.asarray(index) == row)[0])
+    return coupling, ensemble[gi].x[[k]], system.group.take(ensemble[gi].rot, [k])
+
+
 def command_from_ensemble(system, gi, row, ensemble, rot, frame="world", max_linear=math.inf,
                           max_angular=math.inf):
     """The twist of local row ``row`` of group gi against ``ensemble`` (group arrays: every heard
     agent, this one included), ``rot`` its (d, d) orientation."""
-    coupling = system.couple(ensemble, first_stage=True)
-    gs_x = ensemble[gi].x
-    index = getattr(ensemble[gi], "index", None)
-    k = row if index is None else int(np.flatnonzero(np.asarray(index) == row)[0])
-    grp = system.group
-    velocity, skew = model_rates(system, gi, gs_x[[k]], grp.take(ensemble[gi].rot, [k]), coupling)
+    coupling, x, own_rot = _own_rows(system, gi, row, ensemble)
+    velocity, skew = model_rates(system, gi, x, own_rot, coupling)
     return twist_command(velocity[0], skew[0], rot, frame, max_linear, max_angular)
+
+
+def model_accelerations(system, gi, x, rot, v, w, coupling):
+    """(xbar_i'' (n, d), W_i' (n, d, d) skew) of rows of group gi under (A-1), at velocities
+    ``v`` (n, d) and ``w`` (the group's algebra rows of W_i): the core's ``System.rates``."""
+    groups = [None] * len(system.model.groups)
+    groups[gi] = GroupState(x, rot, v, w)
+    _, _, accel, w_dot = system.rates(State(0.0, tuple(groups)), coupling)[gi]
+    return accel, system.group.algebra_to_skew(w_dot)
+
+
+def accel_command(system, gi, row, ensemble, rot, v, w, frame="world", max_linear=math.inf,
+                  max_angular=math.inf):
+    """The acceleration command (A-1) of local row ``row`` of group gi against ``ensemble``:
+    ``rot`` its (d, d) orientation, ``v`` (d,) and ``w`` (one algebra row) its measured centroid
+    and spatial angular velocity; limits in m/s^2 and rad/s^2."""
+    coupling, x, own_rot = _own_rows(system, gi, row, ensemble)
+    accel, w_dot = model_accelerations(system, gi, x, own_rot, np.asarray(v)[None], w, coupling)
+    return twist_command(accel[0], w_dot[0], rot, frame, max_linear, max_angular)
+
+
+def brake_command(model, v, skew, rot, frame="world", max_linear=math.inf,
+                  max_angular=math.inf):
+    """The damped stop of a second-order robot: (A-1) with the coupling off, xbar'' =
+    -(gamma/m) v and W' = -(gamma/m) W (``skew``); the speed decays as in the model."""
+    rate = model.gamma / model.mass
+    return twist_command(-rate * np.asarray(v), -rate * np.asarray(skew), rot, frame,
+                         max_linear, max_angular)
+
+
+def is_still(v, skew):
+    """True when both the speed and the angular speed are below ``STILL``."""
+    return float(np.linalg.norm(v)) < STILL and float(np.linalg.norm(axial(skew))) < STILL
 
 
 def bridge_system(model, rows):

@@ -1,5 +1,6 @@
 """Bridge: an agent that drives a robot.  Its state is the robot's measured pose; it commands the
-robot's velocity with the first-order model (A-2).
+robot's velocity with the first-order model (A-2), or its acceleration with the second-order
+model (A-1).
 
     ros2 run polymatch_ros agent --ros-args -r __ns:=/polymatch -r __node:=agent_3 \\
         -p scene:=FILE -p agent:=3 -p mode:=bridge \\
@@ -11,18 +12,41 @@ with the seconds since the ensemble's start), and publishes on ``cmd_vel`` (Twis
 TwistStamped) linear = xbar_i' and angular = the axial vector of W_i of (A-2) against the
 peers' latest poses (``core.command``), saturated, in the world or the robot's body frame.
 
+Second-order scene: ``measured_pose`` must be nav_msgs/Odometry (``pose_type:=odometry``): its
+twist, in the child (body) frame as Odometry specifies, turned into the world frame with the
+measured orientation, is the agent's own xbar_i' and W_i (relayed on ``agent_<i>/twist``;
+the peers' velocities are not needed: (A-1)'s right-hand side has none).  The agent publishes
+geometry_msgs/AccelStamped on ``cmd_accel``: linear = xbar_i'' and angular = the axial vector of
+W_i' of (A-1), saturated by ``max_linear_accel`` and ``max_angular_accel``.
+
 Safety: a measured pose older than ``pose_timeout``, a non-finite pose or command, and the
 end of the run (t_end, 'stop', shutdown) publish one zero command; the agent then stays quiet
 (no command, no relayed pose: its peers drop it after their peer timeout) until a fresh pose
 arrives.  A pause (``control``) publishes one zero command at once and keeps relaying the
 measured pose, so that the peers keep the robot; resume goes on at the next tick.  The reason
 is in the diagnostics.
+
+A second-order robot keeps its velocity under a zero acceleration, so a pause and a non-finite
+command brake it instead: every tick, while its fresh measured velocity is above
+``core.command.STILL``, the damped stop of (A-1) without coupling (a = -(gamma/m) v, alpha =
+-(gamma/m) omega); at rest, one zero command and quiet.  A stale pose, the end of the run and a
+shutdown leave no measured velocity (or no agent) to close that loop, and a held braking
+acceleration would drive the robot backwards after m/gamma s: they publish one zero
+acceleration, which adds no energy; the robot's own command watchdog stops it from there.
 """
 
 import time
 from types import SimpleNamespace
 
-from ..core.command import ZERO, bridge_system, command_from_ensemble
+from ..core.command import (
+    ZERO,
+    accel_command,
+    brake_command,
+    bridge_system,
+    command_from_ensemble,
+    is_still,
+    rotation3,
+)
 from ..core.errors import ParameterError
 from ..core.model import GroupState, State
 from . import wire
@@ -31,7 +55,7 @@ from .realtime import PeerTable, RealtimeAgent
 from .runtime_params import RuntimeParams
 
 #: relative names: remap them to a robot's topics (``-r cmd_vel:=/robot3/cmd_vel``)
-MEASURED_POSE, CMD_VEL = "measured_pose", "cmd_vel"
+MEASURED_POSE, CMD_VEL, CMD_ACCEL = "measured_pose", "cmd_vel", "cmd_accel"
 
 
 def robot_qos():
@@ -58,14 +82,23 @@ def twist_class(cmd_type):
     return TwistStamped if cmd_type == "twist_stamped" else Twist
 
 
+def command_class(order, cmd_type):
+    """The command message: AccelStamped (second order) or Twist / TwistStamped (``cmd_type``)."""
+    if order == 2:
+        from geometry_msgs.msg import AccelStamped
+
+        return AccelStamped
+    return twist_class(cmd_type)
+
+
 def pose_of(msg):
     """The geometry_msgs/Pose inside a PoseStamped or an Odometry message."""
     return msg.pose.pose if hasattr(msg, "child_frame_id") else msg.pose
 
 
 def fill_twist(msg, twist):
-    """Write ``twist`` (core.command.Twist) into a Twist or TwistStamped message."""
-    body = msg.twist if hasattr(msg, "header") else msg
+    """Write ``twist`` (core.command.Twist) into a Twist, TwistStamped or AccelStamped message."""
+    body = msg.twist if hasattr(msg, "twist") else msg.accel if hasattr(msg, "accel") else msg
     body.linear.x, body.linear.y, body.linear.z = map(float, twist.linear)
     body.angular.x, body.angular.y, body.angular.z = map(float, twist.angular)
     return msg
@@ -84,7 +117,9 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.zero_sent = False
         self.commands = 0
         pose_qos, cmd_qos = robot_qos()
-        self.cmd_pub = node.create_publisher(twist_class(params["cmd_type"]), CMD_VEL, cmd_qos)
+        self.cmd_class = command_class(self.model.order, params["cmd_type"])
+        topic = CMD_ACCEL if self.model.order == 2 else CMD_VEL
+        self.cmd_pub = node.create_publisher(self.cmd_class, topic, cmd_qos)
         node.create_subscription(
             pose_class(params["pose_type"]), MEASURED_POSE, self._measured_cb, pose_qos
         )
@@ -94,7 +129,12 @@ class BridgeAgent(RuntimeParams, AgentBase):
         if p["agents"] and len(p["agents"]) > 1:
             raise ParameterError("mode bridge: one agent per process (one robot each)")
         super()._configure(p)
-        self.rebuild_system()  # refuses d >= 4 and second order before any topic exists
+        self.rebuild_system()  # refuses d >= 4 and undamped second order before any topic
+        if self.model.order == 2 and p["pose_type"] != "odometry":
+            raise ParameterError(
+                "mode bridge: a second-order scene needs the robot's velocity: "
+                "pose_type:=odometry (nav_msgs/Odometry)"
+            )
 
     def rebuild_system(self):
         self.system = bridge_system(self.model, self.layout.rows)
@@ -114,9 +154,26 @@ class BridgeAgent(RuntimeParams, AgentBase):
             self._hold(f"measured pose refused ({reason})")
             self.measured = None
             return
+        velocity = self._measured_velocity(msg, got[1]) if self.model.order == 2 else (None,) * 3
+        if velocity[0] is None and self.model.order == 2:
+            self.drops("measured_pose", velocity[2])
+            self._hold(f"measured velocity refused ({velocity[2]})")
+            self.measured = None
+            return
         self.measured = SimpleNamespace(
-            x=got[0] - self.scene.origin, rot=got[1], heard=time.monotonic()
+            x=got[0] - self.scene.origin, rot=got[1], v=velocity[0], w=velocity[1],
+            heard=time.monotonic()
         )
+
+    def _measured_velocity(self, msg, rot):
+        """(xbar_i', W_i (one algebra row), None) in the world frame from an Odometry twist (in
+        its child frame, the body), or (None, None, reason)."""
+        tw = msg.twist.twist
+        r3 = rotation3(self.grp.to_matrices(rot)[0])
+        linear = r3 @ [tw.linear.x, tw.linear.y, tw.linear.z]
+        angular = r3 @ [tw.angular.x, tw.angular.y, tw.angular.z]
+        got, reason = wire.twist_to_state(self.grp, self.model.dim, linear, angular)
+        return (None, None, reason) if got is None else (got[0], got[1], None)
 
     def fresh_pose(self):
         """The measured pose if it is younger than pose_timeout, else None."""
@@ -125,16 +182,38 @@ class BridgeAgent(RuntimeParams, AgentBase):
             return None
         return m
 
-    def _hold(self, reason):
-        """Publish one zero command and stay quiet until a fresh measured pose arrives."""
+    def _hold(self, reason, brake=False):
+        """Publish one zero command and stay quiet until a fresh measured pose arrives;
+        ``brake``: a moving second-order robot is braked first (``_brake``)."""
+        if brake and self.model.order == 2 and self._brake(reason):
+            return
         if not self.zero_sent:
             self.cmd_pub.publish(self._message(ZERO))
             self.zero_sent = True
             self.log.warning(f"robot stopped: {reason}")
         self.holding = reason
 
+    def _brake(self, reason):
+        """Command the damped stop (``core.command.brake_command``) while the fresh measured
+        velocity says the robot moves: True; False when it is at rest or not measured."""
+        own = self.fresh_pose()
+        if own is None:
+            return False
+        skew = self.grp.algebra_to_skew(own.w)[0]
+        if is_still(own.v, skew):
+            return False
+        if self.holding != reason:
+            self.log.warning(f"robot braking: {reason}")
+        p = self.params
+        self.cmd_pub.publish(self._message(brake_command(
+            self.model, own.v, skew, self.grp.to_matrices(own.rot)[0], p["command_frame"],
+            p["max_linear_accel"], p["max_angular_accel"],
+        )))
+        self.zero_sent, self.holding = False, reason
+        return True
+
     def _message(self, twist):
-        msg = twist_class(self.params["cmd_type"])()
+        msg = self.cmd_class()
         if hasattr(msg, "header"):
             msg.header.stamp = self.node.get_clock().now().to_msg()
             msg.header.frame_id = (
@@ -155,28 +234,29 @@ class BridgeAgent(RuntimeParams, AgentBase):
         super().publish_state()
         request = SimpleNamespace(stage=self.state, fields=("rot", "x"))
         ensemble = self.peers.ensemble(request, self.peers.active())
-        twist = command_from_ensemble(
-            self.system,
-            gi,
-            row,
-            ensemble,
-            self.grp.to_matrices(own.rot)[0],
-            self.params["command_frame"],
-            self.params["max_linear_speed"],
-            self.params["max_angular_speed"],
-        )
+        twist = self._command(gi, row, ensemble, own)
         if not twist.finite:
-            self._hold("non-finite command")
+            self._hold("non-finite command", brake=True)
             return
         self.cmd_pub.publish(self._message(twist))
         self.zero_sent, self.holding = False, ""
         self.commands += 1
         self.saturated = twist.saturated
 
+    def _command(self, gi, row, ensemble, own):
+        """The twist (A-2) or the acceleration (A-1) of this agent against ``ensemble``."""
+        p, rot = self.params, self.grp.to_matrices(own.rot)[0]
+        if self.model.order == 2:
+            return accel_command(self.system, gi, row, ensemble, rot, own.v, own.w,
+                                 p["command_frame"], p["max_linear_accel"], p["max_angular_accel"])
+        return command_from_ensemble(self.system, gi, row, ensemble, rot, p["command_frame"],
+                                     p["max_linear_speed"], p["max_angular_speed"])
+
     def _state_at(self, t, own):
         gi = self.layout.owner[self.layout.local[0]][0]
         groups = [None] * len(self.model.groups)
-        groups[gi] = GroupState(own.x[None], own.rot)
+        v = None if own.v is None else own.v[None]
+        groups[gi] = GroupState(own.x[None], own.rot, v, own.w)
         return State(t, tuple(groups))
 
     def publish_state(self, final=False):
@@ -191,7 +271,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
     def on_pause(self, paused):
         """A pause commands zero at once, not at the next tick."""
         if paused:
-            self._hold("paused")
+            self._hold("paused", brake=True)
 
     def diagnostic_note(self):
         note, extra = super().diagnostic_note()
@@ -211,8 +291,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
             t = time.time() - start
             if t >= self.scene.t_end:
                 break
-            if self.paused:  # zero command; the measured pose still relayed to the peers
-                self._hold("paused")
+            if self.paused:  # zero command (or braking); the measured pose still relayed
+                self._hold("paused", brake=True)
                 self.state.t = max(t, 0.0)
                 self.publish_state()
             elif t >= 0.0:

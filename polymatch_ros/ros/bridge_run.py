@@ -1,11 +1,11 @@
 """`polymatch run SCENE --mode bridge`: N simulated robots, N bridged agents and the monitor.
 
-Robot i runs in namespace ``/<ensemble>/robot_<i>`` (topics ``measured_pose``, ``cmd_vel``);
-agent i is remapped onto them.  The matching diameter the monitor reports comes from measured
-poses, so it cannot fall below what the noise makes: the run's tolerance is the larger of the
-scene's and the noise floor (``core.command.noise_floor``).  With ``--robot-log DIR`` each
-robot also writes its true and measured pose at every step to ``DIR/robot_<i>.txt``
-(``robot_sim.POSE_LOG_COLUMNS``).
+Robot i runs in namespace ``/<ensemble>/robot_<i>`` (topics ``measured_pose``, ``cmd_vel``, or
+``cmd_accel`` and Odometry poses for a second-order scene); agent i is remapped onto them.  The
+matching diameter the monitor reports comes from measured poses, so it cannot fall below what
+the noise makes: the run's tolerance is the larger of the scene's and the noise floor
+(``core.command.noise_floor``).  With ``--robot-log DIR`` each robot also writes its true and
+measured pose at every step to ``DIR/robot_<i>.txt`` (``robot_sim.POSE_LOG_COLUMNS``).
 """
 
 import os
@@ -34,6 +34,10 @@ def add_arguments(p):
                    help="commanded speed limit (m/s)")
     g.add_argument("--max-angular-speed", type=positive_float, default=1e6,
                    help="commanded angular speed limit (rad/s)")
+    g.add_argument("--max-linear-accel", type=positive_float, default=1e6,
+                   help="second order: commanded acceleration limit (m/s^2)")
+    g.add_argument("--max-angular-accel", type=positive_float, default=1e6,
+                   help="second order: commanded angular acceleration limit (rad/s^2)")
     g.add_argument("--robot-log", metavar="DIR",
                    help="each robot writes its true and measured pose at every step to "
                    "DIR/robot_<i>.txt")
@@ -52,7 +56,8 @@ def robot_log(directory, agent):
 
 def prepare(args, scene):
     """The scene with the noise-floor tolerance; one-line errors for what bridge cannot run."""
-    bridge_model(scene.model)  # d <= 3, first order
+    bridge_model(scene.model)  # d <= 3; second order damped
+    args.bridge_order = scene.model.order
     for name in ("lag", "position_noise", "angle_noise"):
         value = getattr(args, name)
         if not np.isfinite(value) or value < 0:
@@ -68,10 +73,15 @@ def prepare(args, scene):
 
 def agent_args(args):
     """Extra --ros-args of every bridged agent."""
-    return [
+    out = [
         "-p", f"max_linear_speed:={args.max_linear_speed!r}",
         "-p", f"max_angular_speed:={args.max_angular_speed!r}",
     ]
+    if args.bridge_order == 2:
+        out += ["-p", "pose_type:=odometry",
+                "-p", f"max_linear_accel:={args.max_linear_accel!r}",
+                "-p", f"max_angular_accel:={args.max_angular_accel!r}"]
+    return out
 
 
 def remaps(agent):
@@ -79,6 +89,7 @@ def remaps(agent):
     return [
         "-r", f"measured_pose:=robot_{agent}/measured_pose",
         "-r", f"cmd_vel:=robot_{agent}/cmd_vel",
+        "-r", f"cmd_accel:=robot_{agent}/cmd_accel",
     ]
 
 
@@ -97,6 +108,8 @@ def robots(args, scene_path, env):
             "-p", f"angle_noise:={args.angle_noise!r}",
             "-p", "rate:=30.0",
         ]
+        if args.bridge_order == 2:
+            argv += ["-p", "pose_type:=odometry"]
         if args.robot_log is not None:
             argv += ["-p", f"pose_log:={robot_log(args.robot_log, a)}"]
         out.append(Child(f"robot_{a}", argv, env))

@@ -14,7 +14,8 @@ MODES = ("lockstep", "realtime", "bridge")
 MONITOR_MODES = ("lockstep", "realtime")
 #: changeable while running (``ros2 param set``) in realtime and bridge modes, applied at the
 #: next tick; every other parameter, and all of them in lockstep, are read-only
-RUNTIME = ("kappa", "gamma", "rate", "max_linear_speed", "max_angular_speed")
+RUNTIME = ("kappa", "gamma", "rate", "max_linear_speed", "max_angular_speed", "max_linear_accel",
+           "max_angular_accel")
 
 
 @dataclass(frozen=True)
@@ -119,17 +120,24 @@ AGENT = (
         "bridge: commanded angular speed limit (rad/s, by norm)",
         (0.0, 1e6),
     ),
+    Param("max_linear_accel", 1e6,
+          "bridge, second order: commanded linear acceleration limit (m/s^2, by norm)",
+          (0.0, 1e6)),
+    Param("max_angular_accel", 1e6,
+          "bridge, second order: commanded angular acceleration limit (rad/s^2, by norm)",
+          (0.0, 1e6)),
     Param(
         "pose_timeout",
         0.5,
         "bridge: a measured pose older than this (s) stops the robot (one zero command)",
         (0.001, 1e6),
     ),
-    Param("pose_type", "pose", "bridge: measured_pose is pose (PoseStamped) | odometry",
-          choices=("pose", "odometry")),
+    Param("pose_type", "pose", "bridge: measured_pose is pose (PoseStamped) | odometry "
+          "(nav_msgs/Odometry; second order needs its twist)", choices=("pose", "odometry")),
     Param("cmd_type", "twist", "bridge: cmd_vel is twist (Twist) | twist_stamped",
           choices=("twist", "twist_stamped")),
-    Param("command_frame", "world", "bridge: cmd_vel components in the world | body frame",
+    Param("command_frame", "world", "bridge: cmd_vel / cmd_accel components in the world | body "
+          "frame",
           choices=("world", "body")),
     Param(
         "run_id",

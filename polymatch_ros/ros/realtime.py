@@ -23,7 +23,8 @@ from .runtime_params import RuntimeParams
 class PeerTable:
     """The latest pose (and velocity) heard from each peer, and who is still alive."""
 
-    def __init__(self, node, layout, frame_id, timeout, drops, origin, delay, t_max, clock=None):
+    def __init__(self, node, layout, frame_id, timeout, drops, origin, delay, t_max, clock=None,
+                 velocities=True):
         self.node, self.layout, self.drops = node, layout, drops
         self.clock = clock  # ClockOffsets fed with every pose's stamp and arrival, or None
         # injected transport delay (s): a pose is used this long after arrival
@@ -38,7 +39,8 @@ class PeerTable:
         self.silent = set()
         dim = self.model.dim
         self.subs = []
-        want_v = self.model.order == 2 and self.model.centroids_exact
+        # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
+        want_v = velocities and self.model.order == 2 and self.model.centroids_exact
         for a in layout.peers:
             self.subs.append(
                 wire.subscription(node, "pose", self._receiver(a, "pose"), dim, a, mode="realtime")
@@ -52,10 +54,12 @@ class PeerTable:
 
     @classmethod
     def of_agent(cls, agent, clock=None):
-        """The table of a realtime or bridge agent (``AgentBase``), from its parameters."""
+        """The table of a realtime or bridge agent (``AgentBase``), from its parameters; a bridge
+        agent (centroids measured, never advanced by the flow) hears no peer velocities."""
         p = agent.params
         return cls(agent.node, agent.layout, p["frame_id"], p["peer_timeout"], agent.drops,
-                   agent.scene.origin, p["delay"], agent.scene.t_end, clock)
+                   agent.scene.origin, p["delay"], agent.scene.t_end, clock,
+                   velocities=agent.mode != "bridge")
 
     def _entry(self, agent):
         return self.latest.setdefault(

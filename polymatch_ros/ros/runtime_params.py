@@ -1,10 +1,10 @@
 """Parameters changed while an agent runs (``ros2 param set``): checked now, applied next tick.
 
-In realtime and bridge modes ``params.RUNTIME`` (kappa, gamma, rate, speed limits) may be set
-while running: a value is checked against its range (``params.check_value``) in the set
-callback - a bad one is rejected with the reason - and applied at the agent's next tick, so a
-tick never mixes old and new gains.  Every other parameter, and all of them in lockstep, are
-declared read-only.
+In realtime and bridge modes ``params.RUNTIME`` (kappa, gamma, rate, speed and acceleration
+limits) may be set while running: a value is checked against its range (``params.check_value``)
+in the set callback - a bad one is rejected with the reason - and applied at the agent's next
+tick, so a tick never mixes old and new gains.  Every other parameter, and all of them in
+lockstep, are declared read-only.
 """
 
 from dataclasses import replace
