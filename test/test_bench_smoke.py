@@ -31,7 +31,7 @@ EXPECTED = {
     "reductions": ["| reduction", "full / reduced", "angles (Kuramoto) vs 2x2 matrices",
                    "exact flow (Prop. 2.1)", "O(m/gamma) modelling error"],
     "distributed": ["| processes", "bare rounds/s best / median", "agents / bare (medians)",
-                    "slowest match"],
+                    "deployed / agents (medians)", "slowest match"],
     "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
               "injected delay"],
     "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",

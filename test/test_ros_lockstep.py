@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 from ros_harness import cli_argv, needs_ros, placed_vertices, scene_path
 
+from polymatch_ros.core.metrics import ensemble_metrics
+from polymatch_ros.core.model import GroupState, State
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
 from polymatch_ros.ros.wire import run_records
@@ -48,12 +50,34 @@ def received_vertices(scene, path):
     return float(data["t"]), out
 
 
+def received_state(scene, path):
+    """The final poses saved by the runner as a core State (first-order scenes)."""
+    data, grp = np.load(path), scene.model.rotations
+    groups = tuple(
+        GroupState(data[f"group{gi}_centroids"] - scene.origin,
+                   grp.from_matrices(data[f"group{gi}_rotations"]))
+        for gi in range(len(scene.model.groups))
+    )
+    return State(float(data["t"]), groups)
+
+
+def assert_monitor_reported_final_state(scene, records, saved):
+    """The monitor reports at most report_rate times a second, yet its last report is the
+    final step's: the diameter of the final poses, at t_end, with every agent heard."""
+    (mon,) = [r for r in run_records(records.read_text().splitlines()) if r.role == "monitor"]
+    final = received_state(scene, saved)
+    assert mon.t == pytest.approx(final.t, abs=1e-9), mon
+    assert mon.agents_heard == scene.model.n_agents, mon
+    want = ensemble_metrics(scene.model, final).diameter
+    assert mon.diameter == pytest.approx(want, rel=1e-9, abs=1e-12), (mon.diameter, want)
+
+
 @pytest.mark.parametrize("name,integrator,k", CASES)
 def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator, k):
-    out = tmp_path / "final.npz"
+    out, records = tmp_path / "final.npz", tmp_path / "records.jsonl"
     proc = ros.start(
         cli_argv("run", scene_path(name), "--integrator", integrator, "--t-end", T_END, "-k", k,
-                 "--timeout", 150, "--no-compare", "--save", out, "-q"),
+                 "--timeout", 150, "--no-compare", "--save", out, "-q", "--records", records),
         timeout=180,
     )
     rc = ros.wait(proc, 190)
@@ -70,6 +94,7 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
     initial = placed_vertices(scene.model, scene.initial.groups, scene.origin)
     moved = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, initial))
     assert moved > 0.1
+    assert_monitor_reported_final_state(scene, records, out)
 
 
 def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros, tmp_path):

@@ -8,7 +8,8 @@ that the machine's drift hits both alike):
            executor, no numerics — the transport's limit;
   agents   N agent processes started directly (no runner, no monitor): congruent
            triangles, first-order model, rkmk4 (4 rounds per step), the same number of rounds;
-  deployed the same through ``polymatch run`` with the monitor (what the demo runs).
+  deployed the same through ``polymatch run`` with the monitor (what the demo runs); its
+           rate against the agents' own shows what supervising a run costs.
 
 Each process reports its own rounds/s and how long after its node was created
 every peer was matched.  Every ROS process runs with loopback discovery, a domain
@@ -208,6 +209,7 @@ def _size_row(n, runs, repeats, deployed):
         f"{a_best:.1f} / {a_med:.1f}",
         f"{a_med / b_med:.0%}" if bare and agents else "-",
         f"{d_best:.1f} / {d_med:.1f}" if deployed else "-",
+        f"{d_med / a_med:.0%}" if deployed and dep and agents else "-",
         f"{max(runs.bare_match):.2f}" if runs.bare_match else "-",
         f"{max(runs.agents_match):.2f}" if runs.agents_match else "-",
         f"{len(bare)}+{len(agents)}+{len(dep)} of {repeats}",
@@ -235,6 +237,7 @@ def _table(report, rows, rounds, repeats):
             "agents rounds/s best / median",
             "agents / bare (medians)",
             "deployed (runner + monitor)",
+            "deployed / agents (medians)",
             "bare: slowest match (s)",
             "agents: slowest match (s)",
             "runs that finished",
@@ -253,8 +256,9 @@ def _notes(report, sizes, deployed):
         "published every step.",
         "- bare: the same QoS (RELIABLE, VOLATILE, readers KEEP_ALL), node and executor, "
         "no numerics.",
-        "- deployed: `polymatch run` with the monitor, which hears every pose and computes the "
-        "metrics each step on the same two cores.",
+        "- deployed: `polymatch run` with the monitor, which hears every pose of every step "
+        "and computes and publishes the metrics at most `report_rate` times a second (20 by "
+        "default), on the same cores.",
     )
     packed = [n for n in sizes if _deployed_per_process(n) > 1]
     if packed and deployed:

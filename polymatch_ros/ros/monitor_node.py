@@ -16,8 +16,10 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
                       one colour per group, lifetime = peer_timeout so silent agents fade
   start, stop, reset  std_srvs/Trigger  the ensemble's services (``control``), broadcast
   pause               std_srvs/SetBool  to every agent on the control topic
-In lockstep it reports each step once every agent's pose for that simulated time
-has arrived; in realtime at ``rate`` Hz from the latest poses.  The headline
+In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
+second, the latest simulated time that every agent's pose has reached (a timer at that rate
+publishes it, so the last step is reported within 1/report_rate s even when no pose follows);
+in realtime at ``rate`` Hz from the latest poses.  The headline
 topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo` still
 gets the last value.
 """
@@ -61,11 +63,14 @@ class MonitorNode(NodeApp):
         self.velocity = {}  # agent -> (t key, v, w)
         self.pending = {}  # time key -> {agent: Row}   (lockstep)
         self.pending_v = {}
-        self.reported = -1
+        self.completed = -1  # lockstep: the latest stamp every agent (and velocity) reached
+        self.unreported = None  # lockstep: (t, rows, velocities) of it until it is reported
         self.last = None  # (t, metrics, agents heard) of the last report
         self.reports = 0
         self._wire_up()
-        if not self.lockstep:
+        if self.lockstep:
+            node.create_timer(1.0 / params["report_rate"], self._report_completed)
+        else:
             node.create_timer(1.0 / params["rate"], self._report_latest)
 
     def _wire_up(self):
@@ -93,12 +98,12 @@ class MonitorNode(NodeApp):
         return got
 
     def _fresh(self, agent, key, pending):
-        """Lockstep: True if this stamp is still to be reported.  The same stamp heard again
+        """Lockstep: True if this stamp is still to be completed.  The same stamp heard again
         (an agent's initial pose re-announced, a repeated publish) is expected traffic, not a
-        drop; an older stamp than the last report is a stale message, dropped and counted."""
-        if key > self.reported and agent not in pending.get(key, {}):
+        drop; a stamp older than the last completed one is a stale message, dropped and counted."""
+        if key > self.completed and agent not in pending.get(key, {}):
             return True
-        if key >= self.reported:
+        if key >= self.completed:
             self.repeats += 1
         else:
             self.drops(f"agent {agent}", "stale pose (a stamp from the past)")
@@ -122,13 +127,14 @@ class MonitorNode(NodeApp):
                 latest[agent] = (got.key, *value)
             if self.lockstep and self._fresh(agent, got.key, pending):
                 pending.setdefault(got.key, {})[agent] = value
-                self._report_complete()
+                self._collect_completed()
 
         return receive
 
     # -- reporting --------------------------------------------------------------------------
     def _state_from(self, rows, velocities):
-        """The agents heard: (model of the groups present, their State, the group indices)."""
+        """The agents heard: (model of the groups present, their State, the group indices);
+        with every agent heard, the scene's own model."""
         groups, sub_groups, keep = [], [], []
         for gi, g in enumerate(self.model.groups):
             present = {a - g.start: rows[a] for a in g.indices if a in rows}
@@ -143,10 +149,15 @@ class MonitorNode(NodeApp):
             scales = None if g.scales is None else g.scales[e.index]
             sub_groups.append(replace(g, size=len(present), scales=scales))
             keep.append(gi)
-        return replace(self.model, groups=tuple(sub_groups)), State(0.0, tuple(groups)), keep
+        state = State(0.0, tuple(groups))
+        if len(rows) == self.n:
+            return self.model, state, keep
+        return replace(self.model, groups=tuple(sub_groups)), state, keep
 
-    def _report_complete(self):
-        """Lockstep: publish every simulated time that all agents (and velocities) have reached."""
+    def _collect_completed(self):
+        """Lockstep: advance to the latest simulated time all agents (and velocities) have
+        reached; its poses wait in ``unreported`` for the report timer, earlier ones are
+        superseded unreported."""
         need_v = self.model.order == 2
         for key in sorted(self.pending):
             rows = self.pending[key]
@@ -154,10 +165,17 @@ class MonitorNode(NodeApp):
                 break
             vel = self.pending_v.pop(key, {})
             del self.pending[key]
-            self.reported = key
-            self._publish(key * 1e-9, rows, vel)
-        for key in [k for k in self.pending if k <= self.reported]:
+            self.completed = key
+            self.unreported = (key * 1e-9, rows, vel)
+        for key in [k for k in self.pending if k <= self.completed]:
             del self.pending[key]
+
+    def _report_completed(self):
+        """Lockstep, at ``report_rate`` Hz: publish the latest completed time if it is new."""
+        if self.unreported is not None:
+            t, rows, vel = self.unreported
+            self.unreported = None
+            self._publish(t, rows, vel)
 
     def _report_latest(self):
         now = time.monotonic()
@@ -168,12 +186,17 @@ class MonitorNode(NodeApp):
         vel = {a: self.velocity[a][1:] for a in alive if a in self.velocity}
         self._publish(max(self.latest[a][0] for a in alive) * 1e-9, rows, vel)
 
-    def _publish(self, t, rows, velocities):
-        from std_msgs.msg import Float64, String
-
+    def _evaluate(self, t, rows, velocities):
+        """The metrics of the agents heard (Prop 2.1/2.2 quantities); they become ``last``."""
         model, state, keep = self._state_from(rows, velocities)
         met = ensemble_metrics(model, state)
         self.last = (t, met, len(rows))
+        return met, keep
+
+    def _publish(self, t, rows, velocities):
+        from std_msgs.msg import Float64, String
+
+        met, keep = self._evaluate(t, rows, velocities)
         self.reports += 1
         for key, value in (
             ("diameter", met.diameter),
@@ -203,6 +226,9 @@ class MonitorNode(NodeApp):
             self.executor.spin_once(timeout_sec=0.5)
 
     def final_record(self):
+        if self.unreported is not None:  # completed after the last tick: the record is exact
+            self._evaluate(*self.unreported)
+            self.unreported = None
         if self.last is None:
             return None
         rec = self.record()

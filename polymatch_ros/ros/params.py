@@ -152,11 +152,19 @@ MONITOR = (
     Param(
         "mode",
         "lockstep",
-        "lockstep: report each simulated time once all agents reached it; "
-        "realtime: report at 'rate' Hz from the latest poses (also for bridged agents)",
+        "lockstep: report the latest simulated time all agents reached, at most "
+        "'report_rate' Hz; realtime: report at 'rate' Hz from the latest poses (also for "
+        "bridged agents)",
         choices=MONITOR_MODES,
     ),
     Param("rate", 10.0, "realtime: reports per second", (0.01, 10000.0)),
+    Param(
+        "report_rate",
+        20.0,
+        "lockstep: reports per second at most; every step's poses are still collected, and "
+        "the latest step all agents reached is reported within 1/report_rate s",
+        (0.01, 10000.0),
+    ),
     Param(
         "peer_timeout",
         1.0,
