@@ -210,8 +210,8 @@ def build_parser():
         sub.add_parser(name, help=f"one {name} node (ROS 2); takes the same arguments as "
                                   f"`ros2 run polymatch_ros {name}`, "
                                   f"e.g. --ros-args -p scene:=FILE")
-    for _name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("bench", "bench"),
-                          ("sweep", "sweep")):
+    for _name, module in (("run", "ros.runner"), ("echo", "ros.echo"), ("set", "ros.param_set"),
+                          ("bench", "bench"), ("sweep", "sweep")):
         try:
             mod = __import__(f"polymatch_ros.{module}", fromlist=["add_parser"])
         except ImportError as exc:

@@ -144,3 +144,22 @@ def test_lifecycle_agent_walks_every_transition_and_steps_only_when_active(ros):
     assert held_a[1:] == held_b[1:] and held_b[0] > held_a[0], text
     assert again[1:] != held_b[1:], text
     assert ros.wait(managed, 30) == 0, ros.output(managed)[-2000:]
+
+
+def test_polymatch_set_changes_a_runtime_gain_on_every_agent_in_one_command(ros):
+    """``polymatch set kappa 1.5``: every realtime agent of the ensemble accepts it (its
+    set_parameters service) and applies it at its next tick; a value out of range is refused
+    before anything is sent."""
+    realtime = dict(mode="realtime", start_time=0.0, rate=20.0, t_end=1000.0, timeout=BOUND)
+    agents = [ros.agent(SCENE, i, **realtime) for i in range(2)]
+    _probe(ros, "pose 0", "pose 1")  # both active and publishing
+    setter = ros.start(cli_argv("set", "kappa", "1.5", "--timeout", "30"), timeout=60,
+                       name="set")
+    assert ros.wait(setter, 70) == 0, ros.output(setter)
+    applied = re.findall(r"^(agent_\d): kappa = 1.5 ", ros.output(setter), re.M)
+    assert applied == ["agent_0", "agent_1"], ros.output(setter)
+    _probe(ros, "sleep 1")
+    for a in agents:
+        assert "kappa 1 -> 1.5" in ros.output(a), ros.output(a)[-2000:]
+    bad = ros.start(cli_argv("set", "kappa", "2e6"), timeout=30, name="set_bad")
+    assert ros.wait(bad, 40) == 2 and "out of range" in ros.output(bad), ros.output(bad)

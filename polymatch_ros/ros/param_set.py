@@ -1,0 +1,138 @@
+"""`polymatch set NAME VALUE`: one runtime parameter on every agent of an ensemble, one command.
+
+    polymatch set kappa 2.0                 # every agent node in /polymatch
+    polymatch set max_linear_speed 0.3 --ensemble team_b
+
+It finds the agent nodes of the ensemble (``agent_<i>``, ``agents_<first>_<last>``) in the ROS
+graph and calls each one's ``set_parameters`` service (``rcl_interfaces/srv/SetParameters``),
+as ``ros2 param set`` would one at a time.  The value is checked against the parameter's range
+here first (``params.check_value``; a bad one is a one-line error, exit 2, nothing sent);
+each agent checks it again and applies it at its next tick (``runtime_params``).  One line per
+agent node; exit 0 if every one accepted, 2 if one refused (lockstep agents refuse: their
+parameters are read-only), 1 if no agent answered within ``--timeout``.
+"""
+
+import os
+import time
+
+from ..core.errors import ParameterError, PolymatchError
+from . import wire
+from .params import RUNTIME, check_value
+from .ros_env import ros_environment, teardown_watchdog
+from .runtime_params import SPEC
+
+SETTLE_SECONDS = 1.0  # the graph must stay unchanged this long before the calls go out
+
+
+def checked_value(name, text):
+    """The float value of ``text`` for runtime parameter ``name``; ParameterError otherwise."""
+    if name not in RUNTIME:
+        raise ParameterError(
+            f"{name!r} cannot be set while running; runtime parameters: {', '.join(RUNTIME)}"
+        )
+    try:
+        value = float(text)
+    except ValueError:
+        raise ParameterError(f"{name}: {text!r} is not a number") from None
+    return check_value(SPEC[name], value)
+
+
+def agent_nodes(node, namespace):
+    """Names of the agent nodes in ``namespace`` (sorted)."""
+    return sorted(
+        name for name, space in node.get_node_names_and_namespaces()
+        if space == namespace and (name.startswith("agent_") or name.startswith("agents_"))
+    )
+
+
+def _discover(node, executor, namespace, deadline):
+    """The agent nodes once the graph has stopped changing (or at the deadline)."""
+    seen, since = [], time.monotonic()
+    while time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.1)
+        now = agent_nodes(node, namespace)
+        if now != seen:
+            seen, since = now, time.monotonic()
+        elif seen and time.monotonic() - since >= SETTLE_SECONDS:
+            break
+    return seen
+
+
+def _call_all(node, executor, namespace, names, name, value, deadline):
+    """{node name: (accepted, reason)} of the set_parameters calls (None: no answer)."""
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    request = SetParameters.Request(parameters=[Parameter(
+        name=name,
+        value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value),
+    )])
+    clients = {n: node.create_client(SetParameters, f"{namespace}/{n}/set_parameters")
+               for n in names}
+    futures, answers = {}, dict.fromkeys(names)
+    while time.monotonic() < deadline and any(a is None for a in answers.values()):
+        executor.spin_once(timeout_sec=0.05)
+        for n, client in clients.items():
+            if n not in futures and client.service_is_ready():
+                futures[n] = client.call_async(request)
+            elif n in futures and futures[n].done() and answers[n] is None:
+                result = futures[n].result().results[0]
+                answers[n] = (result.successful, result.reason)
+    return answers
+
+
+def cmd_set(args):
+    value = checked_value(args.name, args.value)
+    namespace = wire.namespace(args.ensemble)
+    os.environ.update(ros_environment())  # loopback discovery unless the user set otherwise
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    rclpy.init(args=[])
+    node = Node("polymatch_set", namespace=namespace, start_parameter_services=False)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    code = 1
+    try:
+        deadline = time.monotonic() + args.timeout
+        names = _discover(node, executor, namespace, deadline)
+        if not names:
+            raise PolymatchError(
+                f"no agent node in {namespace} within {args.timeout:g} s "
+                f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})"
+            )
+        answers = _call_all(node, executor, namespace, names, args.name, value, deadline)
+        code = _report(answers, args.name, value)
+    finally:
+        with teardown_watchdog(exit_code=code):
+            executor.shutdown(timeout_sec=1.0)
+            node.destroy_node()
+            if rclpy.ok():
+                rclpy.shutdown()
+    return code
+
+
+def _report(answers, name, value):
+    """One line per agent node; the exit code."""
+    for n, answer in answers.items():
+        if answer is None:
+            print(f"{n}: no answer", flush=True)
+        elif answer[0]:
+            print(f"{n}: {name} = {value:g} (applied at its next tick)", flush=True)
+        else:
+            print(f"{n}: refused: {answer[1]}", flush=True)
+    if any(a is not None and not a[0] for a in answers.values()):
+        return 2
+    return 0 if all(a is not None for a in answers.values()) else 1
+
+
+def add_parser(sub):
+    p = sub.add_parser("set", help="set a runtime parameter (kappa, gamma, rate, limits) on "
+                                   "every agent of a running ensemble")
+    p.add_argument("name", help=f"one of {', '.join(RUNTIME)}")
+    p.add_argument("value", help="the new value (checked against the parameter's range)")
+    p.add_argument("--ensemble", default="polymatch", help="ensemble namespace")
+    p.add_argument("--timeout", type=float, default=10.0,
+                   help="seconds to find the agents and hear their answers (default 10)")
+    p.set_defaults(func=cmd_set)
