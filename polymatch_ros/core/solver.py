@@ -143,9 +143,10 @@ def lincomb(base, h: float, coefs: Sequence[float], terms: Sequence):
 
 
 def _same_floats(base, term, shape: tuple) -> bool:
-    """True when term is a float array of ``shape`` and base None or a float array of it."""
-    return all(a is None or (isinstance(a, np.ndarray) and a.dtype == np.float64
-                             and a.shape == shape) for a in (base, term))
+    """True when term is a float array of ``shape`` (rows first) and base None or one too."""
+    return len(shape) > 0 and all(
+        a is None or (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == shape)
+        for a in (base, term))
 
 
 def _row_block_sum(base, scaled: list) -> np.ndarray:
