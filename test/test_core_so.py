@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from polymatch_ros.core.so import SO4, SOn, group_for
+from polymatch_ros.core.so import SO4, SOn, base, group_for
 from polymatch_ros.core.so.cayley import SERIES_LIMIT, cayley_series
 from polymatch_ros.core.so.so4 import cayley4, dcay_inv4, pair_matrices, quaternion_pairs
+from polymatch_ros.core.solver import lincomb
 
 
 def _skew(rng, n, d, scale):
@@ -121,3 +122,34 @@ def test_so4_steps_hand_on_their_quaternion_pairs_without_drifting_off_so4():
     assert np.max(np.abs(np.swapaxes(rot, 1, 2) @ rot - np.eye(4))) < 1e-14
     p, q = grp._quaternion_pairs(rot)
     np.testing.assert_allclose(pair_matrices(p, q), rot, rtol=0, atol=1e-14)
+
+
+def test_recycled_arrays_are_handed_out_again_only_once_nothing_refers_to_them():
+    shape = (base.RECYCLED_MIN_BYTES // 8 + 1,)
+    first, second = base.recycled(shape), base.recycled(shape)
+    assert not np.shares_memory(first, second)          # both held: two arrays
+    view = first[::2]
+    del first                                            # a view still refers to it
+    third = base.recycled(shape)
+    assert not np.shares_memory(third, view) and not np.shares_memory(third, second)
+    address = third.__array_interface__["data"][0]
+    del third                                            # nothing refers to it any more
+    assert base.recycled(shape).__array_interface__["data"][0] == address
+
+
+def test_row_blocks_leave_every_bit_of_the_batched_forms_unchanged(monkeypatch):
+    """Cayley retraction, dcay^{-1}, the Lohe kernel and stage sums, whole and in blocks."""
+    rng = np.random.default_rng(12)
+    grp = SOn(6)
+    w, a, g = _skew(rng, 50, 6, 1e-2), _skew(rng, 50, 6, 1.0), _rotations(rng, 50, 6)
+    s = grp.mean_field(g)
+
+    def forms():
+        return [grp.retract(w, g).copy(), grp.dpsi_inv(w, a).copy(),
+                grp.coupling(g, s).copy(), lincomb(g, 0.1, [0.5, 0.0, 0.25], [w, a, a]).copy()]
+
+    whole = forms()
+    monkeypatch.setattr(base, "ROW_BLOCK_BYTES", 7 * 6 * 6 * 8)          # blocks of 7 rows
+    assert base.row_blocks(g.shape)[0] == 7
+    for got, want in zip(forms(), whole):
+        assert np.array_equal(got, want)

@@ -174,10 +174,11 @@ def lohe_torque(group: RotationGroup, rot: Array, coupling: GroupCoupling, gain:
     gain = kappa/gamma it is W_i of the first-order model (A-2).  S is the group's mean
     field (sum_k s_k O_k under F-1) and ``inv_scales`` the local 1/s_i (F-1 weights).
     """
-    rate = group.coupling(rot, coupling.s)
+    rate = group.coupling(rot, coupling.s)            # a new array: scaled in place
     if inv_scales is not None:
         rate = group.algebra_scale_rows(rate, inv_scales)
-    return (gain / 2.0 / coupling.n) * rate
+    rate *= gain / 2.0 / coupling.n
+    return rate
 
 
 class System:

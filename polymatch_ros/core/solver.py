@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from .model import Coupling, GroupState, Request, State, System
+from .so.base import recycled, row_blocks, scratch
 
 RUNNING, FINISHED = "running", "finished"
 
@@ -126,11 +127,43 @@ class Method:
 
 
 def lincomb(base, h: float, coefs: Sequence[float], terms: Sequence):
-    """base + h * sum coefs[j] * terms[j] (skipping zero coefficients); base may be None (zero)."""
+    """base + h * sum coefs[j] * terms[j] (skipping zero coefficients); base may be None (zero).
+
+    Float arrays of one shape are summed block of rows by block (``row_blocks``) into one
+    result array (``recycled``; ``base`` is never modified): the operations and their order
+    are those of out + (h c) t term by term, without a fresh array per term.
+    """
+    scaled = [(h * c, t) for c, t in zip(coefs, terms) if c != 0.0 and t is not None]
+    if scaled and all(_same_floats(base, t, scaled[0][1].shape) for _, t in scaled):
+        return _row_block_sum(base, scaled)
     out = base
-    for c, t in zip(coefs, terms):
-        if c != 0.0 and t is not None:
-            out = (h * c) * t if out is None else out + (h * c) * t
+    for hc, t in scaled:
+        out = hc * t if out is None else out + hc * t
+    return out
+
+
+def _same_floats(base, term, shape: tuple) -> bool:
+    """True when term is a float array of ``shape`` (rows first) and base None or one too."""
+    return len(shape) > 0 and all(
+        a is None or (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == shape)
+        for a in (base, term))
+
+
+def _row_block_sum(base, scaled: list) -> np.ndarray:
+    """base + sum hc t over [(hc, t)] (base None: zero), one block of rows at a time."""
+    shape = scaled[0][1].shape
+    out = recycled(shape)
+    rows, blocks = row_blocks(shape)
+    temp = scratch("lincomb", (rows,) + shape[1:])
+    for block in blocks:
+        acc, term = out[block], temp[:block.stop - block.start]
+        (hc, t), rest = scaled[0], scaled[1:]
+        if base is None:
+            np.multiply(t[block], hc, out=acc)
+        else:
+            np.add(base[block], np.multiply(t[block], hc, out=term), out=acc)
+        for hc, t in rest:
+            acc += np.multiply(t[block], hc, out=term)
     return out
 
 

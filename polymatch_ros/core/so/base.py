@@ -1,5 +1,7 @@
 """The interface of the batched SO(d) representations, and the polar factor they share."""
 
+import math
+import sys
 import threading
 from collections.abc import Sequence
 
@@ -109,7 +111,8 @@ class RotationGroup:
         """The skew kernel S O_i^T - O_i S^T of the Lohe torque (A-1, A-2), as an algebra array.
 
         ``s`` is one mean field for all rows or one field per row (``neighbour_fields``).
-        Only ``model.lohe_torque`` calls it: that is where gains and F-1 weights are applied.
+        Only ``model.lohe_torque`` calls it: that is where gains and F-1 weights are applied,
+        in place (the result is a new array the caller owns, as ``algebra_scale_rows``'s).
         """
         raise NotImplementedError
 
@@ -186,6 +189,60 @@ def scratch(name: str, shape: tuple) -> np.ndarray:
     if buf is None or buf.shape != shape:
         buf = kept[name] = np.empty(shape)
     return buf
+
+
+#: arrays ``recycled`` keeps, least recently handed out first, one list per thread
+_RECYCLED = threading.local()
+#: how many arrays ``recycled`` keeps per thread (a step of rkmk4 holds about ten at once)
+RECYCLED_ARRAYS = 16
+#: arrays smaller than this (bytes) are simply allocated: the allocator reuses them cheaply
+RECYCLED_MIN_BYTES = 1 << 17
+
+
+def _references(kept: list, k: int) -> int:
+    return sys.getrefcount(kept[k])
+
+
+#: what ``_references`` counts for an array that only the kept list refers to
+_UNREFERENCED = _references([np.empty(0)], 0)
+
+
+def recycled(shape: tuple) -> np.ndarray:
+    """A float array of ``shape`` for a result that leaves the call, its memory reused.
+
+    Like ``scratch`` it spares the page faults of a large fresh array, but the caller may keep
+    the result as long as it likes: a kept array is handed out again only once nothing else
+    refers to it (its reference count says so; a view counts, as it refers to its base),
+    which is how numpy itself reuses temporaries.  Contents are undefined.
+    """
+    if 8 * math.prod(shape) < RECYCLED_MIN_BYTES:
+        return np.empty(shape)
+    kept = _RECYCLED.__dict__.setdefault("arrays", [])
+    for k in range(len(kept)):
+        if kept[k].shape == shape and _references(kept, k) == _UNREFERENCED:
+            kept.append(kept.pop(k))
+            return kept[-1]
+    if len(kept) >= RECYCLED_ARRAYS:
+        held = [k for k in range(len(kept)) if _references(kept, k) > _UNREFERENCED]
+        kept.pop(held[0] if held else 0)
+    buf = np.empty(shape)
+    kept.append(buf)
+    return buf
+
+
+#: bytes of one array's rows that a row-blocked computation takes at a time (``row_blocks``)
+ROW_BLOCK_BYTES = 1 << 20
+
+
+def row_blocks(shape: tuple) -> tuple[int, list[slice]]:
+    """(rows per block, the row slices) of an array of ``shape``, each block ROW_BLOCK_BYTES.
+
+    A computation of several steps on a block at a time keeps its temporaries in the CPU
+    caches (a block of each fits, where whole arrays of megabytes do not).
+    """
+    row_bytes = 8 * math.prod(shape[1:])
+    rows = max(1, min(shape[0], ROW_BLOCK_BYTES // max(row_bytes, 1)))
+    return rows, [slice(s, min(s + rows, shape[0])) for s in range(0, shape[0], rows)]
 
 
 def rows_product(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

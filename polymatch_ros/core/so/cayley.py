@@ -16,11 +16,15 @@ d >= 5: with M = -W^2/4 (symmetric, 0 <= M <= |W|_F^2/8), (I - W/2)^{-1} =
 A rotation whose |W|_F^2/8 exceeds SERIES_LIMIT is solved by LAPACK
 instead (a choice made by that row alone); k follows the largest |W| of the others, so a
 row's result depends on the rest of the batch only below round-off.
+
+Both run over blocks of rows (``row_blocks``): a block's few temporaries stay in the CPU
+caches between its products, where whole (N, d, d) arrays would go back and forth to memory.
+Every row's operations are those of the whole batch, so the results are the same bits.
 """
 
 import numpy as np
 
-from .base import scratch
+from .base import recycled, row_blocks, scratch
 
 #: rows with |W|_F^2 / 8 (a bound of |M|_2) above this are solved by LAPACK
 SERIES_LIMIT = 1.0 / 16.0
@@ -50,10 +54,21 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
         factors += 1
     while largest ** terms >= SERIES_ROUNDOFF and terms < 2 ** factors:
         terms += 1
-    half = np.multiply(w, 0.5, out=scratch("cayley.half", w.shape))
-    neg_m = np.matmul(half, half, out=scratch("cayley.m", w.shape))   # -M = W^2 / 4
-    spare = scratch("cayley.spare", w.shape)
-    y = neg_m @ g                                       # the result: a fresh array
+    out = recycled(g.shape)
+    rows, blocks = row_blocks(g.shape)
+    temps = [scratch(f"cayley.{name}", (rows,) + g.shape[1:]) for name in ("half", "m", "spare")]
+    for block in blocks:
+        n = block.stop - block.start
+        _series_rows(w[block], g[block], out[block], [t[:n] for t in temps], factors, terms)
+    return out
+
+
+def _series_rows(w, g, y, temps, factors: int, terms: int) -> None:
+    """y = cay(W) G for a block of rows: (I + W/2)(I + M)^{-1} G with ``terms`` or ``factors``."""
+    half_buf, m_buf, spare = temps
+    half = np.multiply(w, 0.5, out=half_buf)
+    neg_m = np.matmul(half, half, out=m_buf)            # -M = W^2 / 4
+    np.matmul(neg_m, g, out=y)
     y += g
     if terms - 1 < 2 * factors - 1:     # small W: G - M (G - M (G ...)), fewer products
         for _ in range(terms - 2):
@@ -65,4 +80,18 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
     y += np.matmul(half, y, out=spare)                  # (I + W/2) (I + M)^{-1} G
     y *= 2.0
     y -= g
-    return y
+
+
+def dcay_inv_series(w: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """dcay^{-1}_W(A) = (I - W/2) A (I + W/2) = B + B W/2, B = A - W/2 A, for (N, d, d) W, A."""
+    out = recycled(a.shape)
+    rows, blocks = row_blocks(a.shape)
+    half_buf, prod_buf = (scratch(f"dcay.{name}", (rows,) + a.shape[1:])
+                          for name in ("half", "product"))
+    for block in blocks:
+        n = block.stop - block.start
+        half = np.multiply(w[block], 0.5, out=half_buf[:n])
+        prod = np.matmul(half, a[block], out=prod_buf[:n])
+        b = np.subtract(a[block], prod, out=out[block])
+        b += np.matmul(b, half, out=prod)
+    return out

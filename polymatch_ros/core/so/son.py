@@ -8,11 +8,13 @@ from .base import (
     MeanField,
     RowsFirstGroup,
     polar_newton_schulz,
+    recycled,
+    row_blocks,
     row_sum,
     rows_product,
     scratch,
 )
-from .cayley import cayley_series
+from .cayley import cayley_series, dcay_inv_series
 from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
 
 
@@ -110,12 +112,7 @@ class SOn(RowsFirstGroup):
             return a
         if self.dim == 4:
             return dcay_inv4(xi, a, self._so4_parts(xi))
-        # (I - H) A (I + H) = B + B H,  B = A - H A; temporaries kept (``scratch``)
-        half = np.multiply(xi, 0.5, out=scratch("dcay.half", xi.shape))
-        prod = np.matmul(half, a, out=scratch("dcay.product", a.shape))
-        b = a - prod
-        b += np.matmul(b, half, out=prod)
-        return b
+        return dcay_inv_series(xi, a)
 
     def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
         # BLAS products on one thread each: summing over the leading axis of (N, d, d) is slower
@@ -127,12 +124,19 @@ class SOn(RowsFirstGroup):
 
     def coupling(self, g: Array, s: MeanField) -> Array:
         d = self.dim
+        out = recycled(g.shape)
         if np.ndim(s) == 3:                      # one field per row
-            b = g @ np.swapaxes(s, 1, 2)
-            return np.swapaxes(b, 1, 2) - b
-        b = rows_product(g.reshape(-1, d), np.ascontiguousarray(s.T),              # O S^T
-                         out=scratch("coupling", (len(g) * d, d))).reshape(-1, d, d)
-        return np.swapaxes(b, 1, 2) - b
+            b = np.matmul(g, np.swapaxes(s, 1, 2), out=scratch("coupling.fields", g.shape))
+            return np.subtract(np.swapaxes(b, 1, 2), b, out=out)
+        s_t = np.ascontiguousarray(s.T)
+        rows, blocks = row_blocks(g.shape)       # B = O S^T and B^T - B a block at a time
+        product = scratch("coupling", (rows * d, d))
+        for block in blocks:
+            n = block.stop - block.start
+            b = rows_product(g[block].reshape(-1, d), s_t, out=product[:n * d])
+            b = b.reshape(n, d, d)
+            np.subtract(np.swapaxes(b, 1, 2), b, out=out[block])
+        return out
 
     def tangent(self, a: Array, g: Array) -> Array:
         return a @ g
