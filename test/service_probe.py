@@ -27,7 +27,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
-from polymatch_ros.ros.ros_env import teardown_watchdog
+from polymatch_ros.ros.ros_env import end_process, teardown_watchdog
 from polymatch_ros.ros.wire import RunRecord
 
 BOUND = 60.0
@@ -172,4 +172,4 @@ def main(actions):
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    end_process(main(sys.argv[1:]))

@@ -23,7 +23,7 @@ import time
 
 from ..core.errors import ParameterError, PolymatchError
 from . import discovery
-from .ros_env import teardown_watchdog
+from .ros_env import end_process, teardown_watchdog
 
 READY_LINE = "discovery server: listening on"
 
@@ -99,4 +99,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    end_process(main())

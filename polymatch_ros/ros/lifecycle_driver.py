@@ -1,57 +1,90 @@
 """The runner's side of the managed agents: it drives each agent process's lifecycle node
-through ``configure`` and ``activate`` (``lifecycle_msgs/srv/ChangeState``), as
-``ros2 lifecycle set`` would, without blocking its loop."""
+to ``active`` (``lifecycle_msgs/srv/GetState`` and ``ChangeState``), as ``ros2 lifecycle set``
+would, without blocking its loop.
+
+A service answer can be lost: a server may answer before its reply writer has matched the
+client's reader (rclpy then only warns "failed to send response"), although the client already
+sees the service as ready.  So the driver asks each node for its state and sends the one
+transition that state calls for (unconfigured: configure; inactive: activate); a question or
+transition without an answer within ``RETRY_SECONDS`` is dropped and the state asked again.
+A transition refused in its answer is an error naming the process.
+"""
+
+import time
 
 from ..core.errors import PolymatchError
 
+RETRY_SECONDS = 2.0
+
 
 class LifecycleDriver:
-    """``step()`` once per loop: configure every agent node whose service is up, activate each
-    one that configured; a refused transition is an error naming the node."""
+    """``step()`` once per loop until ``active()``: every agent node configured and active."""
 
     def __init__(self, node, namespace, names, last_words=lambda name: ""):
-        from lifecycle_msgs.msg import Transition
-        from lifecycle_msgs.srv import ChangeState
+        from lifecycle_msgs.msg import State, Transition
+        from lifecycle_msgs.srv import ChangeState, GetState
 
         self.node, self.last_words = node, last_words
-        self.steps = (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE)
-        self.labels = dict(zip(self.steps, ("configure", "activate")))
+        base = namespace.rstrip("/")
+        self.next_transition = {
+            State.PRIMARY_STATE_UNCONFIGURED: (Transition.TRANSITION_CONFIGURE, "configure"),
+            State.PRIMARY_STATE_INACTIVE: (Transition.TRANSITION_ACTIVATE, "activate"),
+        }
+        self.active_id = State.PRIMARY_STATE_ACTIVE
+        self.finalized_id = State.PRIMARY_STATE_FINALIZED
         self.clients = {
-            name: node.create_client(ChangeState, f"{namespace.rstrip('/')}/{name}/change_state")
+            name: (node.create_client(GetState, f"{base}/{name}/get_state"),
+                   node.create_client(ChangeState, f"{base}/{name}/change_state"))
             for name in names
         }
-        self.done = {name: 0 for name in names}  # transitions that succeeded, per node
-        self.pending = {}  # name -> (transition, future)
+        self.done = set()
+        self.pending = {}  # name -> (label or None for a state question, client, future, sent)
 
     def active(self):
-        return all(n == len(self.steps) for n in self.done.values())
+        return len(self.done) == len(self.clients) or not self.clients
 
     def step(self):
-        """Send what is due, take what was answered; raise on a refused transition."""
-        for name, client in list(self.clients.items()):
+        """Take what was answered, drop what is overdue, ask what is due."""
+        now = time.monotonic()
+        for name, (get, _) in self.clients.items():
+            if name in self.done:
+                continue
             if name in self.pending:
-                self._take(name)
-            elif self.done[name] < len(self.steps) and client.service_is_ready():
-                self._send(name, client)
-        if self.active() and self.clients:
-            for client in self.clients.values():
-                self.node.destroy_client(client)
+                self._take(name, now)
+            elif get.service_is_ready():
+                self.pending[name] = (None, get, get.call_async(get.srv_type.Request()), now)
+        if self.clients and len(self.done) == len(self.clients):
+            for pair in self.clients.values():
+                for client in pair:
+                    self.node.destroy_client(client)
             self.clients = {}
 
-    def _send(self, name, client):
-        transition = self.steps[self.done[name]]
-        request = client.srv_type.Request()
-        request.transition.id = transition
-        self.pending[name] = (transition, client.call_async(request))
-
-    def _take(self, name):
-        transition, future = self.pending[name]
+    def _take(self, name, now):
+        label, client, future, sent = self.pending[name]
         if not future.done():
+            if now - sent > RETRY_SECONDS:  # the answer was lost: ask the state again
+                client.remove_pending_request(future)
+                del self.pending[name]
             return
         del self.pending[name]
-        if not future.result().success:
-            raise PolymatchError(
-                f"{name}: lifecycle transition '{self.labels[transition]}' refused: "
-                f"{self.last_words(name) or 'see its log'}"
-            )
-        self.done[name] += 1
+        answer = future.result()
+        if label is not None:  # a transition: on success the next question finds the new state
+            if not answer.success:
+                raise PolymatchError(
+                    f"{name}: lifecycle transition '{label}' refused: "
+                    f"{self.last_words(name) or 'see its log'}"
+                )
+            return
+        self._advance(name, answer.current_state.id, now)
+
+    def _advance(self, name, state, now):
+        if state == self.active_id:
+            self.done.add(name)
+        elif state == self.finalized_id:
+            raise PolymatchError(f"{name}: its lifecycle node was shut down before it ran")
+        elif state in self.next_transition:
+            transition, label = self.next_transition[state]
+            change = self.clients[name][1]
+            request = change.srv_type.Request()
+            request.transition.id = transition
+            self.pending[name] = (label, change, change.call_async(request), now)

@@ -18,7 +18,7 @@ import time
 from ..core.errors import ParameterError, PolymatchError
 from . import wire
 from .params import RUNTIME, check_value
-from .ros_env import ros_environment, teardown_watchdog
+from .ros_env import end_process, ros_environment, teardown_watchdog
 from .runtime_params import SPEC
 
 SETTLE_SECONDS = 1.0  # the graph must stay unchanged this long before the calls go out
@@ -110,7 +110,7 @@ def cmd_set(args):
             node.destroy_node()
             if rclpy.ok():
                 rclpy.shutdown()
-    return code
+    end_process(code)
 
 
 def _report(answers, name, value):

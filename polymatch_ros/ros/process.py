@@ -9,7 +9,7 @@ application print its final lines, and bounds the DDS teardown (``teardown_watch
 import sys
 
 from ..core.errors import PolymatchError
-from .ros_env import teardown_watchdog
+from .ros_env import end_process, teardown_watchdog
 
 
 class NodeApp:
@@ -32,7 +32,8 @@ class NodeApp:
         self.node.destroy_node()
 
 def ros_main(factory, label, argv=None):
-    """Run ``factory(argv).run()``; return the exit code.
+    """Run ``factory(argv).run()`` and end the process with its exit code (``end_process``:
+    after the bounded teardown, nothing of the interpreter's own finalization runs).
 
     The application may define ``report()`` (final lines, printed also after an
     interruption), ``destroy()`` and ``interrupted_exit`` (the code for Ctrl-C; 130).
@@ -61,4 +62,4 @@ def ros_main(factory, label, argv=None):
                 app.destroy()
             if rclpy.ok():
                 rclpy.shutdown()
-    return code
+    end_process(code)

@@ -40,7 +40,7 @@ from .discovery import (
     parse_discovery_spec,
     start_discovery_server,
 )
-from .ros_env import reserved_domain_id, ros_environment, teardown_watchdog
+from .ros_env import end_process, reserved_domain_id, ros_environment, teardown_watchdog
 from .summary import report, verdict
 from .watcher import Watcher
 
@@ -91,10 +91,11 @@ def cmd_run(args):
         _adopt(env if envs is None else envs.for_role("super_client", env))
         server = _start_server(spec, envs, env, args, directory)
         try:
-            return _run(args, scene, scene_path, the_plan, env, domain, envs)
+            code = _run(args, scene, scene_path, the_plan, env, domain, envs)
         finally:
             if server is not None:
                 server.stop()
+    end_process(code)  # rclpy ran in this process: no interpreter finalization after it
 
 
 def _localhost(env):
