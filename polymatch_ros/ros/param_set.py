@@ -22,6 +22,7 @@ from .ros_env import end_process, ros_environment, teardown_watchdog
 from .runtime_params import SPEC
 
 SETTLE_SECONDS = 1.0  # the graph must stay unchanged this long before the calls go out
+RESEND_SECONDS = 2.0  # an answer can be lost (see lifecycle_driver): the same value again
 
 
 def checked_value(name, text):
@@ -69,15 +70,19 @@ def _call_all(node, executor, namespace, names, name, value, deadline):
     )])
     clients = {n: node.create_client(SetParameters, f"{namespace}/{n}/set_parameters")
                for n in names}
-    futures, answers = {}, dict.fromkeys(names)
+    futures, answers = {}, dict.fromkeys(names)  # futures: name -> (future, sent)
     while time.monotonic() < deadline and any(a is None for a in answers.values()):
         executor.spin_once(timeout_sec=0.05)
         for n, client in clients.items():
-            if n not in futures and client.service_is_ready():
-                futures[n] = client.call_async(request)
-            elif n in futures and futures[n].done() and answers[n] is None:
-                result = futures[n].result().results[0]
+            if answers[n] is not None:
+                continue
+            if n in futures and futures[n][0].done():
+                result = futures[n][0].result().results[0]
                 answers[n] = (result.successful, result.reason)
+            elif n in futures and time.monotonic() - futures[n][1] > RESEND_SECONDS:
+                client.remove_pending_request(futures.pop(n)[0])  # a lost answer: ask again
+            elif n not in futures and client.service_is_ready():
+                futures[n] = (client.call_async(request), time.monotonic())
     return answers
 
 
