@@ -341,6 +341,10 @@ def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
     time.sleep(1.5)
     assert len(_twists(ros.output(echo))) == len(seen), "commands after the zero command"
     assert agents[0].poll() is None and agents[1].poll() is None
+    # its agent relays no stale pose, so its peer drops it after the peer timeout (1 s)
+    assert _wait(lambda: "agent 0 silent for 1 s" in ros.output(agents[1]), 5), (
+        ros.output(agents[1])[-2000:]
+    )
 
     # the robot restarted (at its initial pose): its agent drives it again, non-zero commands
     robots[0] = _robot(ros, scene, 0, position_noise=0.0005)
@@ -348,11 +352,17 @@ def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
         ros.output(agents[0])[-2000:]
     )
     assert np.abs(_twists(ros.output(echo))[-1]).max() > 0.0
+    # and its peer takes it back into the sums
+    assert _wait(lambda: "agent 0 is back" in ros.output(agents[1]), 10), (
+        ros.output(agents[1])[-2000:]
+    )
 
 
 @needs_ros
 def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
-    count = 6
+    """Eight first-order robots (A-2), each driven by its bridged agent, match to the noise
+    floor (Theorem 4.2 up to the measurement noise)."""
+    count = 8
     scene = _scene(tmp_path, SCENE_ROBOTS.format(t_end=25.0, count=count))
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene, "--mode", "bridge",
                       "--rate", "10", "--position-noise", "0.002", "--angle-noise", "0.002",

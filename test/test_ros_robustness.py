@@ -32,8 +32,10 @@ ROGUE_T_END = 4.0
 
 
 def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
+    # the rogue outlives the longest run this test allows (30 s to start flooding + the run's
+    # 150 s): it is still sending when the run ends, and the harness ends it by its PID
     rogue = ros.start([PY, os.path.join(REPO, "test", "rogue_publisher.py"),
-                      "polymatch", "3", "120"], timeout=130)
+                      "polymatch", "3", "200"], timeout=210)
     deadline = time.monotonic() + 30                  # the flood is on before the run starts
     while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -45,10 +47,15 @@ def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
                  "--round-timeout", 60),  # the flood is under test, not the timeout
         timeout=180,
     )
+    t0 = time.monotonic()
     rc = ros.wait(proc, 190)
     text = ros.output(proc)
     assert rc in (0, 3), text
-    assert rogue.poll() is None, "the rogue must still be sending when the run ends"
+    took = time.monotonic() - t0
+    assert rogue.poll() is None, (
+        f"the rogue must still be sending when the run ends (the run took {took:.0f} s)\n"
+        + text + "\n" + ros.output(rogue)
+    )
     scene = load_scene(scene_path("congruent_triangles"))
     data = np.load(out)
     traj = simulate(replace(scene, t_end=ROGUE_T_END), "rkmk4", 0.05, samples=[ROGUE_T_END],

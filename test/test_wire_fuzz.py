@@ -264,3 +264,28 @@ def test_a_valid_message_of_each_kind_is_accepted():
         )
         stage, reason = wire.decode_stage(msg, grp, dim, RUN_ID, 3, wire.ROTATION_TOL, T_MAX)
         assert reason is None and (stage.step, stage.stage, stage.t) == (4, 1, 1.25)
+
+
+def test_a_flood_of_drops_is_counted_in_full_and_warned_once_a_second_per_reason():
+    """Every dropped message is counted; the warnings are throttled before the logger is
+    called (a flood must not cost a logger call per message)."""
+    from polymatch_ros.ros.exchange import DropCounter
+
+    class Logger:
+        def __init__(self):
+            self.lines = []
+
+        def warning(self, text):
+            self.lines.append(text)
+
+    logger = Logger()
+    drops = DropCounter(logger)
+    for k in range(1000):
+        drops("agent 3", "non-finite value" if k % 2 else "unknown sender (run id)")
+    assert drops.counts == {"non-finite value": 500, "unknown sender (run id)": 500}
+    assert drops.total == 1000
+    assert len(logger.lines) == 2, logger.lines
+    assert "non-finite value (1 so far)" in logger.lines[1]
+    drops._warned = {reason: t - DropCounter.LOG_PERIOD for reason, t in drops._warned.items()}
+    drops("agent 3", "non-finite value")
+    assert len(logger.lines) == 3 and "(501 so far)" in logger.lines[2]
