@@ -19,6 +19,12 @@ def positive_float(text):
     return value
 
 
+def add_number_options(parser, table):
+    """One ``--flag`` a row of ``table``: (flag, type, default, help)."""
+    for flag, kind, default, text in table:
+        parser.add_argument(flag, type=kind, default=default, help=text)
+
+
 def tolerance_arg(text):
     """A relative tolerance in [MIN_RELATIVE_TOLERANCE, 1), as the scene's integrator.tolerance."""
     value = positive_float(text)

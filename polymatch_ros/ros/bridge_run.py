@@ -14,30 +14,30 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..console import positive_float
+from ..console import add_number_options, positive_float
 from ..core.command import bridge_model, noise_floor
 from ..core.errors import ParameterError
 from . import wire
 from .children import Child
 
+# (flag, type, default, help) of the simulated robots and the agents' command limits
+ROBOT_OPTIONS = (
+    ("--lag", float, 0.1, "robots' actuator time constant (s, default 0.1)"),
+    ("--position-noise", float, 0.001, "std of the measured positions (m, default 0.001)"),
+    ("--angle-noise", float, 0.001, "std of the measured orientations (rad, default 0.001)"),
+    ("--max-linear-speed", positive_float, 1e6, "commanded speed limit (m/s)"),
+    ("--max-angular-speed", positive_float, 1e6, "commanded angular speed limit (rad/s)"),
+    ("--max-linear-accel", positive_float, 1e6,
+     "second order: commanded acceleration limit (m/s^2)"),
+    ("--max-angular-accel", positive_float, 1e6,
+     "second order: commanded angular acceleration limit (rad/s^2)"),
+)
+
 
 def add_arguments(p):
     """The options of the simulated robots (bridge mode)."""
     g = p.add_argument_group("bridge mode (simulated robots)")
-    g.add_argument("--lag", type=float, default=0.1,
-                   help="robots' actuator time constant (s, default 0.1)")
-    g.add_argument("--position-noise", type=float, default=0.001,
-                   help="std of the measured positions (m, default 0.001)")
-    g.add_argument("--angle-noise", type=float, default=0.001,
-                   help="std of the measured orientations (rad, default 0.001)")
-    g.add_argument("--max-linear-speed", type=positive_float, default=1e6,
-                   help="commanded speed limit (m/s)")
-    g.add_argument("--max-angular-speed", type=positive_float, default=1e6,
-                   help="commanded angular speed limit (rad/s)")
-    g.add_argument("--max-linear-accel", type=positive_float, default=1e6,
-                   help="second order: commanded acceleration limit (m/s^2)")
-    g.add_argument("--max-angular-accel", type=positive_float, default=1e6,
-                   help="second order: commanded angular acceleration limit (rad/s^2)")
+    add_number_options(g, ROBOT_OPTIONS)
     g.add_argument("--robot-log", metavar="DIR",
                    help="each robot writes its true and measured pose at every step to "
                    "DIR/robot_<i>.txt")

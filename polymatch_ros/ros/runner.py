@@ -17,7 +17,7 @@ import sys
 import tempfile
 import time
 
-from ..console import Progress, positive_float, writable_output
+from ..console import Progress, add_number_options, positive_float, writable_output
 from ..core.errors import ParameterError, PolymatchError
 from ..core.scene import load_scene, resolve_scene_path
 from ..core.simulate import plan
@@ -311,6 +311,17 @@ def _run(args, scene, scene_path, the_plan, env, domain, envs=None):
     return code
 
 
+# (flag, type, default, help) of the options that set how the agents step and wait
+RUN_OPTIONS = (
+    ("--rate", positive_float, 50.0, "realtime: steps per second (default 50)"),
+    ("--time-scale", positive_float, 1.0, "realtime: simulated seconds per wall-clock second"),
+    ("--peer-timeout", positive_float, 1.0, "realtime: drop silent peers after S s"),
+    ("--delay", float, 0.0, "realtime: injected transport delay (s), experiments"),
+    ("--round-timeout", positive_float, 10.0,
+     "lockstep: after S s a round fails if a missing peer has left"),
+)
+
+
 def add_parser(sub):
     p = sub.add_parser(
         "run", help="run the distributed ROS 2 ensemble of a scene (one process per agent)"
@@ -331,16 +342,7 @@ def add_parser(sub):
         help="agents per process (default 1, or the fewest that keep the processes within the 32 "
         "DDS participants that LOCALHOST discovery reaches)",
     )
-    p.add_argument("--rate", type=positive_float, default=50.0,
-                   help="realtime: steps per second (default 50)")
-    p.add_argument("--time-scale", type=positive_float, default=1.0,
-                   help="realtime: simulated seconds per wall-clock second")
-    p.add_argument("--peer-timeout", type=positive_float, default=1.0,
-                   help="realtime: drop silent peers after S s")
-    p.add_argument("--delay", type=float, default=0.0,
-                   help="realtime: injected transport delay (s), experiments")
-    p.add_argument("--round-timeout", type=positive_float, default=10.0,
-                   help="lockstep: after S s a round fails if a missing peer has left")
+    add_number_options(p, RUN_OPTIONS)
     p.add_argument(
         "--hold",
         type=float,
