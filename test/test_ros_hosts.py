@@ -106,8 +106,9 @@ def _server_processes(port):
 
 @needs_ros
 def test_run_through_its_own_discovery_server_converges(ros):
+    # two agents per process: four clients of the server, converging in a third of the time
     proc = ros.start([sys.executable, "-m", "polymatch_ros.cli", "run", "congruent_triangles",
-                      "--discovery", "server", "--timeout", "100"], timeout=120)
+                      "--discovery", "server", "-k", "2", "--timeout", "100"], timeout=120)
     rc = ros.wait(proc, 130)
     text = ros.output(proc)
     assert rc == 0, text[-3000:]

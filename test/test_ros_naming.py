@@ -56,6 +56,8 @@ def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
                 "--no-compare",
                 "--round-timeout",
                 "60",
+                "--t-end",  # naming is under test: a few steps, not the whole convergence
+                "3",
             ],
             timeout=200,
         )  # two ensembles on 2 cores

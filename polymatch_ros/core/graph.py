@@ -26,11 +26,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import linalg, sparse
-from scipy.sparse import csgraph
-from scipy.spatial import cKDTree
+
+if TYPE_CHECKING:  # scipy is imported where it is used: a complete-graph scene never needs it
+    from scipy import sparse
 
 from .checks import Map, number
 from .errors import SceneError
@@ -67,6 +68,8 @@ class Graph:
 
     def matrix(self) -> sparse.csr_matrix:
         """The weights a_ik as a sparse matrix (the complete graph's: ones off the diagonal)."""
+        from scipy import sparse
+
         if self.weights is not None:
             return self.weights
         full = np.ones((self.size, self.size)) - np.eye(self.size)
@@ -117,6 +120,8 @@ class Graph:
         p = a (normalise: size) or p_ik = a_ik N_g / deg_i (normalise: degree; rows of
         agents without in-neighbours stay zero).
         """
+        from scipy import sparse
+
         a = self.matrix()
         if self.normalise != "degree":
             return a
@@ -129,6 +134,8 @@ class Graph:
         """Component label of every agent (weakly connected components for directed graphs)."""
         if self.complete:
             return np.zeros(self.size, dtype=int)
+        from scipy.sparse import csgraph
+
         _, labels = csgraph.connected_components(self.weights, directed=True, connection="weak")
         return labels
 
@@ -138,6 +145,8 @@ class Graph:
         The centroids obey x' = -(kappa/gamma) L x (first order, scales ignored) and the
         rotations linearise at consensus to xi' = -(kappa/gamma) L xi.
         """
+        from scipy import sparse
+
         p = self.coupling_weights
         if scales is not None:
             p = sparse.diags(1.0 / scales) @ p @ sparse.diags(scales)
@@ -162,6 +171,8 @@ class Graph:
 
     def local_weights(self, rows=None, scales: np.ndarray | None = None) -> LocalWeights:
         """The coupling weights of some rows (None: all), for sums against the whole group."""
+        from scipy import sparse
+
         p = self.coupling_weights
         if rows is not None:
             p = p[np.asarray(rows, dtype=int)]
@@ -187,6 +198,8 @@ class Graph:
         ``scipy.linalg.eigh`` of the symmetric pair (K, diag(b)); eigenvalues below round-off
         (one per component) are exactly 0.  O(N^3) once, cached with the graph.
         """
+        from scipy import linalg
+
         k, b = self.symmetric_pair()
         lam, vec = linalg.eigh(k) if self.normalise != "degree" else linalg.eigh(k, np.diag(b))
         lam[lam < 1e-12 * max(float(lam.max(initial=0.0)), 1.0 / self.size)] = 0.0
@@ -197,6 +210,8 @@ def build_graph(spec, path: str, size: int, centroids: np.ndarray | None = None)
     """A validated ``Graph`` of ``size`` agents from a scene's ``graph`` value at ``path``."""
     if spec is None or spec == "complete":
         return Graph("complete", size)
+    from scipy import sparse
+
     if isinstance(spec, str):
         raise SceneError(f"{path}: unknown graph {spec!r} (expected complete or a mapping "
                          f"with one of "
@@ -260,6 +275,8 @@ def _ring(k: int, size: int) -> np.ndarray:
 
 
 def _k_nearest(k: int, size: int, centroids, path: str) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
     if centroids is None:
         raise SceneError(f"{path}: needs the agents' initial centroids")
     if k >= size:
@@ -282,6 +299,8 @@ def _random(raw, path: str, size: int) -> np.ndarray:
 
 
 def _edges(m: Map, size: int) -> Graph:
+    from scipy import sparse
+
     raw = m.raw("edges")
     if not isinstance(raw, list) or not raw:
         raise SceneError(f"{m.at('edges')}: expected a list of [i, k] pairs")
@@ -323,6 +342,8 @@ def check_connected(graph: Graph, path: str) -> None:
     """
     if graph.complete or graph.size <= 1:
         return
+    from scipy.sparse import csgraph
+
     flow = graph.weights.T.tocsr()                   # k -> i when i hears k
     if not graph.directed:
         count, labels = csgraph.connected_components(flow, directed=False)
