@@ -277,9 +277,13 @@ class AgentBase(NodeApp):
         self.publish_state(final=True)
         self.finished = True
         self._maybe_diagnostics(force=True)
+        self.settle()
+        return 0
+
+    def settle(self):
+        """After the final pose: until its readers have it (and the lead host said so)."""
         self.flush_poses()
         self.hold_final_poses()
-        return 0
 
     def hold_final_poses(self):
         """On a host without the summary: keep the latched final poses alive (this process)

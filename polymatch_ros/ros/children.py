@@ -300,7 +300,7 @@ class Supervision:
                 return failed
             for c in self.children:
                 c.end_if_overstaying(OVERSTAY_SECONDS)
-            if args.lead and not self.received_sent and watcher.have_final():
+            if args.lead and not self.received_sent and self.final_everywhere():
                 watcher.received()  # the agents hold their final poses until this
                 self.received_sent = True
             if all(c.ended_well() for c in self.children):
@@ -310,6 +310,15 @@ class Supervision:
                 last = self.last_words()
                 return 1, f"timed out after {args.timeout:g} s (raise --timeout){last}"
             self.show_progress()
+
+    def final_everywhere(self):
+        """Every final pose is here and, in lockstep, the monitor (if any) has reported the
+        final step with every agent: nobody needs another message from the agents."""
+        if not self.watcher.have_final():
+            return False
+        if self.args.mode != "lockstep" or self.monitor is None:
+            return True
+        return self.watcher.monitor_reported_final()
 
     def await_final_poses(self):
         """(0, "") once the lead host has every agent's final pose (other hosts: at once)."""

@@ -339,7 +339,18 @@ class LockstepAgent(AgentBase):
                 self.exchange.spin_once(0.05)  # the peers' stages of the next round wait here
             if stop:
                 break
-        self.exchange.flush()
+
+    def settle(self):
+        """Hold the final poses until the lead host says 'received': it then has every agent's
+        final pose and the monitor has reported the final step, so every agent has ended its
+        last round and no reader needs a message of ours.  Without that word (no runner, or its
+        hold ran out) wait until our last stage and pose messages are acknowledged: a writer
+        that exits takes unacknowledged samples along, and an acknowledgement comes only with
+        the writer's next heartbeat, up to 3 s later."""
+        self.hold_final_poses()
+        if not self.control.final_received:
+            self.exchange.flush()
+            self.flush_poses()
 
     def release(self):
         """The exchange's lean node (lifecycle cleanup)."""

@@ -111,6 +111,16 @@ class Watcher:
             self.model.order == 1 or len(self.velocities) >= self.model.n_agents
         )
 
+    def monitor_reported_final(self):
+        """The monitor's last report is of the final poses' step, with every agent heard."""
+        times = self.pose_times()
+        return (
+            self.monitor is not None
+            and bool(times)
+            and self.monitor.agents_heard >= self.model.n_agents
+            and self.monitor.t >= max(times.values()) - 1e-9
+        )
+
     def stop(self):
         """The ensemble's ``stop`` service; False while it is not up yet."""
         return self.services.call("stop")
