@@ -4,8 +4,9 @@
 
 Agents 0-3 and 4-7 of SCENE are driven by two ``LockstepExchange`` objects in two threads,
 exactly as two agent processes drive them (``LockstepAgent.loop``), for STEPS rkmk4 steps.
-The first message of agent 0 for round (step 1, stage 2) is swallowed before it reaches
-DDS: a sample lost for good, as one can be when a starved peer is matched anew.  Prints
+Each side sends one block message a round (``stage_links.BlockLinks``).  The first message
+of block 0 (agents 0-3) for round (step 1, stage 2) is swallowed before it reaches DDS: a
+sample lost for good, as one can be when a starved peer is matched anew.  Prints
 one JSON line: each side's final rows against the centralised run, resends, repeats,
 drops, or the error that ended a side.  ``--no-resend`` switches the resends off (the
 round must then time out: what the resends repair).  Run it under the test's private ROS
@@ -28,17 +29,17 @@ from polymatch_ros.ros import lockstep, wire
 from polymatch_ros.ros.agent_node import local_state
 from polymatch_ros.ros.exchange import DropCounter, Layout
 
-DT, LOST = 0.05, (0, 1, 2)  # the swallowed message: agent 0, step 1, stage 2
+DT, LOST = 0.05, (0, 1, 2)  # the swallowed message: block 0, step 1, stage 2
 STALL = 8.0  # s: stall_timeout; resends come after 1 s, even on a loaded machine
 
 
-def swallow_first(publisher, agent, step, stage):
-    """Make ``publisher`` drop the first message of (agent, step, stage) it is given."""
+def swallow_first(publisher, block, step, stage):
+    """Make ``publisher`` drop the first message of (block, step, stage) it is given."""
     send, lost = publisher.publish, []
 
     def publish(msg):
         head = tuple(int(v) for v in msg.data[2:5])
-        if head == (agent, step, stage) and not lost:
+        if head == (block, step, stage) and not lost:
             lost.append(head)
             return
         send(msg)

@@ -304,10 +304,14 @@ def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
         agents.append(ros.start(argv, timeout=100, name=f"agent {a}"))
     echo = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/polymatch/robot_0/cmd_vel",
                       "--timeout", "80"], timeout=90)
-    # the agent commands its robot: non-zero twists in the plane (linear x, y; angular z)
-    assert _wait(lambda: len(_twists(ros.output(echo))) >= 5, 40), ros.output(agents[0])[-2000:]
-    moving = _twists(ros.output(echo))
-    assert np.abs(moving[:, [0, 1, 5]]).max() > 1e-6 and np.abs(moving[:, [2, 3, 4]]).max() == 0
+    # the agent commands its robot: non-zero twists in the plane (linear x, y; angular z) once
+    # it hears its peer (alone, its command is zero: a peer started late on a loaded machine)
+    def moving_in_plane():
+        twists = _twists(ros.output(echo))
+        return len(twists) >= 5 and np.abs(twists[:, [0, 1, 5]]).max() > 1e-6
+
+    assert _wait(moving_in_plane, 40), ros.output(agents[0])[-2000:]
+    assert np.abs(_twists(ros.output(echo))[:, [2, 3, 4]]).max() == 0
 
     # a gain in range is applied at the next tick; one out of range and a read-only one are not
     ok, reason = _set_parameter(ros, "/polymatch/agent_0", "kappa", 3.0)

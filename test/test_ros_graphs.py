@@ -81,6 +81,12 @@ def test_layout_on_a_ring_needs_the_in_neighbours_and_complete_scenes_everyone(t
     layout = Layout(complete, [0, 1], agents_per_process=2)
     assert not layout.sparse and layout.peers == list(range(2, 8))
     assert layout.expected_subscribers(0) == 3
+    # packed, the process's rows travel as block 0 to the three other processes ...
+    assert layout.blocks and layout.local_blocks() == {0: [0, 1]}
+    assert layout.peer_blocks() == [1, 2, 3] and layout.expected_block_subscribers(0) == 3
+    # ... and on the ring of two, blocks 1 and 3 hold the in-neighbours 2, 3, 6 and 7
+    ring_layout = Layout(integrated, [0, 1], agents_per_process=2)
+    assert ring_layout.peer_blocks() == [1, 3] and ring_layout.expected_block_subscribers(0) == 2
 
 
 @pytest.mark.parametrize("graph,dim,order,method,count,k", CASES)
@@ -108,9 +114,11 @@ def test_lockstep_on_a_graph_equals_the_centralised_run(ros, tmp_path, graph, di
     assert len(recs) == -(-count // k) and all(r.finished for r in recs), recs
     layout_model = scene.model
     for rec in recs:
-        want_peers = Layout(layout_model, rec.agents, k).peers
-        assert list(rec.peers) == want_peers
-        assert rec.stage_subscriptions == len(want_peers)
+        layout = Layout(layout_model, rec.agents, k)
+        assert list(rec.peers) == layout.peers
+        # one stage topic per peer, or packed (k > 1) one per block of k that holds a peer
+        want = len(layout.peer_blocks()) if k > 1 else len(layout.peers)
+        assert rec.stage_subscriptions == want
     if graph == "{ring: 1}":            # an agent on a ring of k = 1 subscribes to 2k stages
         assert all(rec.stage_subscriptions == 2 for rec in recs)
         assert sorted(recs[3].peers) == [2, 4]

@@ -97,6 +97,29 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
     assert_monitor_reported_final_state(scene, records, out)
 
 
+def test_packed_blocks_cut_across_two_runners_equal_the_centralised_run(ros, tmp_path):
+    """Packed processes send one message per block of K agents and round.  Two runners in one
+    domain (two hosts' commands) with --only cutting blocks: 0-2 here, 3-7 there, K = 4, so
+    block 0 has writers in both, and one process hosts agents of blocks 0 and 1."""
+    out, name, integrator = tmp_path / "final.npz", "congruent_triangles", "rkmk4"
+    common = ("--integrator", integrator, "--t-end", T_END, "-k", 4, "--timeout", 150, "-q")
+    other = ros.start(cli_argv("run", scene_path(name), "--only", "0-2", "--no-monitor",
+                               *common), timeout=180)
+    lead = ros.start(cli_argv("run", scene_path(name), "--only", "3-7", "--save", out,
+                              *common), timeout=180)
+    assert ros.wait(lead, 190) in (0, 3), ros.output(lead)
+    assert ros.wait(other, 60) in (0, 3), ros.output(other)
+    text = ros.output(lead)
+    m = re.search(r"max vertex deviation ([0-9.e+-]+)", text)
+    assert m and float(m.group(1)) <= 1e-9, text
+    scene = load_scene(scene_path(name))
+    t, got = received_vertices(scene, out)
+    assert t == pytest.approx(T_END)
+    want = central_vertices(scene, integrator, t)
+    dev = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, want))
+    assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
+
+
 def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros, tmp_path):
     """README's demo: `polymatch run` converges and stops early; a separate subscriber process
     (the launch-free stand-in for `ros2 topic echo /polymatch/diameter`) sees the diameter fall

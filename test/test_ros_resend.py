@@ -3,7 +3,8 @@
 RELIABLE delivery repairs a lost datagram, but not a sample sent before a starved peer was
 matched anew (its DDS lease ran out; the stage topics are VOLATILE), and then every process
 waits for a present peer for ever.  ``test/lost_stage.py`` drives two exchanges of the Fig. 1
-scene (agents 0-3 and 4-7, as two agent processes) and swallows one message of agent 0.
+scene (agents 0-3 and 4-7, as two agent processes) and swallows one message of agents 0-3
+(their block's).
 """
 
 import json

@@ -162,6 +162,9 @@ def test_colcon_build_and_installed_executables_start(ros, tmp_path):
     monitor = ros.start(
         [str(exe / "monitor"), "--ros-args", "-p", "scene:=congruent_triangles"], timeout=60
     )
+    # Ctrl-C only once it runs ROS (rclpy.init loads the RMW, then takes SIGINT): before, the
+    # interpreter is still importing (seconds on a loaded machine) and a SIGINT is its own
+    assert _wait_for_rmw(monitor.pid, 45), ros.output(monitor)
     time.sleep(4.0)
     assert monitor.poll() is None, ros.output(monitor)
     ros.kill(monitor, signal.SIGINT)
@@ -178,6 +181,21 @@ def _descendants(pid):
             out.append(c)
             todo.append(c)
     return out
+
+
+def _wait_for_rmw(pid, timeout):
+    """True once a process below ``pid`` has loaded Fast DDS's RMW library (rclpy.init)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for child in _descendants(pid):
+            try:
+                with open(f"/proc/{child}/maps") as fh:
+                    if "librmw_fastrtps" in fh.read():
+                        return True
+            except OSError:
+                pass
+        time.sleep(0.2)
+    return False
 
 
 def _alive(pid):

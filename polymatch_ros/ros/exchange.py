@@ -22,11 +22,11 @@ class Layout:
     """Which agents a process hosts and which peers each of them needs.
 
     ``local`` are global agent indices.  ``agents_per_process`` K gives the
-    runner's partition (process p hosts [pK, (p+1)K)); it is used only to count
-    how many remote processes subscribe to each local stage topic.  On a communication
-    graph (``sparse``) an agent needs only what ``System.sources`` names at any stage (its
-    in-neighbours once the centroids are integrated, ``simulate.prepare``); otherwise every
-    agent of its group, and every agent under the F-2 inter-group potential.
+    runner's partition (process p hosts [pK, (p+1)K), block p); it counts how many remote
+    processes subscribe to each local stage topic, and with K > 1 names the block topics.
+    On a communication graph (``sparse``) an agent needs only what ``System.sources`` names
+    at any stage (its in-neighbours once the centroids are integrated, ``simulate.prepare``);
+    otherwise every agent of its group, and every agent under the F-2 inter-group potential.
     """
 
     def __init__(self, model, local, agents_per_process=1):
@@ -64,6 +64,34 @@ class Layout:
 
     def process_of(self, agent):
         return agent // self.k
+
+    @property
+    def blocks(self):
+        """Packed processes (K > 1) exchange one message per block of K agents and round."""
+        return self.k > 1
+
+    def local_blocks(self):
+        """Block -> the local agents in it (one block unless ``--only`` cut across one)."""
+        out = {}
+        for a in self.local:
+            out.setdefault(self.process_of(a), []).append(a)
+        return out
+
+    def peer_blocks(self):
+        """The blocks that hold the peers (their stage rows come in those blocks' messages)."""
+        return sorted({self.process_of(a) for a in self.peers})
+
+    def expected_block_subscribers(self, block):
+        """Remote processes that need some local agent of ``block``."""
+        key = ("block", block)
+        if key not in self._subscribers:
+            mine = self.local_blocks()[block]
+            self._subscribers[key] = len({
+                self.process_of(b)
+                for b in range(self.model.n_agents)
+                if self.process_of(b) != block and any(a in self.sources(b) for a in mine)
+            })
+        return self._subscribers[key]
 
     def expected_subscribers(self, agent):
         """Remote processes that need ``agent``'s stage messages."""

@@ -7,12 +7,13 @@ then the simulator's).
 """
 
 import time
-from collections import defaultdict, deque
+from collections import defaultdict
 
 from ..core.simulate import drive, step_grid
 from . import wire
 from .agent_node import AgentBase
-from .exchange import RoundTimeout, lean_node, quiet_events
+from .exchange import RoundTimeout, lean_node
+from .stage_links import AgentLinks, BlockLinks, local_fields
 
 # A round that has waited this long re-sends this process's last two rounds of stage messages,
 # and again each period after.  RELIABLE delivery repairs a lost datagram, but a sample can
@@ -32,8 +33,6 @@ class LockstepExchange:
     """
 
     def __init__(self, resolver, layout, run_id, rot_tol, drops, t_max, stall_timeout=300.0):
-        from std_msgs.msg import Float64MultiArray
-
         self.node, self.executor = lean_node(
             resolver.get_name() + "_stages", resolver.get_namespace()
         )
@@ -41,16 +40,6 @@ class LockstepExchange:
         self.model = layout.model
         self.grp = self.model.rotations
         self.rot_tol, self.t_max = rot_tol, t_max
-        pub_events, sub_events = quiet_events()
-        self.pubs = {
-            a: wire.publisher(
-                self.node, "stage", agent=a, resolver=resolver, event_callbacks=pub_events
-            )
-            for a in layout.local
-        }
-        # two messages per agent, used in turn: the previous round's stays intact for a resend
-        self._out = {a: (Float64MultiArray(), Float64MultiArray()) for a in layout.local}
-        self.sent = deque(maxlen=2)  # the messages of the last two rounds, for resends
         self.resends = 0  # rounds re-sent because a peer's message did not come
         self.repeats = 0  # peers' messages of rounds already taken (their resends)
         self.taken = {}  # peer -> the last round of it this process has taken
@@ -58,52 +47,40 @@ class LockstepExchange:
         self.current = (0, 0)
         self.stop_step = None  # graph runs: the step after which every agent stops
         self.paused = lambda: False  # the agent serves its control topic and answers this
-        self.subs = [
-            wire.subscription(
-                self.node,
-                "stage",
-                self._callback(a),
-                agent=a,
-                resolver=resolver,
-                event_callbacks=sub_events,
-            )
-            for a in layout.peers
-        ]
-        self.writers = dict(zip(layout.peers, self.subs))  # peer -> its stage subscription
+        grp, dim = self.grp, self.model.dim
+        if layout.blocks:
+            def decode(msg, block):
+                return wire.decode_block(msg, grp, dim, self.run_id, block, layout.k,
+                                         rot_tol, t_max)
+
+            self.links = BlockLinks(self.node, resolver, layout, decode, self._take, drops)
+        else:
+            def decode(msg, agent):
+                return wire.decode_stage(msg, grp, dim, self.run_id, agent, rot_tol, t_max)
+
+            self.links = AgentLinks(self.node, resolver, layout, decode, self._take, drops)
+        self.pubs, self.writers = self.links.pubs, self.links.writers
         self.stall_timeout = stall_timeout
         self.publish_time = 0.0  # seconds spent publishing stages (for the diagnostics)
         self.wait_time = 0.0  # seconds spent waiting for (and taking) the peers' stages
 
-    def _callback(self, agent):
-        def receive(msg):
-            stage, reason = wire.decode_stage(
-                msg, self.grp, self.model.dim, self.run_id, agent, self.rot_tol, self.t_max
-            )
-            if stage is None:
-                self.drops(f"agent {agent}", reason)
-                return
-            key = (stage.step, stage.stage)
-            if key < self.current:
-                if key <= self.taken.get(agent, (-1, -1)):
-                    self.repeats += 1  # a resend of a round already taken: not a drop
-                else:
-                    self.drops(f"agent {agent}", "stale round (a stamp from the past)")
-                return
-            self.inbox[agent][key] = stage
-
-        return receive
+    def _take(self, stage):
+        """A peer's decoded stage row: into the inbox, unless its round is past."""
+        agent, key = stage.agent, (stage.step, stage.stage)
+        if key < self.current:
+            if key <= self.taken.get(agent, (-1, -1)):
+                self.repeats += 1  # a resend of a round already taken: not a drop
+            else:
+                self.drops(f"agent {agent}", "stale round (a stamp from the past)")
+            return
+        self.inbox[agent][key] = stage
 
     def matched(self):
         """All peers' publishers matched, and all expected remote subscribers matched."""
-        subs_ok = all(s.get_publisher_count() >= 1 for s in self.subs)
-        pubs_ok = all(
-            p.get_subscription_count() >= self.layout.expected_subscribers(a)
-            for a, p in self.pubs.items()
-        )
-        return subs_ok and pubs_ok
+        return self.links.matched()
 
     def missing_peers(self):
-        return [a for a, s in zip(self.layout.peers, self.subs) if s.get_publisher_count() < 1]
+        return self.links.missing_peers()
 
     def _stop_flags(self, stop_flag):
         """Header flags: FLAG_STOP, on a graph with the agreed stop step in the bits above it."""
@@ -128,25 +105,9 @@ class LockstepExchange:
         return self.stop_step is not None and step >= self.stop_step
 
     def publish(self, step, stage, request, stop_flag):
+        agents, fields = local_fields(self.grp, request, self.layout)
         flags = self._stop_flags(stop_flag)
-        st = request.stage
-        turn = 1 - self.sent[-1][0] if self.sent else 0  # not the previous round's message
-        sent = []
-        for gi in self.layout.local_groups:
-            gs = st.groups[gi]
-            g = self.model.groups[gi]
-            for r, row in enumerate(self.layout.rows[gi]):
-                fields = {"rot": wire.rot_values(self.grp, self.grp.take(gs.rot, [r]))}
-                if "x" in request.fields:
-                    fields["x"] = gs.x[r].tolist()
-                if "v" in request.fields and gs.v is not None:
-                    fields["v"] = gs.v[r].tolist()
-                a = g.start + row
-                msg = self._out[a][turn]
-                wire.encode_stage(msg, self.run_id, a, step, stage, flags, st.t, fields)
-                self.pubs[a].publish(msg)
-                sent.append((self.pubs[a], msg))
-        self.sent.append((turn, sent))
+        self.links.publish(self.run_id, step, stage, flags, request.stage.t, agents, fields)
 
     def resend(self, key, waiting, waited):
         """Publish the last two rounds' messages again (see ``RESEND_AFTER``)."""
@@ -157,9 +118,7 @@ class LockstepExchange:
             f"last two rounds ({self.resends} so far)",
             throttle_duration_sec=5.0,
         )
-        for _, sent in self.sent:
-            for pub, msg in sent:
-                pub.publish(msg)
+        self.links.resend()
 
     def spin_once(self, timeout):
         self.executor.spin_once(timeout_sec=timeout)
@@ -241,10 +200,7 @@ class LockstepExchange:
 
     def flush(self, timeout=5.0):
         """Wait until every stage message this process sent has been acknowledged."""
-        from rclpy.duration import Duration
-
-        for p in self.pubs.values():
-            p.wait_for_all_acked(Duration(seconds=timeout))
+        self.links.flush(timeout)
 
     def destroy(self):
         self.executor.shutdown(timeout_sec=1.0)

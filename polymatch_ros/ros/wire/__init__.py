@@ -4,6 +4,7 @@ assembly of heard agents into group arrays, and the run record.  Nothing else to
 
 # ruff: noqa: F401
 from .codec import (
+    BLOCK_FORMAT,
     FIELDS,
     FLAG_STOP,
     HEADER,
@@ -13,7 +14,9 @@ from .codec import (
     STAGE_FORMAT,
     STAMP_SLACK,
     Stage,
+    decode_block,
     decode_stage,
+    encode_block,
     encode_stage,
     orthogonality,
     rot_from_values,

@@ -15,18 +15,24 @@
                      mask & 2, rot (r) (mask & 4, always); rot is the core's representation
                      (angle in 2-D, row-major matrix otherwise), so the distributed run computes
                      with exactly the numbers the centralised one does.
+``stages/block_<b>`` lockstep with K agents per process: the rows of agents bK .. bK + K - 1
+                     that one process hosts, in one message per round: data = [format 3, run id,
+                     b, step, stage, flags, t, mask] then per row the agent index and its
+                     fields as above (one mask for all rows).
 
 Every decoder returns ``(value, None)`` or ``(None, reason)``, never raises: a value is finite,
 within MAX_ABS, stamped inside the run, its rotation in SO(d) (Lemma 2.1: the flow keeps O_i
 orthogonal); agents and the monitor drop and count a message with a reason, never use it.
 """
 
+import array
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 STAGE_FORMAT = 2
+BLOCK_FORMAT = 3
 HEADER = 8
 FLAG_STOP = 1
 FIELDS = (("x", 1), ("v", 2), ("rot", 4))  # field, bit in the header's field mask, in wire order
@@ -129,8 +135,10 @@ def encode_stage(msg, run_id, agent, step, stage, flags, t, fields):
     return msg
 
 
-def _stage_header(data, run_id, agent, t_max):
-    """(step, stage, flags, t, mask) of a stage message's header, or the reason it is refused."""
+def _stage_header(data, run_id, agent, t_max, fmt=STAGE_FORMAT):
+    """(step, stage, flags, t, mask) of a stage message's header, or the reason it is refused.
+
+    ``agent`` is the sender's agent index (a block message: its block index)."""
     head = data[:HEADER]
     if (
         np.any(head[[0, 1, 2, 3, 4, 5, 7]] != np.round(head[[0, 1, 2, 3, 4, 5, 7]]))
@@ -138,7 +146,7 @@ def _stage_header(data, run_id, agent, t_max):
         or np.any(np.abs(head) > 2.0**53)
     ):
         return None, "malformed header"
-    if int(head[0]) != STAGE_FORMAT:
+    if int(head[0]) != fmt:
         return None, "unknown format"
     if int(head[1]) != int(run_id):
         return None, "unknown sender (run id)"
@@ -182,4 +190,80 @@ def decode_stage(msg, grp, dim, run_id, agent, rot_tol=ROTATION_TOL, t_max=None)
             out.rot = rot_from_values(grp, values)
         else:
             setattr(out, label, values.copy())
+    return out, None
+
+
+def encode_block(msg, run_id, block, step, stage, flags, t, agents, fields):
+    """Fill a Float64MultiArray with the stage rows of several agents of one block.
+
+    ``fields``: label -> array of shape (len(agents), width), in ``FIELDS`` order."""
+    mask = 0
+    columns = [np.asarray(agents, dtype=float)[:, None]]
+    for label, bit in FIELDS:
+        if label in fields:
+            mask |= bit
+            columns.append(np.asarray(fields[label], dtype=float).reshape(len(agents), -1))
+    head = np.array([BLOCK_FORMAT, run_id, block, step, stage, flags, t, mask], dtype=float)
+    msg.data = array.array("d", np.concatenate([head, np.hstack(columns).ravel()]).tobytes())
+    return msg
+
+
+def _block_rows(data, grp, dim, block, k, mask):
+    """The rows of a block message as (agents, {label: values}), or (None, reason)."""
+    sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
+    width = 1 + sum(sizes[f] for f, bit in FIELDS if mask & bit)
+    body = data[HEADER:]
+    if mask & ~7 or not mask & 4 or not body.size or body.size % width:
+        return None, "malformed layout"
+    rows = body.reshape(-1, width)
+    agents = rows[:, 0]
+    first = block * k
+    if (
+        len(rows) > k
+        or np.any(agents != np.round(agents))
+        or np.any(agents < first)
+        or np.any(agents >= first + k)
+        or len(np.unique(agents)) != len(agents)
+    ):
+        return None, "unknown sender (agent index)"
+    out, pos = {}, 1
+    for label, bit in FIELDS:
+        if mask & bit:
+            out[label] = rows[:, pos : pos + sizes[label]]
+            pos += sizes[label]
+    return [int(a) for a in agents], out
+
+
+def decode_block(msg, grp, dim, run_id, block, k, rot_tol=ROTATION_TOL, t_max=None):
+    """Float64MultiArray of a block -> ([Stage, ...], None) or (None, reason).
+
+    Checked as ``decode_stage`` checks one agent's message, each row's rotation included;
+    every agent index must lie in the block (bK .. bK + K - 1) and appear once."""
+    data = np.frombuffer(msg.data, dtype=float) if len(msg.data) else np.zeros(0)
+    if len(data) < HEADER or msg.layout.dim or msg.layout.data_offset != 0:
+        return None, "malformed layout"
+    reason = _bad_numbers(data)
+    if reason:
+        return None, reason
+    head, reason = _stage_header(data, run_id, block, t_max, fmt=BLOCK_FORMAT)
+    if head is None:
+        return None, reason
+    step, stage, flags, t, mask = head
+    agents, fields = _block_rows(data, grp, dim, block, k, mask)
+    if agents is None:
+        return None, fields
+    rot = fields["rot"]
+    if grp.name != "angle":
+        mats = rot.reshape(-1, grp.dim, grp.dim)
+        defect = np.abs(np.einsum("nki,nkj->nij", mats, mats) - np.eye(grp.dim))
+        if np.max(defect) > rot_tol:
+            return None, "rotation not orthogonal"
+    out = []
+    for r, a in enumerate(agents):
+        s = Stage(a, step, stage, flags, t, rot=rot_from_values(grp, rot[r]))
+        if "x" in fields:
+            s.x = fields["x"][r].copy()
+        if "v" in fields:
+            s.v = fields["v"][r].copy()
+        out.append(s)
     return out, None

@@ -31,6 +31,8 @@ TOPICS = {
     "final_pose": Topic("agent_{agent}/final_pose", "pose", "latched"),
     "final_twist": Topic("agent_{agent}/final_twist", "twist", "latched"),
     "stage": Topic("agent_{agent}/stage", "array", "stage", reader_qos="stage_in"),
+    # lockstep with K agents per process: the rows of block b (agents bK .. bK + K - 1)
+    "stage_block": Topic("stages/block_{agent}", "array", "stage", reader_qos="stage_in"),
     "control": Topic("control", "string", "control"),
     # RunRecord JSON of every agent process and the monitor (wire.record), latched per writer
     "status": Topic("status", "string", "status", reader_qos="status_in"),
