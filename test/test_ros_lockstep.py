@@ -50,6 +50,17 @@ def received_vertices(scene, path):
     return float(data["t"]), out
 
 
+def assert_saved_poses_equal_centralised(scene, integrator, saved):
+    """The final poses the runner saved are at T_END and equal the centralised run's to 1e-9;
+    returns their vertices."""
+    t, got = received_vertices(scene, saved)
+    assert t == pytest.approx(T_END)
+    want = central_vertices(scene, integrator, t)
+    dev = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, want))
+    assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
+    return got
+
+
 def received_state(scene, path):
     """The final poses saved by the runner as a core State (first-order scenes)."""
     data, grp = np.load(path), scene.model.rotations
@@ -85,11 +96,7 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
     # 3: ran to t_end without converging (t_end is short)
     assert rc in (0, 3), text
     scene = load_scene(scene_path(name))
-    t, got = received_vertices(scene, out)
-    assert t == pytest.approx(T_END)
-    want = central_vertices(scene, integrator, t)
-    dev = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, want))
-    assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
+    got = assert_saved_poses_equal_centralised(scene, integrator, out)
     # the agents really moved: the comparison is not between two copies of the initial state
     initial = placed_vertices(scene.model, scene.initial.groups, scene.origin)
     moved = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, initial))
@@ -113,11 +120,7 @@ def test_packed_blocks_cut_across_two_runners_equal_the_centralised_run(ros, tmp
     m = re.search(r"max vertex deviation ([0-9.e+-]+)", text)
     assert m and float(m.group(1)) <= 1e-9, text
     scene = load_scene(scene_path(name))
-    t, got = received_vertices(scene, out)
-    assert t == pytest.approx(T_END)
-    want = central_vertices(scene, integrator, t)
-    dev = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, want))
-    assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
+    assert_saved_poses_equal_centralised(scene, integrator, out)
 
 
 def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros, tmp_path):

@@ -158,15 +158,21 @@ def _stage_header(data, run_id, agent, t_max, fmt=STAGE_FORMAT):
     return (int(head[3]), int(head[4]), int(head[5]), float(head[6]), int(head[7])), None
 
 
-def decode_stage(msg, grp, dim, run_id, agent, rot_tol=ROTATION_TOL, t_max=None):
-    """Float64MultiArray -> (Stage, None) or (None, reason)."""
+def _stage_data(msg, run_id, sender, t_max, fmt):
+    """(data, header, None) of a stage or block message, or (None, None, reason)."""
     data = np.frombuffer(msg.data, dtype=float) if len(msg.data) else np.zeros(0)
     if len(data) < HEADER or msg.layout.dim or msg.layout.data_offset != 0:
-        return None, "malformed layout"
+        return None, None, "malformed layout"
     reason = _bad_numbers(data)
     if reason:
-        return None, reason
-    head, reason = _stage_header(data, run_id, agent, t_max)
+        return None, None, reason
+    head, reason = _stage_header(data, run_id, sender, t_max, fmt)
+    return data, head, reason
+
+
+def decode_stage(msg, grp, dim, run_id, agent, rot_tol=ROTATION_TOL, t_max=None):
+    """Float64MultiArray -> (Stage, None) or (None, reason)."""
+    data, head, reason = _stage_data(msg, run_id, agent, t_max, STAGE_FORMAT)
     if head is None:
         return None, reason
     step, stage, flags, t, mask = head
@@ -239,13 +245,7 @@ def decode_block(msg, grp, dim, run_id, block, k, rot_tol=ROTATION_TOL, t_max=No
 
     Checked as ``decode_stage`` checks one agent's message, each row's rotation included;
     every agent index must lie in the block (bK .. bK + K - 1) and appear once."""
-    data = np.frombuffer(msg.data, dtype=float) if len(msg.data) else np.zeros(0)
-    if len(data) < HEADER or msg.layout.dim or msg.layout.data_offset != 0:
-        return None, "malformed layout"
-    reason = _bad_numbers(data)
-    if reason:
-        return None, reason
-    head, reason = _stage_header(data, run_id, block, t_max, fmt=BLOCK_FORMAT)
+    data, head, reason = _stage_data(msg, run_id, block, t_max, BLOCK_FORMAT)
     if head is None:
         return None, reason
     step, stage, flags, t, mask = head
