@@ -53,3 +53,23 @@ def test_good_parameters_pass_and_integers_are_numbers():
 def test_missing_scene_is_an_error():
     with pytest.raises(ParameterError, match="'scene' is required"):
         check(MONITOR, {})
+
+
+def test_polymatch_set_waits_for_every_agent_the_run_records_name():
+    """`polymatch set` calls once the records cover the ensemble and their nodes are in the
+    graph: one of two nodes in the graph (discovery on a loaded machine) is not enough."""
+    from polymatch_ros.ros.param_set import _not_found
+    from polymatch_ros.ros.wire import RunRecord
+
+    def record(agents, name):
+        return RunRecord(role="agent", mode="realtime", t=0.0, agents=agents, n_agents=8,
+                         node=f"/polymatch/{name}")
+
+    records = {"agents_0_3": record((0, 1, 2, 3), "agents_0_3"),
+               "agents_4_7": record((4, 5, 6, 7), "agents_4_7")}
+    assert _not_found(records, ["agents_0_3"]) == [4, 5, 6, 7]
+    assert _not_found(records, ["agents_0_3", "agents_4_7"]) == []
+    assert _not_found({"agents_0_3": records["agents_0_3"]}, ["agents_0_3"]) == [4, 5, 6, 7]
+    # the record survives its JSON line (the status topic carries it so)
+    again = RunRecord.from_json(records["agents_4_7"].to_json())
+    assert (again.n_agents, again.node) == (8, "/polymatch/agents_4_7")

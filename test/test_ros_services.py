@@ -146,12 +146,18 @@ def test_lifecycle_agent_walks_every_transition_and_steps_only_when_active(ros):
     assert ros.wait(managed, 30) == 0, ros.output(managed)[-2000:]
 
 
-def test_polymatch_set_changes_a_runtime_gain_on_every_agent_in_one_command(ros):
+def test_polymatch_set_changes_a_runtime_gain_on_every_agent_in_one_command(ros, tmp_path):
     """``polymatch set kappa 1.5``: every realtime agent of the ensemble accepts it (its
     set_parameters service) and applies it at its next tick; a value out of range is refused
-    before anything is sent."""
+    before anything is sent.  The ensemble is the scene's two agents: `polymatch set` calls
+    once their run records and nodes have all been found (one node found later than the other
+    on a loaded machine once made it set one of two)."""
+    two = tmp_path / "two.yaml"
+    with open(scene_path(SCENE), encoding="utf-8") as fh:
+        two.write_text(fh.read().replace("count: 8", "count: 2"), encoding="utf-8")
+    assert load_scene(two).model.n_agents == 2
     realtime = dict(mode="realtime", start_time=0.0, rate=20.0, t_end=1000.0, timeout=BOUND)
-    agents = [ros.agent(SCENE, i, **realtime) for i in range(2)]
+    agents = [ros.agent(str(two), i, **realtime) for i in range(2)]
     _probe(ros, "pose 0", "pose 1")  # both active and publishing
     setter = ros.start(cli_argv("set", "kappa", "1.5", "--timeout", "30"), timeout=60,
                        name="set")

@@ -189,6 +189,8 @@ class AgentBase(NodeApp):
             dropped=dict(self.drops.counts),
             peers=tuple(self.layout.peers),
             stage_subscriptions=self.stage_subscriptions(),
+            n_agents=self.model.n_agents,
+            node=self.node.get_fully_qualified_name(),
         )
 
     def stage_subscriptions(self):

@@ -47,16 +47,41 @@ def agent_nodes(node, namespace):
 
 
 def _discover(node, executor, namespace, deadline):
-    """The agent nodes once the graph has stopped changing (or at the deadline)."""
+    """The agent nodes of the ensemble, once they are all found (or at the deadline).
+
+    Each agent process publishes its run record once a second on the status topic (latched):
+    its agents, the ensemble's size and its node name.  When the records cover every agent of
+    the ensemble and each recording node is in the graph, the search ends at once.  An
+    ensemble of which only some agents run ends when the graph has not changed for
+    SETTLE_SECONDS and holds every node that sent a record.
+    """
+    records = {}
+
+    def heard(msg):
+        rec = wire.RunRecord.from_json(msg.data)
+        if rec is not None and rec.role == "agent" and rec.node.startswith(namespace + "/"):
+            records[rec.node.rsplit("/", 1)[-1]] = rec
+
+    sub = wire.subscription(node, "status", heard)
     seen, since = [], time.monotonic()
     while time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.1)
         now = agent_nodes(node, namespace)
         if now != seen:
             seen, since = now, time.monotonic()
-        elif seen and time.monotonic() - since >= SETTLE_SECONDS:
+        if records and not _not_found(records, seen):
             break
+        if seen and time.monotonic() - since >= SETTLE_SECONDS and set(records) <= set(seen):
+            break
+    node.destroy_subscription(sub)
     return seen
+
+
+def _not_found(records, names):
+    """Agents of the ensemble whose node the records and the graph do not both show yet."""
+    n = max((rec.n_agents for rec in records.values()), default=0)
+    found = {a for name, rec in records.items() if name in names for a in rec.agents}
+    return sorted(set(range(n)) - found)
 
 
 def _call_all(node, executor, namespace, names, name, value, deadline):

@@ -34,6 +34,8 @@ class RunRecord:
     (lockstep; on a communication graph only the in-neighbours); ``clock_offsets`` {peer: s its
     clock is ahead of this one}, estimated from its pose stamps (realtime); monitor:
     ``diameter`` of its last report, ``agents_heard`` in it, ``reports`` published.
+    ``n_agents`` the ensemble's size and ``node`` the process's fully qualified node name
+    (agents): what ``polymatch set`` waits for before it calls every agent node.
     """
 
     role: str
@@ -54,6 +56,8 @@ class RunRecord:
     peers: tuple = ()
     stage_subscriptions: int = 0
     clock_offsets: dict = field(default_factory=dict)
+    n_agents: int = 0
+    node: str = ""
 
     @property
     def dropped_total(self):
@@ -80,6 +84,7 @@ class RunRecord:
             rec.agents = tuple(int(a) for a in rec.agents)
             rec.peers = tuple(int(a) for a in rec.peers)
             rec.stage_subscriptions = int(rec.stage_subscriptions)
+            rec.n_agents, rec.node = int(rec.n_agents), str(rec.node)
             rec.dropped = {str(k): int(v) for k, v in dict(rec.dropped).items()}
             rec.clock_offsets = {int(k): float(v) for k, v in dict(rec.clock_offsets).items()}
             rec.t = float(rec.t)
