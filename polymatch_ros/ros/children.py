@@ -79,7 +79,9 @@ class Child:
                 self.proc.wait(timeout=wait)
             except subprocess.TimeoutExpired:
                 continue
-        self.thread.join(timeout=1.0)
+        # its last lines (the run record) may still be in the pipe: once the process has
+        # ended, the reader reaches EOF at once unless a loaded machine starves it
+        self.thread.join(timeout=5.0 if self.proc.poll() is not None else 1.0)
         return self.proc.poll()
 
     def tail(self, n=5):

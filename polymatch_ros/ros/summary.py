@@ -15,6 +15,12 @@ from ..core.simulate import convergence_verdict, prepare, simulate
 def report(args, scene, the_plan, watcher, children, monitor, progress, code, message, wall):
     final = watcher.final_state() if watcher is not None else None
     records = [r for c in children + ([monitor] if monitor else []) for r in c.records()]
+    if monitor is not None and not monitor.records() and watcher and watcher.monitor:
+        # no final line from the monitor (ended before it wrote one): its last report as the
+        # status topic carried it stands in (in lockstep the final step's, see 'received')
+        records.append(watcher.monitor)
+        print("note: the monitor printed no final record; its last report on the status "
+              "topic stands in", file=sys.stderr)
     if args.records:
         with open(args.records, "w", encoding="utf-8") as fh:
             fh.writelines(r.to_json() + "\n" for r in records)
