@@ -83,26 +83,22 @@ class Layout:
 
     def expected_block_subscribers(self, block):
         """Remote processes that need some local agent of ``block``."""
-        key = ("block", block)
-        if key not in self._subscribers:
-            mine = self.local_blocks()[block]
-            self._subscribers[key] = len({
-                self.process_of(b)
-                for b in range(self.model.n_agents)
-                if self.process_of(b) != block and any(a in self.sources(b) for a in mine)
-            })
-        return self._subscribers[key]
+        return self._remote_readers(tuple(self.local_blocks()[block]), block)
 
     def expected_subscribers(self, agent):
         """Remote processes that need ``agent``'s stage messages."""
-        if agent not in self._subscribers:
-            me = self.process_of(agent)
-            self._subscribers[agent] = len({
+        return self._remote_readers((agent,), self.process_of(agent))
+
+    def _remote_readers(self, agents, home):
+        """Processes other than ``home`` hosting an agent that needs one of ``agents``."""
+        key = (agents, home)
+        if key not in self._subscribers:
+            self._subscribers[key] = len({
                 self.process_of(b)
                 for b in range(self.model.n_agents)
-                if self.process_of(b) != me and agent in self.sources(b)
+                if self.process_of(b) != home and not self.sources(b).isdisjoint(agents)
             })
-        return self._subscribers[agent]
+        return self._subscribers[key]
 
 
 class DropCounter:

@@ -81,7 +81,8 @@ def rot_from_values(grp, values):
 
 
 def orthogonality(mat):
-    return float(np.max(np.abs(mat.T @ mat - np.eye(len(mat)))))
+    """max |O^T O - I| over the entries of one d x d matrix, or of a stack of them."""
+    return float(np.max(np.abs(np.swapaxes(mat, -1, -2) @ mat - np.eye(mat.shape[-1]))))
 
 
 def _bad_numbers(values):
@@ -253,11 +254,8 @@ def decode_block(msg, grp, dim, run_id, block, k, rot_tol=ROTATION_TOL, t_max=No
     if agents is None:
         return None, fields
     rot = fields["rot"]
-    if grp.name != "angle":
-        mats = rot.reshape(-1, grp.dim, grp.dim)
-        defect = np.abs(np.einsum("nki,nkj->nij", mats, mats) - np.eye(grp.dim))
-        if np.max(defect) > rot_tol:
-            return None, "rotation not orthogonal"
+    if grp.name != "angle" and orthogonality(rot.reshape(-1, grp.dim, grp.dim)) > rot_tol:
+        return None, "rotation not orthogonal"
     out = []
     for r, a in enumerate(agents):
         s = Stage(a, step, stage, flags, t, rot=rot_from_values(grp, rot[r]))
