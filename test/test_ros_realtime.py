@@ -95,7 +95,8 @@ def test_realtime_converges_survives_sigkill_and_rejoin_theorem_4_2(ros):
 
 def test_last_realtime_progress_line_has_the_true_diameter_and_a_rate(ros):
     """The runner's last progress line is the final state's: its diameter is the summary's, its
-    rate is not negative (a monitor report of fewer agents after the end must not count)."""
+    rate is not negative (a monitor report of fewer agents after the end must not count); each
+    agent reports its CPU time per tick."""
     proc = ros.start(
         [
             PY,
@@ -113,11 +114,15 @@ def test_last_realtime_progress_line_has_the_true_diameter_and_a_rate(ros):
             "6",
             "--timeout",
             "120",
+            "-v",
         ],
         timeout=150,
     )
     rc = ros.wait(proc, 160)
     text = ros.output(proc)
+    # each agent's line (-v) gives its process's CPU time per tick, measured over its ticks
+    cpu = [float(v) for v in re.findall(r"^agent \d+: .*CPU ([0-9.]+) ms per tick", text, re.M)]
+    assert len(cpu) == 8 and all(v > 0.0 for v in cpu), text
     assert rc in (0, 3), text
     progress = re.findall(r"^t = +([0-9.]+) / .*diameter = (\S+) +(\S+) rounds/s", text, re.M)
     assert progress, text

@@ -322,5 +322,10 @@ class BridgeAgent(RuntimeParams, AgentBase):
             self._hold("shutdown")
         except Exception:  # noqa: BLE001 -- the context may already be gone; nothing to do
             pass
+        self.peers.destroy()
         super().destroy()
+
+    def release(self):
+        """The peers' lean node (lifecycle cleanup)."""
+        self.peers.destroy()
 

@@ -162,6 +162,32 @@ def lean_node(name, namespace=None):
     return node, executor
 
 
+def drain(executor, taken, most):
+    """Run the callbacks that are ready in ``executor`` now, at most ``most`` of them;
+    ``taken()`` counts the callbacks run so far.
+
+    rclpy's ``spin_once(0)`` runs one callback of its last wait's ready entities, and once they
+    are done the next call comes back empty (the wait's timeout has passed); the call after that
+    waits anew.  So two empty calls in a row mean nothing was ready.
+    """
+    first, empty = taken(), 0
+    while empty < 2 and taken() - first < most:
+        before = taken()
+        executor.spin_once(timeout_sec=0.0)
+        empty = empty + 1 if taken() == before else 0
+
+
+def received_at(info):
+    """(wall-clock, monotonic) time at which the middleware received a message: its
+    ``received_timestamp`` (ns since the epoch), or now where the middleware gives none."""
+    now_wall, now_mono = time.time(), time.monotonic()
+    stamp = info.get("received_timestamp") if info else None
+    if not stamp:
+        return now_wall, now_mono
+    wall = min(stamp * 1e-9, now_wall)
+    return wall, now_mono - (now_wall - wall)
+
+
 def quiet_events():
     """(publisher, subscription) event callbacks without rclpy's default QoS-event waitables."""
     from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks

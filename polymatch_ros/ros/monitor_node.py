@@ -18,10 +18,10 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
   pause               std_srvs/SetBool  to every agent on the control topic
 In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
 second, the latest simulated time that every agent's pose has reached (a timer at that rate
-publishes it, so the last step is reported within 1/report_rate s even when no pose follows);
-in realtime at ``rate`` Hz from the latest poses.  The headline
-topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo` still
-gets the last value.
+takes the poses that came since its last tick and publishes it, so the last step is reported
+within 1/report_rate s); in realtime at ``rate`` Hz from the latest poses, taken only then.
+The headline topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo`
+still gets the last value.
 """
 
 import sys
@@ -32,7 +32,7 @@ from ..core.metrics import ensemble_metrics
 from ..core.model import GroupState, State
 from . import wire
 from .control import EnsembleControl
-from .exchange import DropCounter
+from .exchange import DropCounter, drain, lean_node, quiet_events, received_at
 from .monitor_output import diagnostics, markers
 from .params import MONITOR, declare
 from .process import NodeApp, ros_main
@@ -67,6 +67,7 @@ class MonitorNode(NodeApp):
         self.unreported = None  # lockstep: (t, rows, velocities) of it until it is reported
         self.last = None  # (t, metrics, agents heard) of the last report
         self.reports = 0
+        self.taken = 0  # pose and twist messages taken (decoded or dropped)
         self._wire_up()
         if self.lockstep:
             node.create_timer(1.0 / params["report_rate"], self._report_completed)
@@ -74,12 +75,25 @@ class MonitorNode(NodeApp):
             node.create_timer(1.0 / params["rate"], self._report_latest)
 
     def _wire_up(self):
+        """Readers of every agent's pose (and twist); the headline, diagnostics, status and
+        marker writers; the ensemble's services.
+
+        The readers live on a lean node of their own (``exchange.lean_node``), and the report
+        timer takes what they hold (``_drain``), so the poses do not wake the monitor between
+        reports: in realtime each reader keeps an agent's newest pose (depth 1); in lockstep
+        the poses of the steps since the last report (RELIABLE, depth 100), every one of
+        which is taken, to complete every step."""
         node, dim = self.node, self.model.dim
-        mode = self.params["mode"]
+        self.readers, self.readers_executor = lean_node(
+            node.get_name() + "_poses", node.get_namespace()
+        )
+        events = quiet_events()[1]
+        kinds = ("pose", "twist") if self.model.order == 2 else ("pose",)
+        self.n_readers = self.n * len(kinds)
         for a in range(self.n):
-            wire.subscription(node, "pose", self._receiver(a, "pose"), dim, a, mode=mode)
-            if self.model.order == 2:
-                wire.subscription(node, "twist", self._receiver(a, "twist"), dim, a, mode=mode)
+            for kind in kinds:
+                wire.subscription(self.readers, kind, self._receiver(a, kind), dim, a,
+                                  mode=self.params["mode"], resolver=node, event_callbacks=events)
         self.pub = {
             key: wire.publisher(node, key)
             for key in ("diameter", "diameter_centroid", "diameter_rotation")
@@ -115,13 +129,14 @@ class MonitorNode(NodeApp):
         pose = kind == "pose"
         latest, pending = (self.latest, self.pending) if pose else (self.velocity, self.pending_v)
 
-        def receive(msg):
+        def receive(msg, info):
+            self.taken += 1
             got = self._decode(agent, kind, msg)
             if got is None:
                 return
             if pose:
                 value = wire.Row(got.vec - self.scene.origin, got.rot)
-                latest[agent] = (got.key, value, time.monotonic())
+                latest[agent] = (got.key, value, received_at(info)[1])
             else:
                 value = (got.vec, got.rot)
                 latest[agent] = (got.key, *value)
@@ -172,12 +187,20 @@ class MonitorNode(NodeApp):
 
     def _report_completed(self):
         """Lockstep, at ``report_rate`` Hz: publish the latest completed time if it is new."""
+        self._drain()
         if self.unreported is not None:
             t, rows, vel = self.unreported
             self.unreported = None
             self._publish(t, rows, vel)
 
+    def _drain(self):
+        """Take the poses and twists the readers hold (lockstep: up to their depth, 100 each)."""
+        drain(self.readers_executor, lambda: self.taken, 200 * self.n_readers)
+
     def _report_latest(self):
+        """Realtime, at ``rate`` Hz: the metrics of the newest pose of every agent heard within
+        ``peer_timeout``."""
+        self._drain()
         now = time.monotonic()
         alive = [a for a, v in self.latest.items() if now - v[2] <= self.params["peer_timeout"]]
         if not alive:
@@ -204,9 +227,11 @@ class MonitorNode(NodeApp):
             ("diameter_rotation", max(g.rotation_diameter for g in met.groups)),
         ):
             self.pub[key].publish(Float64(data=float(value)))
-        self.diag_pub.publish(diagnostics(self, t, met, keep, len(rows)))
+        # diagnostics and markers are volatile: built only for readers that are there
+        if self.diag_pub.get_subscription_count():
+            self.diag_pub.publish(diagnostics(self, t, met, keep, len(rows)))
         self.status_pub.publish(String(data=self.record().to_json()))
-        if self.marker_pub is not None:
+        if self.marker_pub is not None and self.marker_pub.get_subscription_count():
             self.marker_pub.publish(markers(self, {a: (r.x, r.rot) for a, r in rows.items()}))
 
     def record(self):
@@ -224,6 +249,11 @@ class MonitorNode(NodeApp):
     def run(self):
         while True:
             self.executor.spin_once(timeout_sec=0.5)
+
+    def destroy(self):
+        self.readers_executor.shutdown(timeout_sec=1.0)
+        self.readers.destroy_node()
+        super().destroy()
 
     def final_record(self):
         if self.unreported is not None:  # completed after the last tick: the record is exact

@@ -13,6 +13,7 @@ parameters are read-only), 1 if no agent answered within ``--timeout``.
 """
 
 import os
+import re
 import time
 
 from ..core.errors import ParameterError, PolymatchError
@@ -38,11 +39,14 @@ def checked_value(name, text):
     return check_value(SPEC[name], value)
 
 
+AGENT_NODE = re.compile(r"agent_\d+|agents_\d+_\d+")  # not their lean nodes (``_peers``, ...)
+
+
 def agent_nodes(node, namespace):
     """Names of the agent nodes in ``namespace`` (sorted)."""
     return sorted(
         name for name, space in node.get_node_names_and_namespaces()
-        if space == namespace and (name.startswith("agent_") or name.startswith("agents_"))
+        if space == namespace and AGENT_NODE.fullmatch(name)
     )
 
 

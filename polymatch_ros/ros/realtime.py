@@ -4,6 +4,12 @@ Peers that fall silent longer than ``peer_timeout`` are dropped from the sums of
 (A-1)/(A-2) and re-admitted when they speak again (Theorem 4.2 under delays and churn).
 Each peer's clock offset is estimated from its pose stamps (clock_offset.py) and published in
 the diagnostics.
+
+A tick's work: wait on the agent node (control, services, parameters) until the tick is due,
+take what the peers' readers hold (``PeerTable.drain``: their own lean node, one wait, at
+most one pose per peer), step, publish.  The peers' poses do not wake the agent between
+ticks: their readers keep the newest (depth 1), and the middleware's reception time stamps
+each one for the clock offsets and the silence timeout.
 """
 
 import time
@@ -17,11 +23,17 @@ from ..core.simulate import drive
 from . import wire
 from .agent_node import AgentBase, local_state
 from .clock_offset import ClockOffsets
+from .exchange import drain, lean_node, quiet_events, received_at
 from .runtime_params import RuntimeParams
 
 
 class PeerTable:
-    """The latest pose (and velocity) heard from each peer, and who is still alive."""
+    """The latest pose (and velocity) heard from each peer, and who is still alive.
+
+    Its readers live on a lean node of their own (``exchange.lean_node``, topic names resolved
+    by the agent node): ``drain()`` takes what they hold, at the tick, without waking the agent
+    for every pose in between.
+    """
 
     def __init__(self, node, layout, frame_id, timeout, drops, origin, delay, t_max, clock=None,
                  velocities=True):
@@ -38,19 +50,21 @@ class PeerTable:
         self.latest = {}  # agent -> SimpleNamespace(t, x, rot, v, heard)
         self.silent = set()
         dim = self.model.dim
+        self.taken = 0  # messages taken from the peers' readers (decoded or dropped)
+        self.lean, self.executor = lean_node(node.get_name() + "_peers", node.get_namespace())
+        events = quiet_events()[1]
         self.subs = []
         # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
         want_v = velocities and self.model.order == 2 and self.model.centroids_exact
         for a in layout.peers:
-            self.subs.append(
-                wire.subscription(node, "pose", self._receiver(a, "pose"), dim, a, mode="realtime")
-            )
+            kinds = ["pose"]
             if want_v and self.layout.owner[a][0] in layout.local_groups:
-                self.subs.append(
-                    wire.subscription(
-                        node, "twist", self._receiver(a, "twist"), dim, a, mode="realtime"
-                    )
-                )
+                kinds.append("twist")
+            for kind in kinds:
+                self.subs.append(wire.subscription(
+                    self.lean, kind, self._receiver(a, kind), dim, a, mode="realtime",
+                    resolver=node, event_callbacks=events,
+                ))
 
     @classmethod
     def of_agent(cls, agent, clock=None):
@@ -68,21 +82,34 @@ class PeerTable:
 
     def _receiver(self, agent, kind):
         """The callback of one peer's pose or twist topic: decoded messages wait in ``pending``
-        (a pose as (t, offset x, rotation), a twist as its centroid velocity)."""
+        (a pose as (t, offset x, rotation), a twist as its centroid velocity), stamped with the
+        time the middleware received them."""
 
-        def receive(msg):
+        def receive(msg, info):
+            self.taken += 1
             got, reason = wire.decode_motion(
                 kind, msg, self.grp, self.model.dim, self.frame_id, self.t_max
             )
             if got is None:
                 self.drops(f"agent {agent}", reason)
                 return
+            wall, mono = received_at(info)
             if kind == "pose" and self.clock is not None:
-                self.clock.add(agent, got.t, time.time())
+                self.clock.add(agent, got.t, wall)
             value = (got.t, got.vec - self.origin, got.rot) if kind == "pose" else got.vec
-            self.pending[agent].append((time.monotonic(), kind, value))
+            self.pending[agent].append((mono, kind, value))
 
         return receive
+
+    def drain(self):
+        """Take the poses and twists the peers' readers hold (depth 1: one of each per peer,
+        unless more come while they are taken)."""
+        drain(self.executor, lambda: self.taken, 4 * len(self.subs))
+
+    def destroy(self):
+        """The readers' lean node (lifecycle cleanup, shutdown)."""
+        self.executor.shutdown(timeout_sec=1.0)
+        self.lean.destroy_node()
 
     def _deliver(self, now):
         """Move every pose and velocity that has waited ``delay`` into the table."""
@@ -110,12 +137,15 @@ class PeerTable:
 
     def newest_time(self):
         """The newest simulated time heard from any peer (None if none): the ensemble's clock."""
+        self.drain()
         self._deliver(time.monotonic())
         times = [e.t for e in self.latest.values() if e.x is not None and np.isfinite(e.t)]
         return max(times) if times else None
 
     def active(self):
-        """Peers heard within the timeout; logs once when one falls silent."""
+        """Peers heard within the timeout (what their readers hold taken first); logs once
+        when one falls silent."""
+        self.drain()
         now = time.monotonic()
         self._deliver(now)
         alive = []
@@ -164,6 +194,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         super().__init__(node, params, executor)
         self.clock = ClockOffsets(params["time_scale"], params["clock_offset_warn"])
         self.peers = PeerTable.of_agent(self, self.clock)
+        self.cpu_span = None  # process CPU time (s) when the ticks began and ended
         self.watch_parameters()
 
     def rebuild_system(self):
@@ -187,6 +218,14 @@ class RealtimeAgent(RuntimeParams, AgentBase):
     def step_size(self, p):
         return p["time_scale"] / p["rate"]
 
+    def time_split(self):
+        """CPU milliseconds per tick of the whole process (the middleware's threads too), over
+        the ticks so far."""
+        if self.rounds == 0 or self.cpu_span is None:
+            return {}
+        start, end = self.cpu_span
+        return {"cpu": ((end or time.process_time()) - start) / self.rounds * 1e3}
+
     def _start_epoch(self):
         """Wall-clock time of t = 0: the runner's 'start', or the start_time parameter."""
         if self.params["start_time"] >= 0:
@@ -201,6 +240,8 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         return self.start_epoch if self.start_epoch is not None else time.time()
 
     def _wait_tick(self, next_tick, period):
+        """Serve the agent node (control, services, parameters) until the tick is due; the
+        peers' poses wait in their readers for ``PeerTable.active``."""
         while True:
             left = next_tick - time.monotonic()
             if left <= 0 or self.stop_requested:
@@ -208,8 +249,6 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             self.spin_once(min(left, 0.05))
         if time.monotonic() - next_tick > period:  # behind schedule: the CPU is short
             self.late_ticks += 1
-        for _ in range(len(self.peers.subs) + 2):  # drain what is ready
-            self.spin_once(0.0)
 
     def loop(self):
         self.wait_for_discovery()
@@ -221,6 +260,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         h, period = self.plan.dt, 1.0 / self.params["rate"]
         next_tick = self._join_clock(start, period, h)
         t0 = time.monotonic()
+        self.cpu_span = (time.process_time(), None)
         while self.state.t < self.scene.t_end - 1e-12 and not self.stop_requested:
             next_tick += period
             self._wait_tick(next_tick, period)
@@ -244,6 +284,15 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             self.rounds += 1
             self.round_time = time.monotonic() - t0
             self.publish_state()
+        self.cpu_span = (self.cpu_span[0], time.process_time())
+
+    def release(self):
+        """The peers' lean node (lifecycle cleanup)."""
+        self.peers.destroy()
+
+    def destroy(self):
+        self.peers.destroy()
+        super().destroy()
 
     def _held(self, t_next):
         """Reset and pause (``control.AgentControl``): back to the initial state at the tick

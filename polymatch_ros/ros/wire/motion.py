@@ -10,7 +10,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .codec import ROTATION_TOL, _bad_numbers, _bad_stamp, orthogonality, stamp_of, time_key
+from .codec import (
+    ROTATION_TOL,
+    _bad_numbers,
+    _bad_stamp,
+    bad_scalars,
+    orthogonality,
+    stamp_of,
+    time_key,
+)
 
 
 def pose_fields(grp, x, g):
@@ -67,9 +75,8 @@ def _stamped(cls, t, frame_id):
 
 def _numbers(vector, rotation):
     """A geometry message's two parts as float arrays, and the reason they are unusable."""
-    vec = np.asarray(vector, dtype=float)
-    rot = np.asarray(rotation, dtype=float)
-    return vec, rot, _bad_numbers(np.concatenate([vec, rot]))
+    reason = bad_scalars(tuple(vector) + tuple(rotation))
+    return np.array(vector, dtype=float), np.array(rotation, dtype=float), reason
 
 
 def _out_of_plane(vec, rot):
@@ -82,7 +89,7 @@ def pose_to_state(grp, dim, position, quat):
     p, q, reason = _numbers(position, quat)
     if reason:
         return None, reason
-    norm = float(np.linalg.norm(q))
+    norm = math.hypot(*quat)
     if abs(norm - 1.0) > ROTATION_TOL:
         return None, "quaternion far from unit norm"
     if dim == 2:

@@ -27,8 +27,10 @@ class RunRecord:
     """What one process did: ``role`` agent (hosting ``agents``) or monitor.
 
     ``t`` simulated time reached; ``steps`` integrator steps and ``rounds`` stage rounds
-    (lockstep; a realtime tick is one round); ``rounds_per_second`` over the run's wall time;
-    ``ms_per_round`` publish/wait/other split (lockstep); ``late_ticks`` realtime ticks started
+    (lockstep; a realtime tick is one round); ``rounds_per_second`` over the run's wall time
+    (lockstep: after the first round, which waits for the last peer to start);
+    ``ms_per_round`` publish/wait/other split (lockstep; realtime: CPU per tick of the whole
+    process); ``late_ticks`` realtime ticks started
     more than one period late; ``dropped`` counts per reason; ``peers`` the agents whose
     messages the process needs and ``stage_subscriptions`` its stage-topic subscriptions
     (lockstep; on a communication graph only the in-neighbours); ``clock_offsets`` {peer: s its
@@ -114,6 +116,8 @@ class RunRecord:
                 f"finished at t = {self.t:.6g} after {self.steps} realtime steps, "
                 f"{self.late_ticks} started more than one period late"
             )
+            if "cpu" in self.ms_per_round:
+                text += f" (CPU {self.ms_per_round['cpu']:.2f} ms per tick)"
         if self.matched_after is not None:
             text += f"; peers matched after {self.matched_after:.2f} s"
         return f"{self.name()}: {text}; {drop_summary(self.dropped)}"
