@@ -83,7 +83,8 @@ class AgentBase(NodeApp):
         self.drops = DropCounter(self.log)
         self.control = AgentControl(self.mode, self.on_pause)
         self.rounds = self.steps = self.late_ticks = 0
-        self.round_time = 0.0
+        self.round_time = 0.0  # wall seconds of the timed rounds (all but ``untimed_rounds``)
+        self.untimed_rounds = 0  # lockstep: the first round, which waits for every peer's start
         self.finished = False
 
     def step_size(self, p):
@@ -173,7 +174,8 @@ class AgentBase(NodeApp):
 
     def record(self):
         """This process's run record (``wire.RunRecord``)."""
-        rps = self.rounds / self.round_time if self.round_time > 0 else 0.0
+        timed = self.rounds - self.untimed_rounds
+        rps = timed / self.round_time if self.round_time > 0 and timed > 0 else 0.0
         return wire.RunRecord(
             role="agent",
             mode=self.mode,

@@ -232,11 +232,11 @@ class LockstepAgent(AgentBase):
         return p["dt"] or None
 
     def time_split(self):
-        ex = self.exchange
-        if self.rounds == 0:
+        ex, timed = self.exchange, self.rounds - self.untimed_rounds
+        if timed <= 0:
             return {}
-        pub, wait = ex.publish_time / self.rounds * 1e3, ex.wait_time / self.rounds * 1e3
-        rest = max(0.0, self.round_time / self.rounds * 1e3 - pub - wait)
+        pub, wait = ex.publish_time / timed * 1e3, ex.wait_time / timed * 1e3
+        rest = max(0.0, self.round_time / timed * 1e3 - pub - wait)
         return {"publish": pub, "wait": wait, "other": rest}
 
     def stage_subscriptions(self):
@@ -277,6 +277,10 @@ class LockstepAgent(AgentBase):
                 )
                 stop = stop or (request.boundary and stop_seen)
                 self.rounds += 1
+                if self.rounds == 1:  # it waited for the last peer to start: rates count after it
+                    nonlocal start
+                    start, self.untimed_rounds = time.monotonic(), 1
+                    self.exchange.publish_time = self.exchange.wait_time = 0.0
                 return ensemble
 
             self.state = drive(self.plan.method, self.system, self.state, t_next - prev, answer)

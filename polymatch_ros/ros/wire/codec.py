@@ -86,10 +86,21 @@ def orthogonality(mat):
 
 
 def _bad_numbers(values):
-    """The reason a vector of numbers is unusable, or None."""
-    if not np.all(np.isfinite(values)):
+    """The reason a vector of numbers is unusable, or None (one reduction: a NaN or an
+    infinity makes the largest magnitude non-finite)."""
+    if not values.size:
+        return None
+    largest = float(np.max(np.abs(values)))
+    if not math.isfinite(largest):
         return "non-finite value"
-    if values.size and np.max(np.abs(values)) > MAX_ABS:
+    return "value out of range" if largest > MAX_ABS else None
+
+
+def bad_scalars(values):
+    """``_bad_numbers`` of a few Python floats (a geometry message's fields), without numpy."""
+    if not all(map(math.isfinite, values)):
+        return "non-finite value"
+    if values and max(map(abs, values)) > MAX_ABS:
         return "value out of range"
     return None
 
@@ -123,7 +134,8 @@ def encode_stage(msg, run_id, agent, step, stage, flags, t, fields):
         if label in fields:
             mask |= bit
             body.extend(fields[label])
-    msg.data = [
+    # an array.array is taken as it is; a list would be type- and range-checked item by item
+    msg.data = array.array("d", [
         float(STAGE_FORMAT),
         float(run_id),
         float(agent),
@@ -132,7 +144,7 @@ def encode_stage(msg, run_id, agent, step, stage, flags, t, fields):
         float(flags),
         float(t),
         float(mask),
-    ] + body
+    ] + body)
     return msg
 
 
@@ -140,11 +152,12 @@ def _stage_header(data, run_id, agent, t_max, fmt=STAGE_FORMAT):
     """(step, stage, flags, t, mask) of a stage message's header, or the reason it is refused.
 
     ``agent`` is the sender's agent index (a block message: its block index)."""
-    head = data[:HEADER]
+    head = data[:HEADER].tolist()  # eight Python floats: cheaper to check than numpy's
+    counts = head[:6] + head[7:]  # every field but the time is a non-negative integer
     if (
-        np.any(head[[0, 1, 2, 3, 4, 5, 7]] != np.round(head[[0, 1, 2, 3, 4, 5, 7]]))
-        or np.any(head[[1, 2, 3, 4, 5, 7]] < 0)
-        or np.any(np.abs(head) > 2.0**53)
+        any(v % 1.0 for v in counts)  # a fraction (or NaN, for a non-finite value)
+        or min(counts[1:]) < 0
+        or max(map(abs, head)) > 2.0**53
     ):
         return None, "malformed header"
     if int(head[0]) != fmt:
