@@ -17,8 +17,8 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
   start, stop, reset  std_srvs/Trigger  the ensemble's services (``control``), broadcast
   pause               std_srvs/SetBool  to every agent on the control topic
 In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
-second, the latest simulated time that every agent's pose has reached (a timer at that rate
-takes the poses that came since its last tick and publishes it, so the last step is reported
+second, the latest simulated time that every agent's pose has reached (its loop, at that rate,
+takes the poses that came since its last report and publishes it, so the last step is reported
 within 1/report_rate s); in realtime at ``rate`` Hz from the latest poses, taken only then.
 The headline topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo`
 still gets the last value.
@@ -69,17 +69,16 @@ class MonitorNode(NodeApp):
         self.reports = 0
         self.taken = 0  # pose and twist messages taken (decoded or dropped)
         self._wire_up()
-        if self.lockstep:
-            node.create_timer(1.0 / params["report_rate"], self._report_completed)
-        else:
-            node.create_timer(1.0 / params["rate"], self._report_latest)
+        rate = params["report_rate"] if self.lockstep else params["rate"]
+        self.report_period = 1.0 / rate
+        self.report_due = {True: self._report_completed, False: self._report_latest}[self.lockstep]
 
     def _wire_up(self):
         """Readers of every agent's pose (and twist); the headline, diagnostics, status and
         marker writers; the ensemble's services.
 
-        The readers live on a lean node of their own (``exchange.lean_node``), and the report
-        timer takes what they hold (``_drain``), so the poses do not wake the monitor between
+        The readers live on a lean node of their own (``exchange.lean_node``), and each report
+        takes what they hold first (``_drain``), so the poses do not wake the monitor between
         reports: in realtime each reader keeps an agent's newest pose (depth 1); in lockstep
         the poses of the steps since the last report (RELIABLE, depth 100), every one of
         which is taken, to complete every step."""
@@ -171,7 +170,7 @@ class MonitorNode(NodeApp):
 
     def _collect_completed(self):
         """Lockstep: advance to the latest simulated time all agents (and velocities) have
-        reached; its poses wait in ``unreported`` for the report timer, earlier ones are
+        reached; its poses wait in ``unreported`` for the next report, earlier ones are
         superseded unreported."""
         need_v = self.model.order == 2
         for key in sorted(self.pending):
@@ -247,8 +246,20 @@ class MonitorNode(NodeApp):
         )
 
     def run(self):
+        """Serve the node (services, control) and report every ``report_period`` s.
+
+        The reports run here, not in a timer callback: a Ctrl-C (the monitor's normal end) that
+        lands inside a callback leaves rclpy's task holding the timer, and destroying the node
+        then once crashed the process (SIGSEGV)."""
+        due = time.monotonic() + self.report_period
         while True:
-            self.executor.spin_once(timeout_sec=0.5)
+            self.executor.spin_once(timeout_sec=min(0.5, max(0.0, due - time.monotonic())))
+            now = time.monotonic()
+            if now >= due:
+                due += self.report_period
+                if due <= now:  # behind (a loaded machine): the next one a period from now
+                    due = now + self.report_period
+                self.report_due()
 
     def destroy(self):
         self.readers_executor.shutdown(timeout_sec=1.0)

@@ -6,6 +6,7 @@ remaps and parameters apply), builds the application, runs it, turns a
 application print its final lines, and bounds the DDS teardown (``teardown_watchdog``).
 """
 
+import signal
 import sys
 
 from ..core.errors import PolymatchError
@@ -54,6 +55,12 @@ def ros_main(factory, label, argv=None):
     except (KeyboardInterrupt, ExternalShutdownException):
         code = getattr(app, "interrupted_exit", 130)
     finally:
+        # a second Ctrl-C must not cut the report or the teardown short: ``timeout`` passes a
+        # SIGINT on to its child and to its process group, so the child gets it twice, and one
+        # landing in the middle of destroying the nodes once ended the monitor with a traceback,
+        # and once by SIGSEGV (rclpy's own handler woke an executor being torn down).  The
+        # teardown stays bounded by its watchdog.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         if app is not None and hasattr(app, "report"):
             app.report()
         sys.stdout.flush()
