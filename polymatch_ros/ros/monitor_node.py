@@ -32,7 +32,7 @@ from ..core.metrics import ensemble_metrics
 from ..core.model import GroupState, State
 from . import wire
 from .control import EnsembleControl
-from .exchange import DropCounter, drain, lean_node, quiet_events, received_at
+from .exchange import DropCounter, LeanReaders, received_at
 from .monitor_output import diagnostics, markers
 from .params import MONITOR, declare
 from .process import NodeApp, ros_main
@@ -67,32 +67,26 @@ class MonitorNode(NodeApp):
         self.unreported = None  # lockstep: (t, rows, velocities) of it until it is reported
         self.last = None  # (t, metrics, agents heard) of the last report
         self.reports = 0
-        self.taken = 0  # pose and twist messages taken (decoded or dropped)
         self._wire_up()
         rate = params["report_rate"] if self.lockstep else params["rate"]
         self.report_period = 1.0 / rate
-        self.report_due = {True: self._report_completed, False: self._report_latest}[self.lockstep]
+        self.report_due = self._report_completed if self.lockstep else self._report_latest
 
     def _wire_up(self):
         """Readers of every agent's pose (and twist); the headline, diagnostics, status and
         marker writers; the ensemble's services.
 
-        The readers live on a lean node of their own (``exchange.lean_node``), and each report
+        The readers live on a lean node of their own (``exchange.LeanReaders``), and each report
         takes what they hold first (``_drain``), so the poses do not wake the monitor between
         reports: in realtime each reader keeps an agent's newest pose (depth 1); in lockstep
         the poses of the steps since the last report (RELIABLE, depth 100), every one of
         which is taken, to complete every step."""
         node, dim = self.node, self.model.dim
-        self.readers, self.readers_executor = lean_node(
-            node.get_name() + "_poses", node.get_namespace()
-        )
-        events = quiet_events()[1]
+        self.readers = LeanReaders(node, "_poses")
         kinds = ("pose", "twist") if self.model.order == 2 else ("pose",)
-        self.n_readers = self.n * len(kinds)
         for a in range(self.n):
             for kind in kinds:
-                wire.subscription(self.readers, kind, self._receiver(a, kind), dim, a,
-                                  mode=self.params["mode"], resolver=node, event_callbacks=events)
+                self.readers.subscribe(kind, self._receiver(a, kind), dim, a, self.params["mode"])
         self.pub = {
             key: wire.publisher(node, key)
             for key in ("diameter", "diameter_centroid", "diameter_rotation")
@@ -129,7 +123,6 @@ class MonitorNode(NodeApp):
         latest, pending = (self.latest, self.pending) if pose else (self.velocity, self.pending_v)
 
         def receive(msg, info):
-            self.taken += 1
             got = self._decode(agent, kind, msg)
             if got is None:
                 return
@@ -194,7 +187,7 @@ class MonitorNode(NodeApp):
 
     def _drain(self):
         """Take the poses and twists the readers hold (lockstep: up to their depth, 100 each)."""
-        drain(self.readers_executor, lambda: self.taken, 200 * self.n_readers)
+        self.readers.drain(per_reader=200)
 
     def _report_latest(self):
         """Realtime, at ``rate`` Hz: the metrics of the newest pose of every agent heard within
@@ -262,8 +255,7 @@ class MonitorNode(NodeApp):
                 self.report_due()
 
     def destroy(self):
-        self.readers_executor.shutdown(timeout_sec=1.0)
-        self.readers.destroy_node()
+        self.readers.destroy()
         super().destroy()
 
     def final_record(self):

@@ -23,7 +23,7 @@ from ..core.simulate import drive
 from . import wire
 from .agent_node import AgentBase, local_state
 from .clock_offset import ClockOffsets
-from .exchange import drain, lean_node, quiet_events, received_at
+from .exchange import LeanReaders, received_at
 from .runtime_params import RuntimeParams
 
 
@@ -50,10 +50,7 @@ class PeerTable:
         self.latest = {}  # agent -> SimpleNamespace(t, x, rot, v, heard)
         self.silent = set()
         dim = self.model.dim
-        self.taken = 0  # messages taken from the peers' readers (decoded or dropped)
-        self.lean, self.executor = lean_node(node.get_name() + "_peers", node.get_namespace())
-        events = quiet_events()[1]
-        self.subs = []
+        self.readers = LeanReaders(node, "_peers")
         # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
         want_v = velocities and self.model.order == 2 and self.model.centroids_exact
         for a in layout.peers:
@@ -61,10 +58,7 @@ class PeerTable:
             if want_v and self.layout.owner[a][0] in layout.local_groups:
                 kinds.append("twist")
             for kind in kinds:
-                self.subs.append(wire.subscription(
-                    self.lean, kind, self._receiver(a, kind), dim, a, mode="realtime",
-                    resolver=node, event_callbacks=events,
-                ))
+                self.readers.subscribe(kind, self._receiver(a, kind), dim, a, "realtime")
 
     @classmethod
     def of_agent(cls, agent, clock=None):
@@ -86,7 +80,6 @@ class PeerTable:
         time the middleware received them."""
 
         def receive(msg, info):
-            self.taken += 1
             got, reason = wire.decode_motion(
                 kind, msg, self.grp, self.model.dim, self.frame_id, self.t_max
             )
@@ -104,12 +97,11 @@ class PeerTable:
     def drain(self):
         """Take the poses and twists the peers' readers hold (depth 1: one of each per peer,
         unless more come while they are taken)."""
-        drain(self.executor, lambda: self.taken, 4 * len(self.subs))
+        self.readers.drain(per_reader=4)
 
     def destroy(self):
         """The readers' lean node (lifecycle cleanup, shutdown)."""
-        self.executor.shutdown(timeout_sec=1.0)
-        self.lean.destroy_node()
+        self.readers.destroy()
 
     def _deliver(self, now):
         """Move every pose and velocity that has waited ``delay`` into the table."""
