@@ -19,12 +19,16 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--examples", type=int, default=5000)
     p.add_argument("--top", type=int, default=25, help="outcome lines to print")
+    p.add_argument("--derandomize", action="store_true",
+                   help="the fixed examples CI runs (test_input_contract.py), not random ones")
     args = p.parse_args()
-    stats = Counter()
+    stats, slowest = Counter(), {}
     start = time.monotonic()
     try:
-        fuzz(args.examples, stats)
+        fuzz(args.examples, stats, derandomize=args.derandomize, slowest=slowest)
     finally:
+        for key, cpu in sorted(slowest.items()):
+            print(f"slowest {key}: {cpu:.2f} s of CPU (the bound: 3 s)")
         total = sum(stats.values())
         print(f"{total} scene files in {time.monotonic() - start:.0f} s; outcomes:")
         for key, n in stats.most_common(args.top):

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from input_cases import BASE, CASES, PARSE_CASES, bomb, nested, scene
-from input_fuzz import address_space_limit, contract_violation, fuzz, run_main
+from input_fuzz import Timeout, address_space_limit, contract_violation, fuzz, run_main
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "config"
@@ -128,6 +128,17 @@ def test_real_process_refuses_within_seconds_and_1_5_gib(tmp_path, name, data, a
     assert res.returncode == 2, res.stderr
     assert res.stderr.count("\n") == 1 and res.stderr.startswith("polymatch: error: "), res.stderr
     assert time.monotonic() - start < 30
+
+
+def test_harness_bound_is_not_reported_as_an_internal_error(tmp_path):
+    """The harness's CPU bound ends a long run as ``Timeout``, past the CLI's catch-all; a
+    loaded machine (wall time) does not end it."""
+    path = tmp_path / "scene.yaml"
+    path.write_bytes(scene("time: {t_end: 1e3}", "integrator: {method: rkmk4, dt: 1e-3}"))
+    start = time.process_time()
+    with pytest.raises(Timeout):
+        run_main(["simulate", str(path), "-q"], 0.5)
+    assert 0.5 <= time.process_time() - start < 5.0
 
 
 def test_mutated_scenes_keep_the_contract_property_based():
