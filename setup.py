@@ -10,7 +10,7 @@ package_name = "polymatch_ros"
 setup(
     name=package_name,
     version="0.1.0",
-    packages=find_packages(exclude=["test", "test.*"]),
+    packages=find_packages(include=["polymatch_ros", "polymatch_ros.*"]),
     package_data={package_name: ["ros/resources/*.xml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
@@ -31,9 +31,9 @@ setup(
     entry_points={
         "console_scripts": [
             "polymatch = polymatch_ros.cli:main",
-            "agent = polymatch_ros.ros.agent_node:main",
-            "monitor = polymatch_ros.ros.monitor_node:main",
-            "robot = polymatch_ros.ros.robot_sim:main",
+            "agent = polymatch_ros.ros.nodes.agent:main",
+            "monitor = polymatch_ros.ros.nodes.monitor:main",
+            "robot = polymatch_ros.ros.nodes.robot:main",
         ],
     },
 )

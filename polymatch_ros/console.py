@@ -1,15 +1,23 @@
 """What people read: progress lines, tables, command-line number types (no numerics here)."""
 
+from __future__ import annotations
+
 import argparse
 import math
 import os
 import sys
+from collections.abc import Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any, TextIO
 
 from .core.errors import ParameterError
 from .core.limits import MIN_RELATIVE_TOLERANCE, parse_size
 
+if TYPE_CHECKING:
+    from .core.metrics import EnsembleMetrics
+    from .core.scene import Scene
 
-def positive_float(text):
+
+def positive_float(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
@@ -19,13 +27,14 @@ def positive_float(text):
     return value
 
 
-def add_number_options(parser, table):
+def add_number_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+                       table: Iterable[tuple[str, Callable[[str], Any], Any, str]]) -> None:
     """One ``--flag`` a row of ``table``: (flag, type, default, help)."""
     for flag, kind, default, text in table:
         parser.add_argument(flag, type=kind, default=default, help=text)
 
 
-def tolerance_arg(text):
+def tolerance_arg(text: str) -> float:
     """A relative tolerance in [MIN_RELATIVE_TOLERANCE, 1), as the scene's integrator.tolerance."""
     value = positive_float(text)
     if not value < 1:
@@ -36,7 +45,7 @@ def tolerance_arg(text):
     return value
 
 
-def memory_size(text):
+def memory_size(text: str) -> int:
     """--memory-limit: 512M, 8G, 1.5GiB or bytes."""
     try:
         return parse_size(text)
@@ -44,7 +53,7 @@ def memory_size(text):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def writable_output(path, suffix):
+def writable_output(path: str | os.PathLike[str], suffix: str) -> str:
     """The file an output option will write (``suffix`` appended when missing), checked now.
 
     ``np.savez`` and matplotlib append their suffix to a bare name, so the path returned is
@@ -68,8 +77,8 @@ def writable_output(path, suffix):
     return out
 
 
-def format_table(rows, header):
-    widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(len(header))]
+def format_table(rows: Sequence[Sequence[Any]], header: Sequence[Any]) -> str:
+    widths = [max(len(str(r[i])) for r in [*rows, header]) for i in range(len(header))]
     line = "  ".join(h.ljust(w) for h, w in zip(header, widths))
     out = [line, "  ".join("-" * w for w in widths)]
     out += ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)) for r in rows]
@@ -79,7 +88,7 @@ def format_table(rows, header):
 class Progress:
     """One updating line on a terminal, a line every few seconds otherwise."""
 
-    def __init__(self, t_end, quiet=False, stream=sys.stderr):
+    def __init__(self, t_end: float, quiet: bool = False, stream: TextIO = sys.stderr) -> None:
         import time  # noqa: PLC0415
         self.t_end, self.quiet, self.stream = t_end, quiet, stream
         self.tty = stream.isatty()
@@ -87,7 +96,7 @@ class Progress:
         self.start = self._time()
         self.last = -1e9
 
-    def __call__(self, t, diameter, extra=""):
+    def __call__(self, t: float, diameter: float, extra: str = "") -> None:
         if self.quiet:
             return
         now = self._time()
@@ -105,12 +114,12 @@ class Progress:
         else:
             self.stream.write(text + "\n")
 
-    def done(self):
+    def done(self) -> None:
         if self.tty and not self.quiet:
             self.stream.write("\n")
 
 
-def summary_rows(scene, metrics):
+def summary_rows(scene: Scene, metrics: EnsembleMetrics) -> list[list[Any]]:
     rows = []
     for g, m in zip(scene.model.groups, metrics.groups):
         rows.append([g.name, g.size, f"{m.centroid_diameter:.3e}", f"{m.rotation_diameter:.3e}",

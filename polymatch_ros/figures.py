@@ -1,14 +1,30 @@
 """Paper-style snapshot figures (Figures 1-3) rendered to PNG; matplotlib is an optional extra."""
 
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, TypeVar
+
 import numpy as np
 
 from .core.errors import PolymatchError
 from .core.metrics import vertices
 
+if TYPE_CHECKING:
+    from .core.model import Group, State
+    from .core.scene import Scene
+    from .core.simulate import Trajectory
+    from .core.sweep.run import BatchResult
+
+#: where a figure goes: a file name, returned as it was given
+FigurePath = TypeVar("FigurePath", str, os.PathLike[str])
+
 COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf"]
 
 
-def _pyplot():
+def _pyplot() -> ModuleType:
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -19,26 +35,31 @@ def _pyplot():
     return plt
 
 
-def _placed_vertices(scene, state):
+def _placed_vertices(scene: Scene, state: State) -> list[tuple[Group, np.ndarray]]:
     """Per group: (group, (N, n_a, d) vertices xbar_i + s_i O_i r_a in absolute coordinates)."""
     model = scene.model
-    return [(g, vertices(gs.x + scene.origin, model.rotations.to_matrices(gs.rot), g.reference,
-                         g.scales))
-            for g, gs in zip(model.groups, state.groups)]
+    placed = []
+    for g, gs in zip(model.groups, state.groups):
+        assert gs is not None  # a stored state has every group
+        placed.append((g, vertices(gs.x + scene.origin, model.rotations.to_matrices(gs.rot),
+                                   g.reference, g.scales)))
+    return placed
 
 
-def polytope_segments(scene, state):
+def polytope_segments(scene: Scene, state: State) -> list[list[np.ndarray]]:
     """Per group: list of (2, d) edge segments in absolute coordinates."""
     return [[np.array([v[a], v[b]]) for v in verts for a, b in g.edges]
             for g, verts in _placed_vertices(scene, state)]
 
 
-def first_vertices(scene, state):
+def first_vertices(scene: Scene, state: State) -> list[np.ndarray]:
     """Per group: (N, d) positions of every polytope's vertex 0 (the vertex correspondence)."""
     return [verts[:, 0] for _, verts in _placed_vertices(scene, state)]
 
 
-def snapshot_figure(traj, path, times=None):
+def snapshot_figure(
+    traj: Trajectory, path: FigurePath, times: Sequence[float] | None = None
+) -> FigurePath:
     """Save a 1 x k row of snapshots (t = 0, 3, 6, 12 by default) of a trajectory to ``path``."""
     plt = _pyplot()
     scene = traj.scene
@@ -87,7 +108,9 @@ def snapshot_figure(traj, path, times=None):
     return path
 
 
-def sweep_figure(results, path, bins=8):
+def sweep_figure(
+    results: Sequence[tuple[dict[str, Any], Any, BatchResult]], path: FigurePath, bins: int = 8
+) -> FigurePath:
     """Matched fraction against the initial rotation diameter D0, one line per sweep cell."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.2, 3.6))

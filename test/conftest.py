@@ -1,7 +1,39 @@
-"""Shared fixtures: ``ros`` gives a test its own loopback-only ROS world (see ros_harness.py)."""
+"""The suite's layout, markers and shared fixtures.
+
+    test/core/        the numerical core against the paper's claims (no ROS process)
+    test/contract/    the input and wire contracts, fuzzed
+    test/code/        the code's own rules: lint, types, layering, sizes, docs
+    test/ros/         the ROS layer: nodes, the runner, multi-process runs   (marker ``ros``)
+    test/hosts/       several hosts in network namespaces                    (marker ``hosts``)
+    test/benchmarks/  every benchmark family runs (--quick)        (markers ``ros``, ``slow``)
+    test/support/     helpers and the scripts the tests start (not collected)
+
+Markers follow the folders, so ``pytest -m "not ros and not hosts" test`` runs the fast part.
+``ros`` gives a test its own loopback-only ROS world (support/ros_harness.py).
+"""
+
+import pathlib
+import sys
 
 import pytest
-from ros_harness import ros  # noqa: F401
+
+HERE = pathlib.Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE / "support"))
+sys.path.insert(0, str(HERE.parent))        # benchmarks/, beside the package
+
+from ros_harness import ros  # noqa: E402, F401
+
+collect_ignore = ["support"]
+
+FOLDER_MARKERS = {"ros": ("ros",), "hosts": ("hosts",), "benchmarks": ("ros", "slow")}
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test by its folder (``FOLDER_MARKERS``)."""
+    for item in items:
+        folder = pathlib.Path(item.fspath).resolve().relative_to(HERE).parts[0]
+        for name in FOLDER_MARKERS.get(folder, ()):
+            item.add_marker(getattr(pytest.mark, name))
 
 
 @pytest.hookimpl(wrapper=True, tryfirst=True)

@@ -56,7 +56,8 @@ class AdaptiveLie:
                       "DOP853 (scipy's tableau, step control, dense output) in Cayley/angle "
                       "coordinates, re-centred every step; centralised only")
 
-    def __init__(self, rtol: float, atol: float | None = None, max_steps: int = 10_000_000):
+    def __init__(self, rtol: float, atol: float | None = None,
+                 max_steps: int = 10_000_000) -> None:
         self.rtol = float(rtol)
         self.atol = float(rtol if atol is None else atol)
         self.max_steps = int(max_steps)
@@ -94,7 +95,7 @@ class AdaptiveLie:
             _CAPS[key] = self._bisect_caps(tests)
         return _CAPS[key]
 
-    def _bisect_caps(self, tests) -> tuple[float, str]:
+    def _bisect_caps(self, tests: list[tuple[str, np.ndarray, str]]) -> tuple[float, str]:
         best = (np.inf, "")
         for _, mat, cause in tests:
             lam = np.linalg.eigvals(np.atleast_2d(mat))
@@ -112,7 +113,8 @@ class AdaptiveLie:
                 best = (CAP_FRACTION * lo, cause)
         return best
 
-    def solver(self, system: System, state: State, t_end: float, samples: Sequence[float] = (),
+    def solver(self, system: System, state: State, t_end: float,
+               samples: Sequence[float] | np.ndarray = (),
                dt: float | None = None) -> "AdaptiveSolver":
         """A run from ``state`` to t_end (the latest of t_end and the samples); dt is unused."""
         return AdaptiveSolver(self, system, state, t_end, samples)
@@ -122,7 +124,7 @@ class AdaptiveSolver:
     """One adaptive run: ``step()`` takes one accepted step and returns the sample states in it."""
 
     def __init__(self, method: AdaptiveLie, system: System, state: State, t_end: float,
-                 samples: Sequence[float] = ()):
+                 samples: Sequence[float] | np.ndarray = ()) -> None:
         self.method, self.system, self.state = method, system, state
         times = np.union1d(np.asarray(samples, dtype=float), [float(t_end)])
         #: output times still ahead, sorted; ``self.next_sample`` indexes the first one
@@ -259,6 +261,7 @@ class AdaptiveSolver:
                     for t, val in zip(times, vals)]
         gi, _, shape, _ = chart.parts[0]           # one group, rotations only: no chart states
         gs, grp, groups = y.groups[gi], system.group, list(y.groups)
+        assert gs is not None, "the chart's group has rows"
         dts = [t - y.t for t in times]
         all_to_all = isinstance(system.flows[gi], CentroidFlow)
         cents = self._first_order_centroids(gi, gs, dts) if system.model.order == 1 and \

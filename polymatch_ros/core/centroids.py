@@ -6,7 +6,15 @@ potential their equations are linear and ``CentroidFlow`` solves them exactly
 Laplacian); across groups (F-2) ``pair_force`` is the force of V = kappa_2/2 (|x - y| - L)^2.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from .graph import Graph
 
 
 class CentroidFlow:
@@ -19,9 +27,9 @@ class CentroidFlow:
     critical damping, and for gamma = 0.
     """
 
-    def __init__(self, mass: float, gamma: float, kappa: float):
+    def __init__(self, mass: float, gamma: float, kappa: float) -> None:
         self.mass, self.gamma, self.kappa = float(mass), float(gamma), float(kappa)
-        self._cache = {}
+        self._cache: dict[float, tuple] = {}
 
     @staticmethod
     def _roots(m: float, gamma: float, k: float) -> tuple[complex, complex]:
@@ -72,6 +80,7 @@ class CentroidFlow:
         dx = x - mean_x
         if self.mass == 0.0:
             return mean_x + pk * dx, None
+        assert v is not None and mean_v is not None, "the second-order model has velocities"
         dv = v - mean_v
         mx = p0[0, 0] * mean_x + p0[0, 1] * mean_v
         mv = p0[1, 0] * mean_x + p0[1, 1] * mean_v
@@ -113,11 +122,12 @@ class GraphCentroidFlow:
     its momentum).  O(N^3) once, O(N^2 d) per step; ``rows`` are the rows it returns.
     """
 
-    def __init__(self, mass: float, gamma: float, kappa: float, graph, rows=None):
+    def __init__(self, mass: float, gamma: float, kappa: float, graph: Graph,
+                 rows: Sequence[int] | np.ndarray | None = None) -> None:
         self.mass, self.gamma, self.kappa = float(mass), float(gamma), float(kappa)
         self.graph = graph
         self.rows = None if rows is None else np.asarray(rows, dtype=int)
-        self._cache = {}
+        self._cache: dict[float, tuple] = {}
 
     def propagator(self, h: float) -> tuple:
         """Per-mode coefficients over h: (decay,) first order, (xx, xv, vx, vv) second."""

@@ -6,6 +6,8 @@ before anything is allocated from it.
 """
 
 import math
+from collections.abc import Collection
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +18,7 @@ _YAML_TYPES = {bool: "true/false", int: "a number", float: "a number", str: "tex
                list: "a list", dict: "a mapping", type(None): "null"}
 
 
-def describe(value):
+def describe(value: object) -> str:
     """How a YAML value reads to the person who wrote it: 'the text "2"', 'a list', ..."""
     if isinstance(value, str):
         shown = value if len(value) <= 40 else value[:37] + "..."
@@ -28,7 +30,7 @@ def describe(value):
     return _YAML_TYPES.get(type(value), type(value).__name__)
 
 
-def _short_number(value):
+def _short_number(value: float) -> str:
     if isinstance(value, int) and abs(value) > 10**15:
         if abs(value) < 10**308:
             return f"{float(value):.3g}"
@@ -39,7 +41,7 @@ def _short_number(value):
 class Map:
     """A mapping with a key path, that refuses unknown keys and null values."""
 
-    def __init__(self, data, path, allowed):
+    def __init__(self, data: object, path: str, allowed: Collection[str]) -> None:
         if not isinstance(data, dict):
             raise SceneError(f"{path or 'scene'}: expected a mapping of keys, "
                              f"got {describe(data)}")
@@ -52,23 +54,23 @@ class Map:
                                  f"the default")
         self.data, self.path = data, path
 
-    def has(self, key):
+    def has(self, key: str) -> bool:
         return key in self.data
 
-    def raw(self, key, default=None):
+    def raw(self, key: str, default: Any = None) -> Any:
         return self.data.get(key, default)
 
-    def at(self, key):
+    def at(self, key: str | int) -> str:
         return join(self.path, key)
 
-    def number(self, key, default=None, **checks):
+    def number(self, key: str, default: float | None = None, **checks: Any) -> Any:
         if not self.has(key):
             if default is None:
                 raise SceneError(f"{self.at(key)}: required")
             return default
         return number(self.data[key], self.at(key), **checks)
 
-    def text(self, key, default):
+    def text(self, key: str, default: str) -> str:
         if not self.has(key):
             return default
         value = self.data[key]
@@ -76,21 +78,23 @@ class Map:
             raise SceneError(f"{self.at(key)}: expected text, got {describe(value)}")
         return value
 
-    def flag(self, key, default):
+    def flag(self, key: str, default: bool) -> bool:
         value = self.data.get(key, default)
         if not isinstance(value, bool):
             raise SceneError(f"{self.at(key)}: expected true or false, got {describe(value)}")
         return value
 
 
-def join(path, key):
+def join(path: str, key: object) -> str:
     if isinstance(key, int) and not isinstance(key, bool):
         return f"{path}[{key}]"
     return f"{path}.{key}" if path else str(key)
 
 
-def number(value, path, *, minimum=None, maximum=None, positive=False, integer=False):
-    """A YAML number within bounds; integral floats (``1e3``) pass as integers."""
+def number(value: object, path: str, *, minimum: float | None = None,
+           maximum: float | None = None, positive: bool = False, integer: bool = False) -> Any:
+    """A YAML number within bounds; integral floats (``1e3``) pass as integers (an ``int``
+    whenever ``integer`` is set, else an ``int`` or a ``float``)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, _NUMBERS):
         raise SceneError(f"{path}: expected a number, got {describe(value)}")
     value = value.item() if isinstance(value, np.generic) else value
@@ -111,7 +115,7 @@ def number(value, path, *, minimum=None, maximum=None, positive=False, integer=F
     return value
 
 
-def _numeric_array(value, path, want):
+def _numeric_array(value: object, path: str, want: str) -> np.ndarray:
     """A float array from nested lists of YAML numbers only (no text, no booleans, no ragged)."""
     if isinstance(value, np.ndarray):
         value = value.tolist()
@@ -129,7 +133,8 @@ def _numeric_array(value, path, want):
         raise SceneError(f"{path}: expected {want}") from None
 
 
-def vector(value, path, dim=None, *, bound=None):
+def vector(value: object, path: str, dim: int | None = None, *,
+           bound: float | None = None) -> np.ndarray:
     want = f"{dim} numbers" if dim else "a list of numbers"
     if not isinstance(value, (list, tuple, np.ndarray)):
         raise SceneError(f"{path}: expected {want}, got {describe(value)}")
@@ -139,7 +144,8 @@ def vector(value, path, dim=None, *, bound=None):
     return finite(v, path, bound)
 
 
-def matrix_rows(value, path, rows, cols, *, bound=None):
+def matrix_rows(value: object, path: str, rows: int, cols: int, *,
+                bound: float | None = None) -> np.ndarray:
     want = f"{rows} rows of {cols} numbers"
     if not isinstance(value, (list, tuple, np.ndarray)):
         raise SceneError(f"{path}: expected {want}, got {describe(value)}")
@@ -149,7 +155,7 @@ def matrix_rows(value, path, rows, cols, *, bound=None):
     return finite(m, path, bound)
 
 
-def finite(a, path, bound=None):
+def finite(a: np.ndarray, path: str, bound: float | None = None) -> np.ndarray:
     """Refuse NaN/inf and, with ``bound``, magnitudes beyond it (naming the first entry)."""
     bad = ~np.isfinite(a) if bound is None else ~(np.abs(a) <= bound)
     if np.any(bad):
@@ -161,7 +167,7 @@ def finite(a, path, bound=None):
     return a
 
 
-def _shape_text(a):
+def _shape_text(a: np.ndarray) -> str:
     if a.ndim == 0:
         return "a single number"
     if a.ndim == 1:

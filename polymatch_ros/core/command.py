@@ -26,12 +26,15 @@ No ROS here: the bridge agent and the tests call the same functions.
 """
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from .errors import ParameterError
-from .model import GroupState, State, System
+from .model import Coupling, GroupState, Model, State, System
+from .so.base import Array
 
 FRAMES = ("world", "body")
 #: m/s and rad/s: a braking robot slower than this, in both parts, is at rest
@@ -48,14 +51,14 @@ class Twist:
     saturated: bool = False
 
     @property
-    def finite(self):
+    def finite(self) -> bool:
         return bool(np.all(np.isfinite(self.linear)) and np.all(np.isfinite(self.angular)))
 
 
 ZERO = Twist(np.zeros(3), np.zeros(3))
 
 
-def bridge_model(model):
+def bridge_model(model: Model) -> Model:
     """The model a bridged agent evaluates: centroids by their force (no closed-form flow: a
     robot's centroid is measured, never advanced); refuses what a robot cannot carry out (d >= 4;
     second order without damping)."""
@@ -71,7 +74,8 @@ def bridge_model(model):
     return replace(model, centroids="integrated")
 
 
-def model_rates(system, gi, x, rot, coupling):
+def model_rates(system: System, gi: int, x: np.ndarray, rot: Array,
+                coupling: Coupling) -> tuple[np.ndarray, np.ndarray]:
     """(xbar_i' (n, d), W_i (n, d, d) skew) of the rows ``x``, ``rot`` of group gi (A-2)."""
     model = system.model
     velocity = system.centroid_force(gi, x, coupling) / model.gamma
@@ -79,7 +83,7 @@ def model_rates(system, gi, x, rot, coupling):
     return velocity, system.group.algebra_to_skew(rate)
 
 
-def axial(skew):
+def axial(skew: Any) -> np.ndarray:
     """The axial vector omega of a 2x2 or 3x3 skew matrix (W v = omega x v), 3 components."""
     skew = np.asarray(skew, dtype=float)
     if skew.shape == (2, 2):
@@ -87,7 +91,7 @@ def axial(skew):
     return np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
 
 
-def saturate(vec, limit):
+def saturate(vec: np.ndarray, limit: float) -> tuple[np.ndarray, bool]:
     """``vec`` scaled down to norm ``limit`` (direction kept); (vector, cut?)."""
     norm = float(np.linalg.norm(vec))
     if norm <= limit or norm == 0.0:
@@ -95,7 +99,7 @@ def saturate(vec, limit):
     return vec * (limit / norm), True
 
 
-def rotation3(rot):
+def rotation3(rot: Any) -> np.ndarray:
     """A 2x2 or 3x3 rotation as a 3x3 matrix (2-D: about z)."""
     rot = np.asarray(rot, dtype=float)
     if rot.shape == (3, 3):
@@ -105,7 +109,8 @@ def rotation3(rot):
     return out
 
 
-def twist_command(velocity, skew, rot, frame="world", max_linear=math.inf, max_angular=math.inf):
+def twist_command(velocity: np.ndarray, skew: np.ndarray, rot: np.ndarray, frame: str = "world",
+                  max_linear: float = math.inf, max_angular: float = math.inf) -> Twist:
     """The twist of one agent from its model rates (``velocity`` (d,), ``skew`` W_i (d, d)) at
     orientation ``rot`` (d, d); ``frame``: world or body (components in the robot's frame)."""
     if frame not in FRAMES:
@@ -121,7 +126,8 @@ def twist_command(velocity, skew, rot, frame="world", max_linear=math.inf, max_a
     return Twist(linear, angular, cut_linear or cut_angular)
 
 
-def _own_rows(system, gi, row, ensemble):
+def _own_rows(system: System, gi: int, row: int,
+              ensemble: Sequence[Any]) -> tuple[Coupling, np.ndarray, Array]:
     """(coupling, x (1, d), rotation (one row)) of local row ``row`` of group gi in
     ``ensemble``."""
     coupling = system.couple(ensemble, first_stage=True)
@@ -130,8 +136,9 @@ def _own_rows(system, gi, row, ensemble):
     return coupling, ensemble[gi].x[[k]], system.group.take(ensemble[gi].rot, [k])
 
 
-def command_from_ensemble(system, gi, row, ensemble, rot, frame="world", max_linear=math.inf,
-                          max_angular=math.inf):
+def command_from_ensemble(system: System, gi: int, row: int, ensemble: Sequence[Any],
+                          rot: np.ndarray, frame: str = "world", max_linear: float = math.inf,
+                          max_angular: float = math.inf) -> Twist:
     """The twist of local row ``row`` of group gi against ``ensemble`` (group arrays: every heard
     agent, this one included), ``rot`` its (d, d) orientation."""
     coupling, x, own_rot = _own_rows(system, gi, row, ensemble)
@@ -139,17 +146,21 @@ def command_from_ensemble(system, gi, row, ensemble, rot, frame="world", max_lin
     return twist_command(velocity[0], skew[0], rot, frame, max_linear, max_angular)
 
 
-def model_accelerations(system, gi, x, rot, v, w, coupling):
+def model_accelerations(system: System, gi: int, x: np.ndarray, rot: Array, v: np.ndarray,
+                        w: Array, coupling: Coupling) -> tuple[np.ndarray, np.ndarray]:
     """(xbar_i'' (n, d), W_i' (n, d, d) skew) of rows of group gi under (A-1), at velocities
     ``v`` (n, d) and ``w`` (the group's algebra rows of W_i): the core's ``System.rates``."""
-    groups = [None] * len(system.model.groups)
+    groups: list[GroupState | None] = [None] * len(system.model.groups)
     groups[gi] = GroupState(x, rot, v, w)
-    _, _, accel, w_dot = system.rates(State(0.0, tuple(groups)), coupling)[gi]
+    rates = system.rates(State(0.0, tuple(groups)), coupling)[gi]
+    assert rates is not None, "the group has rows"
+    _, _, accel, w_dot = rates
     return accel, system.group.algebra_to_skew(w_dot)
 
 
-def accel_command(system, gi, row, ensemble, rot, v, w, frame="world", max_linear=math.inf,
-                  max_angular=math.inf):
+def accel_command(system: System, gi: int, row: int, ensemble: Sequence[Any], rot: np.ndarray,
+                  v: Any, w: Array, frame: str = "world", max_linear: float = math.inf,
+                  max_angular: float = math.inf) -> Twist:
     """The acceleration command (A-1) of local row ``row`` of group gi against ``ensemble``:
     ``rot`` its (d, d) orientation, ``v`` (d,) and ``w`` (one algebra row) its measured centroid
     and spatial angular velocity; limits in m/s^2 and rad/s^2."""
@@ -158,8 +169,8 @@ def accel_command(system, gi, row, ensemble, rot, v, w, frame="world", max_linea
     return twist_command(accel[0], w_dot[0], rot, frame, max_linear, max_angular)
 
 
-def brake_command(model, v, skew, rot, frame="world", max_linear=math.inf,
-                  max_angular=math.inf):
+def brake_command(model: Model, v: Any, skew: Any, rot: np.ndarray, frame: str = "world",
+                  max_linear: float = math.inf, max_angular: float = math.inf) -> Twist:
     """The damped stop of a second-order robot: (A-1) with the coupling off, xbar'' =
     -(gamma/m) v and W' = -(gamma/m) W (``skew``); the speed decays as in the model."""
     rate = model.gamma / model.mass
@@ -167,17 +178,18 @@ def brake_command(model, v, skew, rot, frame="world", max_linear=math.inf,
                          max_linear, max_angular)
 
 
-def is_still(v, skew):
+def is_still(v: Any, skew: Any) -> bool:
     """True when both the speed and the angular speed are below ``STILL``."""
     return float(np.linalg.norm(v)) < STILL and float(np.linalg.norm(axial(skew))) < STILL
 
 
-def bridge_system(model, rows):
+def bridge_system(model: Model, rows: Sequence[Any]) -> System:
     """``System`` of the bridged rows ``rows`` (per group) of ``model``."""
     return System(bridge_model(model), rows)
 
 
-def noise_floor(position_noise, angle_noise, radius, dim, factor=6.0):
+def noise_floor(position_noise: float, angle_noise: float, radius: float, dim: int,
+                factor: float = 6.0) -> float:
     """The matching diameter that measurement noise alone produces, with margin ``factor``.
 
     Two agents' measured vertices differ by the two position errors (sigma_p per coordinate)

@@ -17,6 +17,7 @@ the rotation is still unique: det O = +1 fixes the normal direction.
 """
 
 import warnings
+from typing import Any
 
 import numpy as np
 
@@ -67,7 +68,7 @@ def _rotation_from_reference_svd(q, ref_u, ref_s, ref_vt, rank):
     then as accurate as the data allow.
     """
     d = ref_vt.shape[0]
-    images = []
+    images: list[np.ndarray] = []
     for j in range(min(rank, d - 1)):
         c = q.T @ ref_u[:, j] / ref_s[j]
         for img in images:
@@ -101,7 +102,9 @@ def _checked_vertex_sets(vertex_sets, n, d, label, offset):
     return sets
 
 
-def decompose(vertex_sets, reference, *, similar=False, tol=1e-9, label="polytope", offset=0):
+def decompose(vertex_sets: Any, reference: Any, *, similar: bool = False, tol: float = 1e-9,
+              label: str = "polytope",
+              offset: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centroids (N, d), rotations (N, d, d) and scales (N,) of congruent or similar vertex sets.
 
     Parameters

@@ -33,7 +33,7 @@ class StabilityError(PolymatchError):
     exit_code = 2
 
     def __init__(self, message: str, *, method: str | None = None, dt: float | None = None,
-                 limit: float | None = None, cause: str | None = None):
+                 limit: float | None = None, cause: str | None = None) -> None:
         super().__init__(message)
         self.method, self.dt, self.limit, self.cause = method, dt, limit, cause
 

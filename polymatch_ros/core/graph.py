@@ -24,9 +24,10 @@ report each component's diameter).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -169,7 +170,8 @@ class Graph:
             cache[key] = float(rate)
         return cache[key]
 
-    def local_weights(self, rows=None, scales: np.ndarray | None = None) -> LocalWeights:
+    def local_weights(self, rows: Sequence[int] | np.ndarray | None = None,
+                      scales: np.ndarray | None = None) -> LocalWeights:
         """The coupling weights of some rows (None: all), for sums against the whole group."""
         from scipy import sparse
 
@@ -206,7 +208,7 @@ class Graph:
         return lam, vec, vec.T * b[None, :]
 
 
-def build_graph(spec, path: str, size: int, centroids: np.ndarray | None = None) -> Graph:
+def build_graph(spec: Any, path: str, size: int, centroids: np.ndarray | None = None) -> Graph:
     """A validated ``Graph`` of ``size`` agents from a scene's ``graph`` value at ``path``."""
     if spec is None or spec == "complete":
         return Graph("complete", size)
@@ -246,7 +248,7 @@ def _options(m: Map) -> dict:
     return {"normalise": normalise, "allow_disconnected": allow}
 
 
-def group_graphs(scene_spec, group_specs: list, sizes: list[int],
+def group_graphs(scene_spec: object, group_specs: list, sizes: list[int],
                  centroids: list[np.ndarray]) -> list[Graph | None]:
     """Each group's validated graph: its own ``graph`` key or the scene's; None = complete.
 
@@ -274,7 +276,7 @@ def _ring(k: int, size: int) -> np.ndarray:
     return a
 
 
-def _k_nearest(k: int, size: int, centroids, path: str) -> np.ndarray:
+def _k_nearest(k: int, size: int, centroids: np.ndarray | None, path: str) -> np.ndarray:
     from scipy.spatial import cKDTree
 
     if centroids is None:
@@ -288,7 +290,7 @@ def _k_nearest(k: int, size: int, centroids, path: str) -> np.ndarray:
     return np.maximum(a, a.T)                    # the undirected union
 
 
-def _random(raw, path: str, size: int) -> np.ndarray:
+def _random(raw: object, path: str, size: int) -> np.ndarray:
     m = Map(raw, path, ("p", "seed"))
     p = m.number("p", minimum=0.0)
     if p > 1.0:
@@ -344,7 +346,7 @@ def check_connected(graph: Graph, path: str) -> None:
         return
     from scipy.sparse import csgraph
 
-    flow = graph.weights.T.tocsr()                   # k -> i when i hears k
+    flow = graph.matrix().T.tocsr()                   # k -> i when i hears k
     if not graph.directed:
         count, labels = csgraph.connected_components(flow, directed=False)
         if count > 1:
@@ -362,7 +364,7 @@ def check_connected(graph: Graph, path: str) -> None:
                          f"(independent sources: {groups})")
 
 
-def _members(labels: np.ndarray, component: int) -> str:
+def _members(labels: np.ndarray, component: int | np.integer) -> str:
     members = np.flatnonzero(labels == component)
     shown = ", ".join(map(str, members[:8])) + (", ..." if len(members) > 8 else "")
     return "{" + shown + "}"

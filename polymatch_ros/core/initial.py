@@ -5,14 +5,20 @@ of a base rotation, or given (angles, rotation vectors, matrices); scales for si
 ensembles (F-1); centroid and angular velocities for the second-order model (A-1).
 """
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from .checks import Map, describe, matrix_rows, number, vector
 from .errors import SceneError
 from .limits import MAX_LENGTH, MIN_SIZE
 
+if TYPE_CHECKING:
+    from .so import RotationGroup
 
-def centroids(raw, path, dim, count, rng):
+
+def centroids(raw: object, path: str, dim: int, count: int,
+              rng: np.random.Generator) -> np.ndarray:
     if isinstance(raw, dict) and len(raw) == 1:
         (kind, val), = raw.items()
         p = f"{path}.{kind}"
@@ -36,7 +42,7 @@ def centroids(raw, path, dim, count, rng):
                      f"{{at: [...]}}, got {describe(raw)}")
 
 
-def base_rotation(raw, path, dim):
+def base_rotation(raw: object, path: str, dim: int) -> np.ndarray:
     if raw is None or (isinstance(raw, str) and raw == "identity"):
         return np.eye(dim)
     if isinstance(raw, dict) and len(raw) == 1:
@@ -58,7 +64,7 @@ def base_rotation(raw, path, dim):
                      f"{{matrix: [[...]]}}, got {describe(raw)}")
 
 
-def check_rotation(m, path):
+def check_rotation(m: np.ndarray, path: str) -> np.ndarray:
     err = np.abs(m.T @ m - np.eye(len(m))).max()
     if err > 1e-9:
         raise SceneError(f"{path}: not orthogonal (|O^T O - I| = {err:.3g})")
@@ -67,7 +73,8 @@ def check_rotation(m, path):
     return m
 
 
-def random_rotation_within(dim, count, angle, rng):
+def random_rotation_within(dim: int, count: int, angle: float,
+                           rng: np.random.Generator) -> np.ndarray:
     """Rotations exp(theta A), A a random unit-spectral-norm skew matrix, theta ~ U[0, angle]."""
     from scipy.linalg import expm
     out = np.empty((count, dim, dim))
@@ -84,7 +91,8 @@ def random_rotation_within(dim, count, angle, rng):
     return out
 
 
-def rotations(raw, path, dim, count, rng):
+def rotations(raw: object, path: str, dim: int, count: int,
+              rng: np.random.Generator) -> np.ndarray:
     if isinstance(raw, str) and raw == "uniform":
         if dim == 2:
             a = rng.uniform(-np.pi, np.pi, count)
@@ -128,7 +136,7 @@ def rotations(raw, path, dim, count, rng):
                      f"got {describe(raw)}")
 
 
-def scales(raw, path, count, rng):
+def scales(raw: object, path: str, count: int, rng: np.random.Generator) -> np.ndarray:
     """Scales s_i of a similar ensemble (F-1), each within [MIN_SIZE, 1 / MIN_SIZE]."""
     usage = "expected a list, {uniform: [lo, hi]} or {log_uniform: [lo, hi]}"
     lo_hi = (MIN_SIZE, 1.0 / MIN_SIZE)
@@ -154,7 +162,8 @@ def scales(raw, path, count, rng):
     return np.exp(rng.uniform(np.log(b[0]), np.log(b[1]), count))
 
 
-def velocities(raw, path, dim, count, rng):
+def velocities(raw: object, path: str, dim: int, count: int,
+               rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     vm = Map(raw, path, ("centroid", "angular"))
     v = random_vectors(vm.raw("centroid", "zero"), vm.at("centroid"), (count, dim), rng)
     k = dim * (dim - 1) // 2
@@ -162,7 +171,8 @@ def velocities(raw, path, dim, count, rng):
     return v, skew_from_components(comps, dim)
 
 
-def random_vectors(raw, path, shape, rng):
+def random_vectors(raw: object, path: str, shape: tuple[int, int],
+                   rng: np.random.Generator) -> np.ndarray:
     if (isinstance(raw, str) and raw == "zero") or (type(raw) in (int, float) and raw == 0):
         return np.zeros(shape)
     if isinstance(raw, dict) and len(raw) == 1:
@@ -176,7 +186,8 @@ def random_vectors(raw, path, shape, rng):
                      f"got {describe(raw)}")
 
 
-def explicit_vectors(values, path, key, dim, order):
+def explicit_vectors(values: list[Any], path: str, key: str, dim: int,
+                     order: int) -> np.ndarray | None:
     if all(v is None for v in values):
         return None
     return np.array([np.zeros(dim) if v is None else
@@ -184,7 +195,8 @@ def explicit_vectors(values, path, key, dim, order):
                      for i, v in enumerate(values)])
 
 
-def explicit_omegas(values, path, dim, order, rotations):
+def explicit_omegas(values: list[Any], path: str, dim: int, order: int,
+                    rotations: "RotationGroup") -> Any:
     if all(v is None for v in values):
         return None
     k = dim * (dim - 1) // 2
@@ -195,7 +207,7 @@ def explicit_omegas(values, path, dim, order, rotations):
     return rotations.algebra_from_skew(w)
 
 
-def skew_from_components(comps, dim):
+def skew_from_components(comps: Any, dim: int) -> np.ndarray:
     """(N, d(d-1)/2) components -> (N, d, d) skew matrices.
 
     For d = 3 the components are the angular-velocity vector (w_x, w_y, w_z);

@@ -7,6 +7,7 @@ the key, the estimate and the limit.  README.md, "Scene files", says why each va
 
 import math
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from .errors import ParameterError, SceneError
@@ -37,7 +38,7 @@ class Limits:
 DEFAULT_LIMITS = Limits()
 
 
-def format_bytes(n):
+def format_bytes(n: float) -> str:
     """1.5 GiB, 300 MiB, 12 KiB."""
     if not n < 2**40 * 1e6:
         return f"{float(n):.3g} bytes" if n < 1e300 else "more than 1e300 bytes"
@@ -47,7 +48,7 @@ def format_bytes(n):
     return f"{int(n)} bytes"
 
 
-def count_text(n):
+def count_text(n: float) -> str:
     """An integer as people read it: 1000000, 1.2e+15, more than 1e300."""
     return str(n) if n < 10**12 else f"{float(n):.3g}" if n < 10**300 else "more than 1e300"
 
@@ -55,7 +56,7 @@ def count_text(n):
 _SIZE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*([kKmMgGtT]?)(?:i?[bB])?\s*$")
 
 
-def parse_size(text):
+def parse_size(text: object) -> int:
     """'512M', '8G', '1.5GiB', '1000000' -> bytes (binary units); ParameterError otherwise."""
     match = _SIZE.match(str(text))
     if not match:
@@ -69,12 +70,12 @@ def parse_size(text):
 class Budget:
     """A running estimate of a scene's memory, charged before each allocation."""
 
-    def __init__(self, limits=None):
+    def __init__(self, limits: Limits | None = None) -> None:
         self.limits = limits or DEFAULT_LIMITS
         self.total = 0.0
-        self.items = []
+        self.items: list[tuple[str, float, str]] = []
 
-    def charge(self, path, nbytes, what):
+    def charge(self, path: str, nbytes: float, what: str) -> None:
         """Add ``nbytes`` (``what``, at key ``path``); refuse once the total exceeds the limit."""
         self.total += float(nbytes)
         self.items.append((path, nbytes, what))
@@ -84,7 +85,8 @@ class Budget:
                              f"{format_bytes(self.limits.memory)}; raise it with --memory-limit "
                              f"if the machine has the memory")
 
-    def charge_agents(self, path, count, vertices, dim, order):
+    def charge_agents(self, path: str, count: int, vertices: int, dim: int,
+                      order: int) -> None:
         """Centroids, rotations (and velocities) with working copies, plus one vertex pass."""
         per_agent = (dim + dim * dim) * (2 if order == 2 else 1) * WORKING_COPIES
         per_agent += 3 * vertices * dim                       # vertex positions in the metrics
@@ -92,7 +94,7 @@ class Budget:
                     f"{count_text(count)} agents x {vertices} vertices in R^{dim}")
 
 
-def shape_vertex_count(family, k):
+def shape_vertex_count(family: str, k: float) -> tuple[int, int]:
     """Vertices and edges of a shape family's member, without building it."""
     k = int(k)
     if family == "polygon":
@@ -104,7 +106,7 @@ def shape_vertex_count(family, k):
     return 2 * k, 2 * k * (k - 1)                             # cross_polytope
 
 
-def check_rates(model_path, rates):
+def check_rates(model_path: str, rates: Iterable[tuple[str, float]]) -> None:
     """Refuse rates (1/s) beyond MAX_RATE: the linearisation and its step limits overflow."""
     for name, value in rates:
         if not value <= MAX_RATE:

@@ -196,15 +196,17 @@ def component_diameters(model: Model, gi: int, gs: GroupState) -> tuple[float, .
 
 def ensemble_metrics(model: Model, state: State) -> EnsembleMetrics:
     """Per-group metrics and the headline diameter (max matching diameter over groups)."""
-    groups = tuple(group_metrics(model, gi, gs) for gi, gs in enumerate(state.groups))
+    whole = state.all_groups()
+    groups = tuple(group_metrics(model, gi, gs) for gi, gs in enumerate(whole))
     separation = None
     if model.inter_group:
-        means = [gs.x.mean(axis=0) for gs in state.groups]
+        means = [gs.x.mean(axis=0) for gs in whole]
         separation = min(float(np.linalg.norm(a - b))
                          for i, a in enumerate(means) for b in means[i + 1:])
-    parts = tuple(component_diameters(model, gi, gs) for gi, gs in enumerate(state.groups))
-    parts = None if all(p is None for p in parts) else parts
-    return EnsembleMetrics(groups, max(m.matching_diameter for m in groups), separation, parts)
+    parts = tuple(component_diameters(model, gi, gs) for gi, gs in enumerate(whole))
+    components = None if all(p is None for p in parts) else parts
+    return EnsembleMetrics(groups, max(m.matching_diameter for m in groups), separation,
+                           components)
 
 
 def stationarity(system: System, state: State) -> float:
@@ -215,7 +217,7 @@ def stationarity(system: System, state: State) -> float:
     coupling = system.couple(state.groups)
     grp = system.group
     worst = 0.0
-    for gi, gs in enumerate(state.groups):
+    for gi, gs in enumerate(state.all_groups()):
         rate = system.rotation_rate(gi, gs.rot, coupling)
         if system.model.order == 2 and system.model.gamma > 0:
             rate = rate / system.model.gamma

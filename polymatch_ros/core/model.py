@@ -32,9 +32,9 @@ simulator passes its own arrays; a ROS agent passes the arrays it assembled
 from its peers' messages.  Both then run the same code.
 """
 
-from collections.abc import Generator, Sequence
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -129,6 +129,13 @@ class State:
     groups: tuple[GroupState | None, ...]
     coupling: "Coupling | None" = field(default=None, repr=False)
 
+    def all_groups(self) -> tuple[GroupState, ...]:
+        """``groups`` of a whole ensemble, where every group has its rows (centralised runs)."""
+        present = tuple(gs for gs in self.groups if gs is not None)
+        if len(present) != len(self.groups):
+            raise ValueError("the state lacks the rows of a group")
+        return present
+
 
 @dataclass(slots=True)
 class Request:
@@ -188,7 +195,7 @@ class System:
     ``None`` means all rows (the centralised simulator).
     """
 
-    def __init__(self, model: Model, rows: Sequence | None = None):
+    def __init__(self, model: Model, rows: Sequence | None = None) -> None:
         self.model = model
         self.group = model.rotations
         self.rows = tuple(None for _ in model.groups) if rows is None else tuple(rows)
@@ -201,7 +208,7 @@ class System:
             for g, r in zip(model.groups, self.rows))
         # the torque's gain: kappa (A-1) or kappa/gamma (A-2, where W_i itself is the torque)
         self._torque_gain = model.kappa if model.order == 2 else model.kappa / model.gamma
-        self._inv_scales = []
+        self._inv_scales: list[np.ndarray | None] = []
         for g, r in zip(model.groups, self.rows):
             if g.scales is None:
                 self._inv_scales.append(None)
@@ -257,7 +264,7 @@ class System:
         m = self.model
         grp = self.group
         need_means = first_stage or not m.centroids_exact
-        out = []
+        out: list[GroupCoupling | None] = []
         for gi, (g, e) in enumerate(zip(m.groups, ensemble)):
             if e is None or e.rot is None:
                 out.append(None)
@@ -275,9 +282,10 @@ class System:
         centroids = tuple(None if e is None else e.x for e in ensemble) if m.inter_group else None
         return Coupling(tuple(out), centroids)
 
-    def _couple_graph(self, gi: int, e, need_means: bool) -> GroupCoupling:
+    def _couple_graph(self, gi: int, e: Any, need_means: bool) -> GroupCoupling:
         """Per-row fields S_i = sum_k a_ik s_k O_k (one sparse product) and centroid sums."""
         w = self.graph_weights[gi]
+        assert w is not None, "a graph group has weights"
         idx = getattr(e, "index", None)
         p, rot = (w.p, w.rot) if idx is None else (w.p[:, idx], w.rot[:, idx])
         out = GroupCoupling(self.group.neighbour_fields(e.rot, rot), self.model.groups[gi].size)
@@ -294,7 +302,9 @@ class System:
 
         Both are ``lohe_torque`` with the model's gain (kappa/gamma or kappa).
         """
-        return lohe_torque(self.group, rot, coupling.groups[gi], self._torque_gain,
+        c = coupling.groups[gi]
+        assert c is not None, f"no coupling for group {gi}"
+        return lohe_torque(self.group, rot, c, self._torque_gain,
                            self._inv_scales[gi])
 
     def centroid_force(self, gi: int, x: np.ndarray, coupling: Coupling) -> np.ndarray:
@@ -304,12 +314,16 @@ class System:
         """
         m = self.model
         c = coupling.groups[gi]
+        assert c is not None, f"no coupling for group {gi}"
         if c.neighbour_x is not None:
-            rows = self.graph_weights[gi].row_sums[:, None]
-            force = (m.kappa / c.n) * (c.neighbour_x - rows * x)
+            w = self.graph_weights[gi]
+            assert w is not None, "a graph group has weights"
+            force = (m.kappa / c.n) * (c.neighbour_x - w.row_sums[:, None] * x)
         else:
+            assert c.mean_x is not None, "the coupling carries the centroid mean"
             force = m.kappa * (c.mean_x - x)
         if m.inter_group:
+            assert coupling.centroids is not None, "F-2 couples every group's centroids"
             for hi, y in enumerate(coupling.centroids):
                 if hi != gi and y is not None:
                     force += pair_force(x, y, m.kappa_2, m.L)
@@ -319,15 +333,20 @@ class System:
                         h: float) -> tuple[np.ndarray, np.ndarray | None]:
         """(x, v) of group gi after h on the exact flow of Proposition 2.1 (or its graph form)."""
         c = coupling.groups[gi]
+        assert c is not None, f"no coupling for group {gi}"
+        flow = self.flows[gi]
         if c.group_x is not None:
-            return self.flows[gi].advance_group(c.group_x, c.group_v, h, c.index)
-        return self.flows[gi].advance(gs.x, gs.v, c.mean_x, c.mean_v, h)
+            assert isinstance(flow, GraphCentroidFlow)
+            return flow.advance_group(c.group_x, c.group_v, h, c.index)
+        assert isinstance(flow, CentroidFlow) and c.mean_x is not None
+        return flow.advance(gs.x, gs.v, c.mean_x, c.mean_v, h)
 
-    def is_active(self, gs: GroupState | None) -> bool:
+    def is_active(self, gs: GroupState | None) -> TypeGuard[GroupState]:
         """True when the group has local rows to advance (an agent holds rows of some groups)."""
         return gs is not None and self.group.count(gs.rot) > 0
 
-    def per_active_group(self, groups: Sequence, fn) -> list:
+    def per_active_group(self, groups: Sequence[GroupState | None],
+                         fn: Callable[[int, GroupState], Any]) -> list:
         """[fn(gi, gs) per group], None for a group without local rows (``is_active``)."""
         return [fn(gi, gs) if self.is_active(gs) else None for gi, gs in enumerate(groups)]
 

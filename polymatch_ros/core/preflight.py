@@ -14,11 +14,12 @@ import warnings
 from dataclasses import replace
 
 from .errors import ParameterError, SceneError
-from .limits import FLOAT, Budget
-from .scene import DEFAULT_DT, check_step_count
+from .limits import FLOAT, Budget, Limits
+from .scene import DEFAULT_DT, Scene, check_step_count
 
 
-def resolve_method(scene, method=None, tolerance=None, distributed=False):
+def resolve_method(scene: Scene, method: str | None = None, tolerance: float | None = None,
+                   distributed: bool = False) -> tuple[str, str]:
     """(name, how it was chosen) exactly as ``simulate.plan`` resolves it."""
     from .simulate import recommend
     name = method or scene.integrator.method
@@ -30,8 +31,9 @@ def resolve_method(scene, method=None, tolerance=None, distributed=False):
     return name, f"auto picked it: {reason}"
 
 
-def check_run(scene, method=None, dt=None, tolerance=None, *, distributed=False,
-              kept_samples=0, limits=None):
+def check_run(scene: Scene, method: str | None = None, dt: float | None = None,
+              tolerance: float | None = None, *, distributed: bool = False,
+              kept_samples: int = 0, limits: Limits | None = None) -> int:
     """Refuse (ParameterError/SceneError) or warn before any step is taken; return the steps."""
     name, why = resolve_method(scene, method, tolerance, distributed)
     spec = scene.integrator

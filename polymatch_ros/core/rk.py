@@ -11,13 +11,14 @@ projection   Classical RK in the embedding R^{d x d}, then the polar factor (bas
 from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from .model import Coupling, GroupState, State, System
 from .so.base import Array
 from .solver import Method, MethodInfo, Stepper, advance_active, lincomb
 
 
-def rk_stability(a: Sequence, b: Sequence, z) -> np.ndarray:
+def rk_stability(a: npt.ArrayLike, b: npt.ArrayLike, z: npt.ArrayLike) -> np.ndarray:
     """R(z) = 1 + z b^T (I - z A)^{-1} 1 for an explicit tableau, vectorised over complex z."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
@@ -39,7 +40,7 @@ class ExplicitRK(Method):
 
     family = ""
 
-    def __init__(self, name: str, a: Sequence, b: Sequence, order: int, summary: str):
+    def __init__(self, name: str, a: Sequence, b: Sequence, order: int, summary: str) -> None:
         self.a = [list(map(float, row)) for row in a]
         self.b = list(map(float, b))
         self.info = MethodInfo(name, order, len(b), len(b), self.family, (1, 2), summary)
@@ -78,7 +79,8 @@ class ExplicitRK(Method):
         """(new rotations, increment Theta in so(d) or None) from the rotation slopes."""
         raise NotImplementedError
 
-    def slopes(self, system: System, stage: State, coupling: Coupling, thetas) -> list:
+    def slopes(self, system: System, stage: State, coupling: Coupling,
+               thetas: Sequence | None) -> list:
         """Per-group stage slopes (k_rot, k_x, k_v, k_w) in the method's coordinates."""
         raise NotImplementedError
 
@@ -92,11 +94,13 @@ class RKMK(ExplicitRK):
 
     family = "lie"
 
-    def move_rotation(self, system, rot, h, row, slopes, final):
+    def move_rotation(self, system: System, rot: Array, h: float, row: Sequence[float],
+                      slopes: list, final: bool) -> tuple[Array, Array | None]:
         theta = lincomb(None, h, row, slopes)
         return (rot if theta is None else system.group.retract(theta, rot)), theta
 
-    def slopes(self, system, stage, coupling, thetas):
+    def slopes(self, system: System, stage: State, coupling: Coupling,
+               thetas: Sequence | None) -> list:
         return system.in_chart(system.rates(stage, coupling), thetas)
 
 
@@ -105,15 +109,17 @@ class ProjectedRK(ExplicitRK):
 
     family = "projection"
 
-    def check_system(self, system):
+    def check_system(self, system: System) -> None:
         if system.group.name == "angle":
             raise TypeError(f"{self.name} needs the matrix representation of SO(2)")
 
-    def move_rotation(self, system, rot, h, row, slopes, final):
+    def move_rotation(self, system: System, rot: Array, h: float, row: Sequence[float],
+                      slopes: list, final: bool) -> tuple[Array, Array | None]:
         rot = lincomb(rot, h, row, slopes)
         return (system.group.project(rot) if final else rot), None
 
-    def slopes(self, system, stage, coupling, thetas):
+    def slopes(self, system: System, stage: State, coupling: Coupling,
+               thetas: Sequence | None) -> list:
         grp = system.group
-        return [None if r is None else (grp.tangent(r[0], gs.rot),) + tuple(r[1:])
+        return [None if r is None or gs is None else (grp.tangent(r[0], gs.rot),) + tuple(r[1:])
                 for r, gs in zip(system.rates(stage, coupling), stage.groups)]

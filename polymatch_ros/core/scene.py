@@ -14,6 +14,7 @@ import math
 import os
 import sys
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -30,6 +31,7 @@ from .limits import (
     MIN_RELATIVE_TOLERANCE,
     MIN_T_END,
     Budget,
+    Limits,
     check_rates,
 )
 from .model import Model, State, validate_model
@@ -43,8 +45,8 @@ DEFAULT_DT = 0.05
 @dataclass(frozen=True)
 class IntegratorSpec:
     method: str = "auto"
-    dt: float = None
-    tolerance: float = None
+    dt: float | None = None
+    tolerance: float | None = None
     max_steps: int = 10_000_000
 
 
@@ -62,15 +64,15 @@ class Scene:
     tolerance: float
     expect_convergence: bool
     seed: int
-    path: str = None
-    notes: list = field(default_factory=list)
+    path: str | None = None
+    notes: list[str] = field(default_factory=list)
 
     @property
-    def dim(self):
+    def dim(self) -> int:
         return self.model.dim
 
 
-def shipped_config_dirs():
+def shipped_config_dirs() -> list[str]:
     """Where shipped scenes live: the repository's config/, then the installed share/ directory."""
     dirs = []
     here = os.path.dirname(os.path.abspath(__file__))
@@ -84,7 +86,7 @@ def shipped_config_dirs():
     return [d for d in dirs if os.path.isdir(d)]
 
 
-def resolve_scene_path(name):
+def resolve_scene_path(name: str) -> str:
     """A path as given, or a shipped scene by name (``congruent_triangles``)."""
     if os.path.isdir(name):
         raise SceneError(f"{name}: is a directory, not a scene file")
@@ -99,13 +101,15 @@ def resolve_scene_path(name):
                      f"see `polymatch scenes`)")
 
 
-def load_scene(source, overrides=None, *, limits=None):
+def load_scene(source: str | os.PathLike[str] | dict[str, Any],
+               overrides: dict[str, Any] | None = None, *,
+               limits: Limits | None = None) -> Scene:
     """Load and validate a scene from a file path, a shipped scene name, a YAML string or a dict.
 
     ``limits`` (``core.limits.Limits``) bounds the memory the scene may need; files are
     also bounded in size, nesting and alias expansion (``core.yamlfile``).
     """
-    path = None
+    path: str | None = None
     if isinstance(source, dict):
         data = source
     elif isinstance(source, os.PathLike) or (isinstance(source, str) and "\n" not in source):
@@ -123,7 +127,7 @@ def load_scene(source, overrides=None, *, limits=None):
     return scene
 
 
-def _apply_overrides(data, overrides):
+def _apply_overrides(data: Any, overrides: dict[str, Any]) -> Any:
     """Set dotted keys (``integrator.dt``) to values; used by the CLI."""
     if not isinstance(data, dict):
         return data                                     # build_scene names the problem
@@ -149,7 +153,7 @@ TOP_KEYS = ("name", "description", "dimension", "seed", "model", "integrator", "
             "convergence", "groups", "figure", "graph")
 
 
-def build_scene(data, limits=None):
+def build_scene(data: object, limits: Limits | None = None) -> Scene:
     top = Map(data, "", TOP_KEYS)
     name = top.text("name", "scene")
     description = top.text("description", "")
@@ -247,7 +251,7 @@ def _groups(top, dim, params, seed, budget):
     return groups, states, ctx
 
 
-def model_rates(model):
+def model_rates(model: Model) -> list[tuple[str, float]]:
     """(name, 1/s) of the linearisation at consensus: coupling, damping, F-1 weights, F-2."""
     m, gamma, k = model.mass, model.gamma, model.kappa
     weight = max([1.0] + [float(np.mean(g.scales) / np.min(g.scales))
@@ -279,7 +283,7 @@ def _integrator_spec(im, t_end):
     return IntegratorSpec(method, dt, tol, max_steps)
 
 
-def tolerance_value(value, path):
+def tolerance_value(value: object, path: str) -> float:
     """An adaptive tolerance: relative, in [MIN_RELATIVE_TOLERANCE, 1)."""
     tol = number(value, path)
     if not 0 < tol < 1:
@@ -290,7 +294,7 @@ def tolerance_value(value, path):
     return tol
 
 
-def check_step_count(t_end, dt, max_steps, path):
+def check_step_count(t_end: float, dt: float, max_steps: int, path: str) -> int:
     """Refuse a fixed-step run whose step count exceeds integrator.max_steps."""
     steps = math.ceil(min(t_end / min(dt, t_end), 1e308) - 1e-9)
     if steps > max_steps:

@@ -14,9 +14,10 @@ from . import initial
 from .checks import Map, describe
 from .decompose import RotationNotUniqueWarning, decompose
 from .errors import SceneError
-from .limits import MAX_LENGTH, MIN_SIZE
+from .limits import MAX_LENGTH, MIN_SIZE, Budget
 from .model import Group, GroupState
 from .shapes import check_vertex_array, make_shape
+from .so import RotationGroup
 
 GROUP_KEYS = ("name", "shape", "size", "count", "centroids", "rotations", "scales",
               "velocities", "agents", "similar", "graph")
@@ -28,14 +29,14 @@ class GroupContext:
 
     dim: int
     order: int
-    rng: object
-    rotations: object
-    budget: object
-    notes: list = field(default_factory=list)
+    rng: np.random.Generator
+    rotations: RotationGroup
+    budget: Budget
+    notes: list[str] = field(default_factory=list)
     start: int = 0
 
 
-def build_group(raw, path, ctx):
+def build_group(raw: object, path: str, ctx: GroupContext) -> tuple[Group, GroupState]:
     """(Group, GroupState) of one ``groups[i]`` entry."""
     gm = Map(raw, path, GROUP_KEYS)
     name = gm.text("name", f"group{ctx.start}")

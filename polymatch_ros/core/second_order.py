@@ -9,6 +9,8 @@ splitting    Strang splitting damp/kick/drift/kick/damp.  For gamma = 0 it is sy
 """
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -39,7 +41,7 @@ def phi_functions(z: float) -> tuple[float, float, float, float]:
     return e, p1, p2, p3
 
 
-def _two_by_two_radius(step_map) -> float:
+def _two_by_two_radius(step_map: Callable[[float, float], Any]) -> float:
     """Spectral radius of the linear map (x0, v0) -> step_map(x0, v0) on R^2."""
     amp = np.empty((2, 2))
     for col, (x0, v0) in enumerate(((1.0, 0.0), (0.0, 1.0))):
@@ -59,7 +61,7 @@ class ExponentialLie(Method):
     As m -> 0 this tends to Heun's method for the first-order model (A-2); stable at any m.
     """
 
-    def __init__(self, order: int):
+    def __init__(self, order: int) -> None:
         name = "etd1" if order == 1 else "etd2"
         summary = ("exponential Lie-Euler: damping exact, coupling frozen; stiff m/gamma"
                    if order == 1 else

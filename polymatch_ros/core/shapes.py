@@ -6,8 +6,10 @@ member of a congruent ensemble as x^i_a = xbar^i + O^i r_a with sum_a r_a = 0
 ``size``.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import combinations, product
+from typing import Any
 
 import numpy as np
 
@@ -25,36 +27,36 @@ class Shape:
     edges: tuple
 
     @property
-    def dim(self):
+    def dim(self) -> int:
         return self.vertices.shape[1]
 
     @property
-    def circumradius(self):
+    def circumradius(self) -> float:
         return float(np.max(np.linalg.norm(self.vertices, axis=1)))
 
     @property
-    def rank(self):
+    def rank(self) -> int:
         """Dimension of span{r_a}; the paper's Lemma 3.2 assumes it equals d."""
         return int(np.linalg.matrix_rank(self.vertices, tol=1e-9 * max(self.circumradius, 1e-300)))
 
-    def embedded(self, dim):
+    def embedded(self, dim: int) -> "Shape":
         """The same shape in R^dim (zero-padded); a triangle becomes a triangle in R^3."""
         if dim < self.dim:
             raise SceneError(f"shape {self.name!r} lives in R^{self.dim}, the scene in R^{dim}")
         pad = np.zeros((self.vertices.shape[0], dim - self.dim))
         return Shape(self.name, np.hstack([self.vertices, pad]), self.edges)
 
-    def scaled(self, size):
+    def scaled(self, size: float) -> "Shape":
         r = self.circumradius
         return Shape(self.name, self.vertices * (size / r), self.edges)
 
 
-def _centred(vertices):
+def _centred(vertices: Any) -> np.ndarray:
     v = np.asarray(vertices, dtype=float)
     return v - v.mean(axis=0)
 
 
-def polygon(n, path="shape"):
+def polygon(n: int, path: str = "shape") -> Shape:
     """Regular n-gon in R^2, circumradius 1, first vertex on the +y axis."""
     if n < 3:
         raise SceneError(f"{path}.polygon: a polygon needs at least 3 sides, got {n}")
@@ -63,7 +65,7 @@ def polygon(n, path="shape"):
     return Shape(f"polygon{n}", _centred(v), tuple((a, (a + 1) % n) for a in range(n)))
 
 
-def simplex(k, path="shape"):
+def simplex(k: int, path: str = "shape") -> Shape:
     """Regular k-simplex in R^k (k + 1 vertices), circumradius 1."""
     if k < 1:
         raise SceneError(f"{path}.simplex: dimension must be >= 1, got {k}")
@@ -74,7 +76,7 @@ def simplex(k, path="shape"):
     return Shape(f"simplex{k}", _centred(v), tuple(combinations(range(k + 1), 2)))
 
 
-def hypercube(k, path="shape"):
+def hypercube(k: int, path: str = "shape") -> Shape:
     """Cube [-1, 1]^k scaled to circumradius 1 (square for k = 2); edges flip one coordinate."""
     v = np.array(list(product((-1.0, 1.0), repeat=k)))
     n = len(v)
@@ -82,14 +84,14 @@ def hypercube(k, path="shape"):
     return Shape(f"hypercube{k}", v / np.sqrt(k), tuple(sorted(edges)))
 
 
-def cross_polytope(k, path="shape"):
+def cross_polytope(k: int, path: str = "shape") -> Shape:
     """The 2k points +-e_i in R^k (octahedron for k = 3)."""
     v = np.vstack([np.eye(k), -np.eye(k)])
     edges = tuple((a, b) for a, b in combinations(range(2 * k), 2) if abs(a - b) != k)
     return Shape(f"cross_polytope{k}", v, edges)
 
 
-_NAMED = {
+_NAMED: dict[str, Callable[[], Shape]] = {
     "triangle": lambda: polygon(3),
     "square": lambda: hypercube(2),
     "pentagon": lambda: polygon(5),
@@ -99,16 +101,16 @@ _NAMED = {
     "octahedron": lambda: cross_polytope(3),
 }
 
-_FAMILIES = {"polygon": polygon, "simplex": simplex,
+_FAMILIES: dict[str, Callable[[int, str], Shape]] = {"polygon": polygon, "simplex": simplex,
              "hypercube": hypercube, "cross_polytope": cross_polytope}
 
 
-def shape_names():
+def shape_names() -> list[str]:
     return (sorted(_NAMED) + [f"{{{k}: n}}" for k in sorted(_FAMILIES)]
             + ["{vertices: [...], edges: [...]}"])
 
 
-def make_shape(spec, path="shape", max_dim=None):
+def make_shape(spec: object, path: str = "shape", max_dim: int | None = None) -> Shape:
     """Build a Shape from a scene entry.
 
     ``spec`` is a name ("triangle", "tetrahedron", ...), ``{polygon: 5}``,
@@ -145,7 +147,7 @@ def make_shape(spec, path="shape", max_dim=None):
     return _FAMILIES[family](n, path)
 
 
-def _custom_shape(spec, path, max_dim):
+def _custom_shape(spec: dict[Any, Any], path: str, max_dim: int | None) -> Shape:
     extra = set(spec) - {"vertices", "edges", "name"}
     if extra:
         raise SceneError(f"{path}.{sorted(map(str, extra))[0]}: unknown key")
@@ -168,7 +170,8 @@ def _custom_shape(spec, path, max_dim):
     return shape
 
 
-def check_vertex_array(value, path, dim=None, *, max_dim=None):
+def check_vertex_array(value: object, path: str, dim: int | None = None, *,
+                       max_dim: int | None = None) -> np.ndarray:
     """A finite (n, k) array, 2 <= n <= MAX_VERTICES, k == dim, k <= max_dim; or SceneError."""
     want = "a list of vertices, each a list of coordinates of the same length"
     if not isinstance(value, (list, np.ndarray)) or len(value) == 0:
@@ -193,7 +196,8 @@ def check_vertex_array(value, path, dim=None, *, max_dim=None):
     return v
 
 
-def check_distinct_vertices(v, path, error=SceneError):
+def check_distinct_vertices(v: np.ndarray, path: str,
+                            error: Callable[[str], Exception] = SceneError) -> None:
     """Reject coincident vertices (relative to the polytope's size) with ``error``."""
     size = np.max(np.linalg.norm(v - v.mean(axis=0), axis=1))
     if size == 0.0:

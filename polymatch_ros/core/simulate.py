@@ -20,7 +20,7 @@ import numpy as np
 from .errors import PolymatchError, StabilityError
 from .integrators import check_stability, get_method, max_stable_dt
 from .metrics import EnsembleMetrics, ensemble_metrics, stationarity
-from .model import GroupState, State, System
+from .model import Group, GroupState, Model, State, System
 from .so import group_for
 from .solver import RUNNING, Method, drive, step_grid
 
@@ -57,7 +57,7 @@ def with_representation(scene: Scene, representation: str) -> Scene:
         return scene
     old = model.rotations
     groups = []
-    for gs in scene.initial.groups:
+    for gs in scene.initial.all_groups():
         rot = new.from_matrices(old.to_matrices(gs.rot))
         w = None if gs.w is None else new.algebra_from_skew(old.algebra_to_skew(gs.w))
         groups.append(GroupState(gs.x.copy(), rot, None if gs.v is None else gs.v.copy(), w))
@@ -198,7 +198,7 @@ def simulate(scene: Scene, method: str | None = None, dt: float | None = None,
     system = System(scene.model)
     times = np.asarray(scene.samples if samples is None else samples, dtype=float)
     traj = Trajectory(scene, plan_)
-    state = State(0.0, tuple(replace(gs) for gs in scene.initial.groups))
+    state = State(0.0, tuple(replace(gs) for gs in scene.initial.all_groups()))
     t0 = time.perf_counter()
     recorder = _Recorder(traj, metrics, keep_states, progress, stop_when_converged)
     stop = recorder.record(state)
@@ -243,7 +243,7 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
     lines.append(f"rotations: {rep_text}")
     p = plan(scene, method, dt, tolerance, distributed=distributed, check=False)
     info = p.method.info
-    if p.dt is not None:
+    if isinstance(p.method, Method) and p.dt is not None:
         try:
             check_stability(p.method, m, p.dt)
             limit = max_stable_dt(p.method, m, 1e6)
@@ -263,7 +263,7 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
     return lines
 
 
-def _centroid_line(m, distributed: bool) -> str:
+def _centroid_line(m: Model, distributed: bool) -> str:
     """How the centroids advance: exact flow (Prop. 2.1) or with the method's stages."""
     if m.inter_group:
         return (f"mixed ensemble (F-2): kappa_2 = {m.kappa_2:g}, L = {m.L:g}; "
@@ -287,7 +287,7 @@ def _centroid_line(m, distributed: bool) -> str:
             "the exact flow would be cheaper and exact)")
 
 
-def _graph_line(g) -> str:
+def _graph_line(g: Group) -> str:
     """Which graph a group couples on and what an evaluation costs there."""
     if g.graph is None:
         return "complete (the paper's mean field S = sum_k O_k: O(N d^3) per evaluation)"

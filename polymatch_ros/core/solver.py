@@ -120,13 +120,16 @@ class Method:
         """Spectral radius of the step's amplification on the linear test system y' = a y."""
         raise NotImplementedError
 
-    def solver(self, system: System, state: State, t_end: float, samples: Sequence[float],
+    def solver(self, system: System, state: State, t_end: float,
+               samples: Sequence[float] | np.ndarray,
                dt: float | None = None) -> "FixedStepSolver":
         """A run of this method from ``state`` to ``t_end`` with steps of ``dt``."""
+        if dt is None:
+            raise TypeError(f"{self.name}: a fixed-step run needs a step dt")
         return FixedStepSolver(self, system, state, t_end, samples, dt)
 
 
-def lincomb(base, h: float, coefs: Sequence[float], terms: Sequence):
+def lincomb(base: Any, h: float, coefs: Sequence[float], terms: Sequence) -> Any:
     """base + h * sum coefs[j] * terms[j] (skipping zero coefficients); base may be None (zero).
 
     Float arrays of one shape are summed block of rows by block (``row_blocks``) into one
@@ -142,14 +145,14 @@ def lincomb(base, h: float, coefs: Sequence[float], terms: Sequence):
     return out
 
 
-def _same_floats(base, term, shape: tuple) -> bool:
+def _same_floats(base: Any, term: Any, shape: tuple) -> bool:
     """True when term is a float array of ``shape`` (rows first) and base None or one too."""
     return len(shape) > 0 and all(
         a is None or (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == shape)
         for a in (base, term))
 
 
-def _row_block_sum(base, scaled: list) -> np.ndarray:
+def _row_block_sum(base: np.ndarray | None, scaled: list) -> np.ndarray:
     """base + sum hc t over [(hc, t)] (base None: zero), one block of rows at a time."""
     shape = scaled[0][1].shape
     out = recycled(shape)
@@ -176,7 +179,8 @@ def exact_centroids(system: System, y: State, coupling: Coupling, h: float) -> l
         y.groups, lambda gi, gs: system.exact_centroids(gi, gs, coupling, h))
 
 
-def advance_active(system: System, groups: Sequence, fn) -> tuple[tuple, list]:
+def advance_active(system: System, groups: Sequence[GroupState | None],
+                   fn: Callable[[int, GroupState], Any]) -> tuple[tuple, list]:
     """(new group states, per-group extras) from fn(gi, gs) -> (new state, extra).
 
     A group without local rows (``System.is_active``) is kept as it is, its extra None.
@@ -206,7 +210,7 @@ class FixedStepSolver:
     """
 
     def __init__(self, method: Method, system: System, state: State, t_end: float,
-                 samples: Sequence[float], dt: float):
+                 samples: Sequence[float] | np.ndarray, dt: float) -> None:
         self.method, self.system, self.state = method, system, state
         self.grid = step_grid(t_end, dt)
         times = np.asarray(samples, dtype=float)

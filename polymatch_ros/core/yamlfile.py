@@ -9,16 +9,17 @@ and non-scalar keys.  Numbers follow YAML 1.2: ``1e-3`` is a float, not the stri
 
 import os
 import re
+from typing import Any
 
 import yaml
 
 from .errors import SceneError
 from .limits import MAX_DEPTH, MAX_FILE_BYTES, MAX_NODES, format_bytes
 
-_BASE = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_BASE: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-class _Loader(_BASE):
+class _Loader(_BASE):  # type: ignore[valid-type,misc]
     """SafeLoader (libyaml when available) with YAML 1.2 floats (1e3, 2E-5)."""
 
 
@@ -28,7 +29,7 @@ _Loader.add_implicit_resolver(
     list("-+0123456789"))
 
 
-def read_scene_file(path):
+def read_scene_file(path: str | os.PathLike[str]) -> str:
     """The text of a scene file: a regular file, at most MAX_FILE_BYTES, UTF-8."""
     if os.path.isdir(path):
         raise SceneError(f"{path}: is a directory, not a scene file")
@@ -46,7 +47,7 @@ def read_scene_file(path):
     return decode_text(data, path)
 
 
-def decode_text(data, label):
+def decode_text(data: bytes, label: object) -> str:
     """UTF-8 (an optional BOM dropped); anything else is refused with the offending byte."""
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise SceneError(f"{label}: is UTF-16 text; scene files must be UTF-8")
@@ -57,7 +58,7 @@ def decode_text(data, label):
                          f"{exc.start}); scene files are UTF-8 YAML") from None
 
 
-def parse_yaml(text, label="scene"):
+def parse_yaml(text: str, label: str = "scene") -> Any:
     """Scene data (a dict) from YAML text, or a one-line SceneError."""
     if len(text) > MAX_FILE_BYTES:
         raise SceneError(f"{label}: more than a scene may be ({format_bytes(MAX_FILE_BYTES)})")
@@ -98,7 +99,9 @@ def _child_path(frame, index_or_key):
 
 def _check_events(text, label):
     """Depth, alias expansion and duplicate keys, from the event stream in one linear pass."""
-    stack, sizes, counts = [], {}, []
+    stack: list[_Frame] = []
+    sizes: dict[str, int] = {}
+    counts: list[int] = []
 
     def where(event):
         return f"line {event.start_mark.line + 1}" if event.start_mark else "?"
@@ -137,7 +140,7 @@ def _check_events(text, label):
         elif isinstance(event, yaml.AliasEvent):
             if top is not None and top.mapping and top.expect_key:
                 raise SceneError(f"{top.path or label}: an alias as a key ({where(event)})")
-            place(sizes.get(event.anchor, 1), event)
+            place(sizes.get(event.anchor or "", 1), event)
         elif isinstance(event, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
             if top is not None and top.mapping and top.expect_key:
                 raise SceneError(f"{top.path or label}: keys must be names, not lists or "

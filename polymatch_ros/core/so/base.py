@@ -4,6 +4,7 @@ import math
 import sys
 import threading
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -12,6 +13,10 @@ Array = np.ndarray
 #: S = sum_k w_k O_k: a complex number for angles, a (d, d) matrix otherwise; on a graph one
 #: field per agent, S_i = sum_k w_ik O_k (``neighbour_fields``), in the rotations' own layout
 MeanField = complex | np.ndarray
+#: rows of a batch: an index, a slice, or a list or array of indices
+RowIndex = int | slice | Sequence[int] | np.ndarray
+#: a scipy.sparse (n, N) matrix of weights w_ik (scipy ships no type information)
+SparseWeights = Any
 
 
 class RotationGroup:
@@ -43,10 +48,10 @@ class RotationGroup:
     def count(self, g: Array) -> int:
         raise NotImplementedError
 
-    def take(self, g: Array, idx) -> Array:
+    def take(self, g: Array, idx: RowIndex) -> Array:
         raise NotImplementedError
 
-    def put(self, g: Array, idx, values: Array) -> None:
+    def put(self, g: Array, idx: RowIndex, values: Array) -> None:
         """Write rows ``idx`` of ``g`` in place."""
         raise NotImplementedError
 
@@ -61,7 +66,7 @@ class RotationGroup:
     def algebra_zeros(self, n: int) -> Array:
         raise NotImplementedError
 
-    def algebra_take(self, a: Array, idx) -> Array:
+    def algebra_take(self, a: Array, idx: RowIndex) -> Array:
         raise NotImplementedError
 
     def algebra_concat(self, parts: Sequence[Array]) -> Array:
@@ -100,7 +105,7 @@ class RotationGroup:
         """S = sum_k w_k O_k (representation-specific)."""
         raise NotImplementedError
 
-    def neighbour_fields(self, g: Array, weights) -> MeanField:
+    def neighbour_fields(self, g: Array, weights: SparseWeights) -> Array:
         """S_i = sum_k w_ik O_k for every row i of a sparse (n, N) matrix w: one product w @ O.
 
         The per-agent fields of a communication graph (``core.graph``), O(|E| d^2).
@@ -136,16 +141,16 @@ class RowsFirstGroup(RotationGroup):
     def count(self, g: Array) -> int:
         return g.shape[0]
 
-    def take(self, g: Array, idx) -> Array:
+    def take(self, g: Array, idx: RowIndex) -> Array:
         return g[idx]
 
-    def put(self, g: Array, idx, values: Array) -> None:
+    def put(self, g: Array, idx: RowIndex, values: Array) -> None:
         g[idx] = values
 
     def concat(self, parts: Sequence[Array]) -> Array:
         return np.concatenate(parts, axis=0)
 
-    def algebra_take(self, a: Array, idx) -> Array:
+    def algebra_take(self, a: Array, idx: RowIndex) -> Array:
         return a[idx]
 
     def algebra_concat(self, parts: Sequence[Array]) -> Array:
@@ -161,7 +166,7 @@ class ComponentAlgebra:
     def algebra_zeros(self, n: int) -> Array:
         return np.zeros((self.algebra_rows, n))
 
-    def algebra_take(self, a: Array, idx) -> Array:
+    def algebra_take(self, a: Array, idx: RowIndex) -> Array:
         return a[:, idx]
 
     def algebra_concat(self, parts: Sequence[Array]) -> Array:

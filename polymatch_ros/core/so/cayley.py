@@ -63,7 +63,8 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
     return out
 
 
-def _series_rows(w, g, y, temps, factors: int, terms: int) -> None:
+def _series_rows(w: np.ndarray, g: np.ndarray, y: np.ndarray, temps: list[np.ndarray],
+                 factors: int, terms: int) -> None:
     """y = cay(W) G for a block of rows: (I + W/2)(I + M)^{-1} G with ``terms`` or ``factors``."""
     half_buf, m_buf, spare = temps
     half = np.multiply(w, 0.5, out=half_buf)

@@ -3,7 +3,7 @@
 
 import numpy as np
 
-from .base import Array, MeanField, RowsFirstGroup
+from .base import Array, MeanField, RowsFirstGroup, SparseWeights
 
 _add = np.add.reduce
 
@@ -74,7 +74,7 @@ class SO2(RowsFirstGroup):
             return complex(_add(c), _add(s))      # more than summing a few angles
         return complex(c @ weights, s @ weights)
 
-    def neighbour_fields(self, g: Array, weights) -> MeanField:
+    def neighbour_fields(self, g: Array, weights: SparseWeights) -> Array:
         c, s = self._cos_sin(g)
         return weights @ (c + 1j * s)            # complex per row: the same formula below
 

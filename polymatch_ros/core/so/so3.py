@@ -4,7 +4,15 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .base import Array, ComponentAlgebra, MeanField, RotationGroup, polar_newton_schulz
+from .base import (
+    Array,
+    ComponentAlgebra,
+    MeanField,
+    RotationGroup,
+    RowIndex,
+    SparseWeights,
+    polar_newton_schulz,
+)
 
 
 def _hat3(w):
@@ -32,7 +40,7 @@ class SO3(ComponentAlgebra, RotationGroup):
     name = "so3"
     algebra_rows = 3
 
-    def __init__(self, retraction: str = "cayley"):
+    def __init__(self, retraction: str = "cayley") -> None:
         if retraction not in ("cayley", "exp"):
             raise ValueError("retraction must be 'cayley' or 'exp'")
         self.retraction = retraction
@@ -52,10 +60,10 @@ class SO3(ComponentAlgebra, RotationGroup):
     def count(self, g: Array) -> int:
         return g.shape[2]
 
-    def take(self, g: Array, idx) -> Array:
+    def take(self, g: Array, idx: RowIndex) -> Array:
         return g[:, :, idx]
 
-    def put(self, g: Array, idx, values: Array) -> None:
+    def put(self, g: Array, idx: RowIndex, values: Array) -> None:
         g[:, :, idx] = values
 
     def concat(self, parts: Sequence[Array]) -> Array:
@@ -133,7 +141,7 @@ class SO3(ComponentAlgebra, RotationGroup):
         s = flat.sum(axis=1) if weights is None else flat @ weights
         return s.reshape(3, 3)
 
-    def neighbour_fields(self, g: Array, weights) -> MeanField:
+    def neighbour_fields(self, g: Array, weights: SparseWeights) -> Array:
         flat = g.reshape(9, -1)
         return np.ascontiguousarray((weights @ flat.T).T).reshape(3, 3, -1)    # (3, 3, n) SoA
 

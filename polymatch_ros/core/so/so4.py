@@ -123,7 +123,8 @@ def quaternion_product(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
-def cayley4_retract(ab: np.ndarray, pair: tuple[np.ndarray, np.ndarray]):
+def cayley4_retract(ab: np.ndarray, pair: tuple[np.ndarray, np.ndarray]
+                    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
     """(cay(W) O, its pair) for ab = so4_split(W) and O = L(p) R(q), ``pair = (p, q)``.
 
     cay(W) O = L(P p) R(Q q): the pair (P p, Q q) of the result comes for free.

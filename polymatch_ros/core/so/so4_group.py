@@ -28,7 +28,7 @@ class SO4(ComponentAlgebra, SOn):
 
     algebra_rows = 6
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__(4)
 
     # -- Lie algebra: (6, N) ----------------------------------------------
@@ -57,7 +57,7 @@ class SO4(ComponentAlgebra, SOn):
     def coupling(self, g: Array, s: MeanField) -> Array:
         if np.ndim(s) == 3:                      # one field per row
             return so4_split(super().coupling(g, s))
-        return coupling_parts4(g, s)
+        return coupling_parts4(g, np.asarray(s))
 
     def tangent(self, a: Array, g: Array) -> Array:
         return so4_join(a) @ g

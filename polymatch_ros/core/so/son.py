@@ -1,5 +1,6 @@
 """SO(d) for any d >= 2 as (N, d, d) matrices with the Cayley map (exp for d = 2)."""
 
+from typing import Any
 
 import numpy as np
 
@@ -7,6 +8,7 @@ from .base import (
     Array,
     MeanField,
     RowsFirstGroup,
+    SparseWeights,
     polar_newton_schulz,
     recycled,
     row_blocks,
@@ -33,7 +35,7 @@ class SOn(RowsFirstGroup):
 
     name = "matrix"
 
-    def __init__(self, dim: int):
+    def __init__(self, dim: int) -> None:
         if dim < 2:
             raise ValueError("dimension must be >= 2")
         self.dim = dim
@@ -81,9 +83,9 @@ class SOn(RowsFirstGroup):
             return out
         return cayley_series(xi, g)
 
-    _pairs = (None, None)
-    _retracted = (None, None)
-    _parts = (None, None)
+    _pairs: tuple[Any, Any] = (None, None)
+    _retracted: tuple[Any, Any] = (None, None)
+    _parts: tuple[Any, Any] = (None, None)
 
     def _so4_parts(self, xi):
         """so4_split(Theta), kept for dpsi_inv at the same Theta (RKMK: the same stage)."""
@@ -118,7 +120,7 @@ class SOn(RowsFirstGroup):
         # BLAS products on one thread each: summing over the leading axis of (N, d, d) is slower
         return row_sum(g.reshape(len(g), -1), weights).reshape(self.dim, self.dim)
 
-    def neighbour_fields(self, g: Array, weights) -> MeanField:
+    def neighbour_fields(self, g: Array, weights: SparseWeights) -> Array:
         d = self.dim
         return np.asarray(weights @ g.reshape(len(g), d * d)).reshape(-1, d, d)
 
@@ -128,7 +130,7 @@ class SOn(RowsFirstGroup):
         if np.ndim(s) == 3:                      # one field per row
             b = np.matmul(g, np.swapaxes(s, 1, 2), out=scratch("coupling.fields", g.shape))
             return np.subtract(np.swapaxes(b, 1, 2), b, out=out)
-        s_t = np.ascontiguousarray(s.T)
+        s_t = np.ascontiguousarray(np.transpose(s))
         rows, blocks = row_blocks(g.shape)       # B = O S^T and B^T - B a block at a time
         product = scratch("coupling", (rows * d, d))
         for block in blocks:

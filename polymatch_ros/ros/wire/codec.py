@@ -25,11 +25,21 @@ within MAX_ABS, stamped inside the run, its rotation in SO(d) (Lemma 2.1: the fl
 orthogonal); agents and the monitor drop and count a message with a reason, never use it.
 """
 
+from __future__ import annotations
+
 import array
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ...core.so import RotationGroup
+
+#: a stage message's header as read: (step, stage, flags, t, field mask)
+Header = tuple[int, int, int, float, int]
 
 STAGE_FORMAT = 2
 BLOCK_FORMAT = 3
@@ -52,40 +62,40 @@ MAX_ABS = 1e100
 STAMP_SLACK = 1e-6
 
 
-def stamp_of(t):
+def stamp_of(t: float) -> tuple[int, int]:
     """Simulated time (s) -> (sec, nanosec) for builtin_interfaces/Time."""
     ns = int(round(t * 1e9))
     return ns // 1_000_000_000, ns % 1_000_000_000
 
 
-def time_key(sec, nanosec):
+def time_key(sec: int, nanosec: int) -> int:
     return int(sec) * 1_000_000_000 + int(nanosec)
 
 
-def rot_values(grp, g):
+def rot_values(grp: RotationGroup, g: np.ndarray) -> list[float]:
     """One rotation (a one-row group array) -> the list of floats the stage message carries."""
     if grp.name == "angle":
         return [float(g[0])]
     return grp.to_matrices(g)[0].ravel().tolist()
 
 
-def rot_size(grp):
+def rot_size(grp: RotationGroup) -> int:
     return 1 if grp.name == "angle" else grp.dim * grp.dim
 
 
-def rot_from_values(grp, values):
+def rot_from_values(grp: RotationGroup, values: Sequence[float] | np.ndarray) -> np.ndarray:
     if grp.name == "angle":
         return np.array([values[0]], dtype=float)
     d = grp.dim
     return grp.from_matrices(np.asarray(values, dtype=float).reshape(1, d, d))
 
 
-def orthogonality(mat):
+def orthogonality(mat: np.ndarray) -> float:
     """max |O^T O - I| over the entries of one d x d matrix, or of a stack of them."""
     return float(np.max(np.abs(np.swapaxes(mat, -1, -2) @ mat - np.eye(mat.shape[-1]))))
 
 
-def _bad_numbers(values):
+def _bad_numbers(values: np.ndarray) -> str | None:
     """The reason a vector of numbers is unusable, or None (one reduction: a NaN or an
     infinity makes the largest magnitude non-finite)."""
     if not values.size:
@@ -96,7 +106,7 @@ def _bad_numbers(values):
     return "value out of range" if largest > MAX_ABS else None
 
 
-def bad_scalars(values):
+def bad_scalars(values: Sequence[float]) -> str | None:
     """``_bad_numbers`` of a few Python floats (a geometry message's fields), without numpy."""
     if not all(map(math.isfinite, values)):
         return "non-finite value"
@@ -105,7 +115,7 @@ def bad_scalars(values):
     return None
 
 
-def _bad_stamp(t, t_max):
+def _bad_stamp(t: float, t_max: float | None) -> str | None:
     if not math.isfinite(t) or t < 0.0 or (t_max is not None and t > t_max + STAMP_SLACK):
         return "stamp outside the run"
     return None
@@ -121,15 +131,16 @@ class Stage:
     stage: int
     flags: int
     t: float
-    x: np.ndarray = None
-    v: np.ndarray = None
-    rot: np.ndarray = None  # one-row group array
+    x: np.ndarray | None = None
+    v: np.ndarray | None = None
+    rot: np.ndarray | None = None  # one-row group array
 
 
-def encode_stage(msg, run_id, agent, step, stage, flags, t, fields):
+def encode_stage(msg: Any, run_id: int, agent: int, step: int, stage: int, flags: int, t: float,
+                 fields: Mapping[str, Sequence[float]]) -> Any:
     """Fill a Float64MultiArray with a stage: fields is a dict label -> values (x, v, rot)."""
     mask = 0
-    body = []
+    body: list[float] = []
     for label, bit in FIELDS:
         if label in fields:
             mask |= bit
@@ -148,7 +159,9 @@ def encode_stage(msg, run_id, agent, step, stage, flags, t, fields):
     return msg
 
 
-def _stage_header(data, run_id, agent, t_max, fmt=STAGE_FORMAT):
+def _stage_header(
+    data: np.ndarray, run_id: int, agent: int, t_max: float | None, fmt: int = STAGE_FORMAT
+) -> tuple[Header | None, str | None]:
     """(step, stage, flags, t, mask) of a stage message's header, or the reason it is refused.
 
     ``agent`` is the sender's agent index (a block message: its block index)."""
@@ -172,7 +185,9 @@ def _stage_header(data, run_id, agent, t_max, fmt=STAGE_FORMAT):
     return (int(head[3]), int(head[4]), int(head[5]), float(head[6]), int(head[7])), None
 
 
-def _stage_data(msg, run_id, sender, t_max, fmt):
+def _stage_data(
+    msg: Any, run_id: int, sender: int, t_max: float | None, fmt: int
+) -> tuple[np.ndarray | None, Header | None, str | None]:
     """(data, header, None) of a stage or block message, or (None, None, reason)."""
     data = np.frombuffer(msg.data, dtype=float) if len(msg.data) else np.zeros(0)
     if len(data) < HEADER or msg.layout.dim or msg.layout.data_offset != 0:
@@ -184,10 +199,12 @@ def _stage_data(msg, run_id, sender, t_max, fmt):
     return data, head, reason
 
 
-def decode_stage(msg, grp, dim, run_id, agent, rot_tol=ROTATION_TOL, t_max=None):
+def decode_stage(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: int,
+                 rot_tol: float = ROTATION_TOL,
+                 t_max: float | None = None) -> tuple[Stage | None, str | None]:
     """Float64MultiArray -> (Stage, None) or (None, reason)."""
     data, head, reason = _stage_data(msg, run_id, agent, t_max, STAGE_FORMAT)
-    if head is None:
+    if data is None or head is None:
         return None, reason
     step, stage, flags, t, mask = head
     sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
@@ -213,7 +230,8 @@ def decode_stage(msg, grp, dim, run_id, agent, rot_tol=ROTATION_TOL, t_max=None)
     return out, None
 
 
-def encode_block(msg, run_id, block, step, stage, flags, t, agents, fields):
+def encode_block(msg: Any, run_id: int, block: int, step: int, stage: int, flags: int, t: float,
+                 agents: Sequence[int], fields: Mapping[str, np.ndarray]) -> Any:
     """Fill a Float64MultiArray with the stage rows of several agents of one block.
 
     ``fields``: label -> array of shape (len(agents), width), in ``FIELDS`` order."""
@@ -228,7 +246,9 @@ def encode_block(msg, run_id, block, step, stage, flags, t, agents, fields):
     return msg
 
 
-def _block_rows(data, grp, dim, block, k, mask):
+def _block_rows(
+    data: np.ndarray, grp: RotationGroup, dim: int, block: int, k: int, mask: int
+) -> tuple[list[int], dict[str, np.ndarray]] | tuple[None, str]:
     """The rows of a block message as (agents, {label: values}), or (None, reason)."""
     sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
     width = 1 + sum(sizes[f] for f, bit in FIELDS if mask & bit)
@@ -246,7 +266,8 @@ def _block_rows(data, grp, dim, block, k, mask):
         or len(np.unique(agents)) != len(agents)
     ):
         return None, "unknown sender (agent index)"
-    out, pos = {}, 1
+    out: dict[str, np.ndarray] = {}
+    pos = 1
     for label, bit in FIELDS:
         if mask & bit:
             out[label] = rows[:, pos : pos + sizes[label]]
@@ -254,18 +275,21 @@ def _block_rows(data, grp, dim, block, k, mask):
     return [int(a) for a in agents], out
 
 
-def decode_block(msg, grp, dim, run_id, block, k, rot_tol=ROTATION_TOL, t_max=None):
+def decode_block(msg: Any, grp: RotationGroup, dim: int, run_id: int, block: int, k: int,
+                 rot_tol: float = ROTATION_TOL,
+                 t_max: float | None = None) -> tuple[list[Stage] | None, str | None]:
     """Float64MultiArray of a block -> ([Stage, ...], None) or (None, reason).
 
     Checked as ``decode_stage`` checks one agent's message, each row's rotation included;
     every agent index must lie in the block (bK .. bK + K - 1) and appear once."""
     data, head, reason = _stage_data(msg, run_id, block, t_max, BLOCK_FORMAT)
-    if head is None:
+    if data is None or head is None:
         return None, reason
     step, stage, flags, t, mask = head
-    agents, fields = _block_rows(data, grp, dim, block, k, mask)
-    if agents is None:
-        return None, fields
+    rows = _block_rows(data, grp, dim, block, k, mask)
+    if rows[0] is None:
+        return None, rows[1]
+    agents, fields = rows
     rot = fields["rot"]
     if grp.name != "angle" and orthogonality(rot.reshape(-1, grp.dim, grp.dim)) > rot_tol:
         return None, "rotation not orthogonal"

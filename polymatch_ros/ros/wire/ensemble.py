@@ -1,22 +1,33 @@
 """Per-agent records -> one group's arrays: what every reader of poses or stages assembles."""
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ...core.model import GroupState
+    from ...core.so import RotationGroup
 
 
 @dataclass
 class Row:
     """One agent's values as heard: centroid x, one-row rotation, velocity v, algebra row w."""
 
-    x: np.ndarray
-    rot: np.ndarray = None
-    v: np.ndarray = None
-    w: np.ndarray = None
+    x: np.ndarray | float
+    rot: np.ndarray | None = None
+    v: np.ndarray | None = None
+    w: np.ndarray | None = None
 
 
-def assemble(grp, dim, rows, local=None, with_rot=True, with_v=False, with_w=False, full=False):
+def assemble(grp: RotationGroup, dim: int, rows: Mapping[int, Row],
+             local: tuple[Sequence[int] | np.ndarray, GroupState | None] | None = None,
+             with_rot: bool = True, with_v: bool = False, with_w: bool = False,
+             full: bool = False) -> SimpleNamespace:
     """Group arrays (x, rot, v, w, index) in row order from ``rows`` {group row: Row}.
 
     ``local`` = (rows, GroupState): the process's own rows at their current (stage) values,
@@ -40,11 +51,12 @@ def assemble(grp, dim, rows, local=None, with_rot=True, with_v=False, with_w=Fal
         k = pos[row]
         out.x[k] = rec.x
         if with_rot:
-            grp.put(out.rot, [k], rec.rot)
+            grp.put(out.rot, [k], rec.rot)  # type: ignore[arg-type]  # rows carry rotations
         if with_v and rec.v is not None:
             out.v[k] = rec.v
-    if local_rows:
+    if local is not None and local_rows:
         gs = local[1]
+        assert gs is not None  # a stage holds the rows of every local group
         at = [pos[r] for r in local_rows]
         out.x[at] = gs.x
         if with_v:
@@ -52,5 +64,5 @@ def assemble(grp, dim, rows, local=None, with_rot=True, with_v=False, with_w=Fal
         if with_rot:
             grp.put(out.rot, at, gs.rot)
     if with_w:
-        out.w = grp.algebra_concat([rows[r].w for r in index.tolist()])
+        out.w = grp.algebra_concat([rows[r].w for r in index.tolist()])  # type: ignore[misc]
     return out

@@ -5,8 +5,12 @@ checks the contents before the stamp (a corrupt message is named as such) and re
 ``(Received, None)`` or ``(None, reason)``, never raises.
 """
 
+from __future__ import annotations
+
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,8 +24,16 @@ from .codec import (
     time_key,
 )
 
+if TYPE_CHECKING:
+    from ...core.so import RotationGroup
 
-def pose_fields(grp, x, g):
+#: (vector, one-row group or algebra array): one agent's state as a decoder returns it
+StatePair = tuple[np.ndarray, np.ndarray]
+
+
+def pose_fields(
+    grp: RotationGroup, x: np.ndarray, g: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(position xyz, quaternion xyzw) of one agent for a PoseStamped (d <= 3)."""
     pos = np.zeros(3)
     pos[: len(x)] = x
@@ -39,7 +51,9 @@ def pose_fields(grp, x, g):
     return pos, quat
 
 
-def twist_fields(grp, v, w_row):
+def twist_fields(
+    grp: RotationGroup, v: np.ndarray, w_row: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(linear xyz, angular xyz) of one agent's velocities for a TwistStamped (d <= 3)."""
     lin = np.zeros(3)
     lin[: len(v)] = v
@@ -52,7 +66,9 @@ def twist_fields(grp, v, w_row):
     return lin, ang
 
 
-def _array_message(t, vec, mat, labels):
+def _array_message(
+    t: float, vec: np.ndarray, mat: np.ndarray, labels: Sequence[str]
+) -> Any:
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
     msg = Float64MultiArray()
@@ -66,25 +82,29 @@ def _array_message(t, vec, mat, labels):
     return msg
 
 
-def _stamped(cls, t, frame_id):
+def _stamped(cls: type, t: float, frame_id: str) -> Any:
     msg = cls()
     msg.header.stamp.sec, msg.header.stamp.nanosec = stamp_of(t)
     msg.header.frame_id = frame_id
     return msg
 
 
-def _numbers(vector, rotation):
+def _numbers(
+    vector: Sequence[float], rotation: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray, str | None]:
     """A geometry message's two parts as float arrays, and the reason they are unusable."""
     reason = bad_scalars(tuple(vector) + tuple(rotation))
     return np.array(vector, dtype=float), np.array(rotation, dtype=float), reason
 
 
-def _out_of_plane(vec, rot):
+def _out_of_plane(vec: np.ndarray, rot: np.ndarray) -> bool:
     """A 2-D message's parts outside the plane: z of the vector, x and y of the rotation."""
     return max(abs(vec[2]), abs(rot[0]), abs(rot[1])) > ROTATION_TOL
 
 
-def pose_to_state(grp, dim, position, quat):
+def pose_to_state(
+    grp: RotationGroup, dim: int, position: Sequence[float], quat: Sequence[float]
+) -> tuple[StatePair | None, str | None]:
     """PoseStamped contents -> ((x, one-row rotation), None) or (None, reason)."""
     p, q, reason = _numbers(position, quat)
     if reason:
@@ -107,7 +127,9 @@ def pose_to_state(grp, dim, position, quat):
     return (p[:3].copy(), grp.from_matrices(mat)), None
 
 
-def twist_to_state(grp, dim, linear, angular):
+def twist_to_state(
+    grp: RotationGroup, dim: int, linear: Sequence[float], angular: Sequence[float]
+) -> tuple[StatePair | None, str | None]:
     """TwistStamped contents -> ((v, one-row algebra element), None) or (None, reason)."""
     lin, ang, reason = _numbers(linear, angular)
     if reason:
@@ -122,7 +144,9 @@ def twist_to_state(grp, dim, linear, angular):
     return (lin[:3].copy(), grp.algebra_from_skew(skew)), None
 
 
-def array_to_state(msg, dim, rot_check=True):
+def array_to_state(
+    msg: Any, dim: int, rot_check: bool = True
+) -> tuple[tuple[float, np.ndarray, np.ndarray] | None, str | None]:
     """Float64MultiArray pose/twist -> ((t, vector, matrix), None) or (None, reason)."""
     data = np.asarray(msg.data, dtype=float)
     if len(data) != 1 + dim + dim * dim or len(msg.layout.dim) != 3 or msg.layout.data_offset != 0:
@@ -149,7 +173,9 @@ class Received:
     rot: np.ndarray
 
 
-def _header_time(msg, frame_id, t_max):
+def _header_time(
+    msg: Any, frame_id: str | None, t_max: float | None
+) -> tuple[tuple[float, int] | None, str | None]:
     if frame_id is not None and msg.header.frame_id != frame_id:
         return None, f"unknown frame {msg.header.frame_id!r}"
     sec, nsec = msg.header.stamp.sec, msg.header.stamp.nanosec
@@ -159,7 +185,7 @@ def _header_time(msg, frame_id, t_max):
     return (None, reason) if reason else ((sec + 1e-9 * nsec, time_key(sec, nsec)), None)
 
 
-def _array_time(t, t_max):
+def _array_time(t: float, t_max: float | None) -> tuple[tuple[float, int] | None, str | None]:
     reason = _bad_stamp(t, t_max)
     return (None, reason) if reason else ((t, int(round(t * 1e9))), None)
 
@@ -177,13 +203,16 @@ class _Motion:
 
     cls: str
     body: str
-    parts: tuple
-    axes: tuple
-    fields: object
-    to_state: object
-    labels: tuple
-    to_matrix: object
-    from_matrix: object
+    parts: tuple[str, str]
+    axes: tuple[str, str]
+    fields: Callable[[RotationGroup, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+    to_state: Callable[
+        [RotationGroup, int, Sequence[float], Sequence[float]],
+        tuple[StatePair | None, str | None],
+    ]
+    labels: tuple[str, str, str]
+    to_matrix: Callable[[RotationGroup, np.ndarray], np.ndarray]
+    from_matrix: Callable[[RotationGroup, np.ndarray], np.ndarray]
     rotation: bool
 
 
@@ -203,7 +232,9 @@ MOTIONS = {
 }
 
 
-def motion_message(kind, grp, t, vec, one, frame_id):
+def motion_message(
+    kind: str, grp: RotationGroup, t: float, vec: np.ndarray, one: np.ndarray, frame_id: str
+) -> Any:
     """One agent's pose or velocity message at simulated time t (type by dimension: see the
     module doc)."""
     spec = MOTIONS[kind]
@@ -219,17 +250,22 @@ def motion_message(kind, grp, t, vec, one, frame_id):
     return msg
 
 
-def pose_message(grp, t, x, one, frame_id):
+def pose_message(
+    grp: RotationGroup, t: float, x: np.ndarray, one: np.ndarray, frame_id: str
+) -> Any:
     """One agent's pose message (centroid, rotation O_i)."""
     return motion_message("pose", grp, t, x, one, frame_id)
 
 
-def twist_message(grp, t, v, w_one, frame_id):
+def twist_message(
+    grp: RotationGroup, t: float, v: np.ndarray, w_one: np.ndarray, frame_id: str
+) -> Any:
     """One agent's velocity message (centroid velocity, spatial angular velocity W_i)."""
     return motion_message("twist", grp, t, v, w_one, frame_id)
 
 
-def decode_motion(kind, msg, grp, dim, frame_id=None, t_max=None):
+def decode_motion(kind: str, msg: Any, grp: RotationGroup, dim: int, frame_id: str | None = None,
+                  t_max: float | None = None) -> tuple[Received | None, str | None]:
     """A pose or twist message -> (Received, None) or (None, reason).
 
     ``frame_id`` (d <= 3): a message in any other frame is refused; ``t_max``: stamps must lie
@@ -257,11 +293,13 @@ def decode_motion(kind, msg, grp, dim, frame_id=None, t_max=None):
     return Received(*stamp, vec, spec.from_matrix(grp, mat[None])), None
 
 
-def decode_pose_msg(msg, grp, dim, frame_id=None, t_max=None):
+def decode_pose_msg(msg: Any, grp: RotationGroup, dim: int, frame_id: str | None = None,
+                    t_max: float | None = None) -> tuple[Received | None, str | None]:
     """PoseStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) or (None, reason)."""
     return decode_motion("pose", msg, grp, dim, frame_id, t_max)
 
 
-def decode_twist_msg(msg, grp, dim, frame_id=None, t_max=None):
+def decode_twist_msg(msg: Any, grp: RotationGroup, dim: int, frame_id: str | None = None,
+                     t_max: float | None = None) -> tuple[Received | None, str | None]:
     """TwistStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) | (None, reason)."""
     return decode_motion("twist", msg, grp, dim, frame_id, t_max)

@@ -6,15 +6,18 @@ results (the runner, the benchmarks, the tests) reads them with ``run_records``;
 ``describe()`` is the human-readable line printed above it.
 """
 
+from __future__ import annotations
+
 import json
 import math
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field, fields
 
 RECORD_KEY = "polymatch_run_record"
 RECORD_VERSION = 1
 
 
-def drop_summary(counts):
+def drop_summary(counts: Mapping[str, int]) -> str:
     """'no messages dropped' or 'dropped N messages (reason: n, ...)'."""
     if not counts:
         return "no messages dropped"
@@ -43,36 +46,36 @@ class RunRecord:
     role: str
     mode: str
     t: float
-    agents: tuple = ()
+    agents: tuple[int, ...] = ()
     finished: bool = False
     steps: int = 0
     rounds: int = 0
     rounds_per_second: float = 0.0
-    ms_per_round: dict = field(default_factory=dict)
+    ms_per_round: dict[str, float] = field(default_factory=dict)
     late_ticks: int = 0
-    matched_after: float = None
-    dropped: dict = field(default_factory=dict)
-    diameter: float = None
+    matched_after: float | None = None
+    dropped: dict[str, int] = field(default_factory=dict)
+    diameter: float | None = None
     agents_heard: int = 0
     reports: int = 0
-    peers: tuple = ()
+    peers: tuple[int, ...] = ()
     stage_subscriptions: int = 0
-    clock_offsets: dict = field(default_factory=dict)
+    clock_offsets: dict[int, float] = field(default_factory=dict)
     n_agents: int = 0
     node: str = ""
 
     @property
-    def dropped_total(self):
+    def dropped_total(self) -> int:
         return sum(self.dropped.values())
 
-    def to_json(self):
+    def to_json(self) -> str:
         data = asdict(self)
         data["agents"] = list(self.agents)
         data["peers"] = list(self.peers)
         return json.dumps({RECORD_KEY: RECORD_VERSION, **data})
 
     @classmethod
-    def from_json(cls, text):
+    def from_json(cls, text: str) -> RunRecord | None:
         """The record of a JSON line, or None for any other line (never raises)."""
         text = text.strip()
         if not text.startswith("{"):
@@ -94,10 +97,10 @@ class RunRecord:
         except (TypeError, ValueError, AttributeError):
             return None
 
-    def name(self):
+    def name(self) -> str:
         return "monitor" if self.role == "monitor" else "agent " + ",".join(map(str, self.agents))
 
-    def describe(self):
+    def describe(self) -> str:
         """The line for people (README: `polymatch run -v` shows the agents')."""
         if self.role == "monitor":
             return (
@@ -123,7 +126,7 @@ class RunRecord:
         return f"{self.name()}: {text}; {drop_summary(self.dropped)}"
 
 
-def run_records(lines):
+def run_records(lines: Iterable[str]) -> list[RunRecord]:
     """Every run record among ``lines`` (text lines, e.g. a process's output), in order."""
     out = []
     for line in lines:

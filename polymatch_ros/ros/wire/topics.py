@@ -6,7 +6,17 @@ Names are relative: they resolve in the node's namespace, which is the ensemble
 is the ROS-wide aggregate topic and stays absolute.
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+    from rclpy.publisher import Publisher
+    from rclpy.qos import QoSProfile
+    from rclpy.subscription import Subscription
 
 DEFAULT_ENSEMBLE = "polymatch"
 
@@ -19,8 +29,8 @@ class Topic:
     name: str
     kind: str
     qos: str
-    realtime_reader_qos: str = None
-    reader_qos: str = None
+    realtime_reader_qos: str | None = None
+    reader_qos: str | None = None
 
 
 TOPICS = {
@@ -44,7 +54,7 @@ TOPICS = {
 }
 
 
-def message_type(kind, dim=None):
+def message_type(kind: str, dim: int | None = None) -> type:
     """The message class of a topic kind; the one d <= 3 / d >= 4 switch of poses and twists."""
     if kind in ("pose", "twist") and dim is not None and dim <= 3:
         from geometry_msgs.msg import PoseStamped, TwistStamped
@@ -73,28 +83,29 @@ def message_type(kind, dim=None):
     raise KeyError(kind)
 
 
-def topic_name(key, agent=None):
+def topic_name(key: str, agent: int | None = None) -> str:
     """The relative (or, for /diagnostics, absolute) name of a topic of the table."""
     name = TOPICS[key].name
     return name.format(agent=agent) if "{agent}" in name else name
 
 
-def full_name(ensemble, key, agent=None):
+def full_name(ensemble: str, key: str, agent: int | None = None) -> str:
     """The name as resolved in namespace /<ensemble> (without remaps): what users see."""
     name = topic_name(key, agent)
     return name if name.startswith("/") else f"/{ensemble.strip('/')}/{name}"
 
 
-def namespace(ensemble):
+def namespace(ensemble: str) -> str:
     return "/" + ensemble.strip("/")
 
 
-def _resolve(node, name, resolver):
+def _resolve(node: Node, name: str, resolver: Node | None) -> str:
     """Names for a node that does not share the process's remap rules: resolved by ``resolver``."""
     return name if resolver is None else resolver.resolve_topic_name(name)
 
 
-def publisher(node, key, dim=None, agent=None, resolver=None, **kwargs):
+def publisher(node: Node, key: str, dim: int | None = None, agent: int | None = None,
+              resolver: Node | None = None, **kwargs: Any) -> Publisher:
     t = TOPICS[key]
     return node.create_publisher(
         message_type(t.kind, dim),
@@ -104,9 +115,9 @@ def publisher(node, key, dim=None, agent=None, resolver=None, **kwargs):
     )
 
 
-def subscription(
-    node, key, callback, dim=None, agent=None, mode="lockstep", resolver=None, **kwargs
-):
+def subscription(node: Node, key: str, callback: Callable[..., None], dim: int | None = None,
+                 agent: int | None = None, mode: str = "lockstep", resolver: Node | None = None,
+                 **kwargs: Any) -> Subscription:
     t = TOPICS[key]
     qos = t.reader_qos or (t.realtime_reader_qos if mode == "realtime" else None) or t.qos
     return node.create_subscription(
@@ -146,13 +157,13 @@ QOS = {
 }
 
 
-def qos_profiles():
+def qos_profiles() -> dict[str, QoSProfile]:
     """The rclpy QoSProfile of each entry of ``QOS`` (imported lazily: rclpy is only needed
     here)."""
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    def profile(depth, reliable, latched):
-        history = {"history": HistoryPolicy.KEEP_ALL}
+    def profile(depth: int | None, reliable: bool, latched: bool) -> QoSProfile:
+        history: dict[str, Any] = {"history": HistoryPolicy.KEEP_ALL}
         if depth is not None:
             history = {"history": HistoryPolicy.KEEP_LAST, "depth": depth}
         return QoSProfile(

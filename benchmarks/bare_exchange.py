@@ -1,0 +1,131 @@
+"""The bare transport's all-to-all lockstep exchange: the limit for the agents' round rate.
+
+    python -m benchmarks.bare_exchange INDEX K ROUNDS [PAYLOAD] [--executor single|events]
+
+Process INDEX of K publishes one std_msgs/Float64MultiArray of PAYLOAD doubles per
+round on /polymatch_bare/p<INDEX> and waits, spinning the same executor with the
+same QoS and the same lean node and executor as the agents' lockstep stages
+(RELIABLE, VOLATILE; readers KEEP_ALL),
+until it has every other process's message of that round.  No numerics.  It waits
+for discovery exactly as an agent does (its readers matched a writer of every peer,
+its writer matched K - 1 readers) and prints one line; as an agent's, its rate counts the
+rounds after the first, which waits for the last peer to start:
+
+    bare 3/8: 512.3 rounds/s over 400 rounds; matched after 0.84 s
+"""
+
+import array
+import sys
+import time
+
+
+def _parse(argv):
+    """(INDEX, K, ROUNDS, PAYLOAD, executor kind) from the command line."""
+    executor_kind = "single"
+    if "--executor" in argv:
+        i = argv.index("--executor")
+        executor_kind = argv[i + 1]
+        argv = argv[:i] + argv[i + 2:]
+    payload = int(argv[3]) if len(argv) > 3 else 10
+    return int(argv[0]), int(argv[1]), int(argv[2]), payload, executor_kind
+
+
+def _endpoints(node, me, k, inbox):
+    """This process's writer and a reader of every peer's topic; a reader files each round's
+    message under ``inbox[round]``."""
+    from std_msgs.msg import Float64MultiArray
+
+    from polymatch_ros.ros import wire
+    from polymatch_ros.ros.nodes.exchange import quiet_events
+
+    pub_events, sub_events = quiet_events()
+    qos = wire.qos_profiles()
+    pub = node.create_publisher(Float64MultiArray, f"/polymatch_bare/p{me}", qos["stage"],
+                                event_callbacks=pub_events)
+
+    def callback(peer):
+        def receive(msg):
+            inbox.setdefault(int(msg.data[0]), set()).add(peer)
+        return receive
+
+    subs = [
+        node.create_subscription(
+            Float64MultiArray,
+            f"/polymatch_bare/p{p}",
+            callback(p),
+            qos["stage_in"],
+            event_callbacks=sub_events,
+        )
+        for p in range(k)
+        if p != me
+    ]
+    return pub, subs
+
+
+def _events_executor(node, executor):
+    """Move ``node`` from ``executor`` to a new rclpy EventsExecutor."""
+    from rclpy.experimental.events_executor import EventsExecutor
+
+    executor.remove_node(node)
+    executor = EventsExecutor()
+    executor.add_node(node)
+    return executor
+
+
+def _wait_matched(executor, pub, subs, k):
+    """Spin until every peer's writer and K - 1 readers are matched; the seconds it took."""
+    t_node = time.monotonic()
+    while not (
+        all(s.get_publisher_count() >= 1 for s in subs) and pub.get_subscription_count() >= k - 1
+    ):
+        executor.spin_once(timeout_sec=0.05)
+    return time.monotonic() - t_node
+
+
+def _exchange(executor, pub, inbox, k, rounds, payload):
+    """``rounds`` lockstep rounds: publish, then spin until every peer's message of the round
+    is in; the wall seconds."""
+    from std_msgs.msg import Float64MultiArray
+
+    msg = Float64MultiArray()
+    filler = [0.5] * (payload - 1)
+    t0 = time.perf_counter()
+    for r in range(rounds):
+        msg.data = array.array("d", [float(r)] + filler)
+        pub.publish(msg)
+        while len(inbox.get(r, ())) < k - 1:
+            executor.spin_once(timeout_sec=1.0)
+        inbox.pop(r, None)
+        if r == 0:  # it waited for the last peer to start: time the rounds after it
+            t0 = time.perf_counter()
+    return time.perf_counter() - t0
+
+
+def main(argv=None):
+    me, k, rounds, payload, executor_kind = _parse(sys.argv[1:] if argv is None else argv)
+    t_start = time.monotonic()
+    import rclpy
+    from rclpy.duration import Duration
+
+    rclpy.init()
+    from polymatch_ros.ros.nodes.exchange import lean_node
+    node, executor = lean_node(f"bare_{me}")
+    inbox = {}
+    pub, subs = _endpoints(node, me, k, inbox)
+    if executor_kind == "events":
+        executor = _events_executor(node, executor)
+    matched = _wait_matched(executor, pub, subs, k)
+    wall = _exchange(executor, pub, inbox, k, rounds, payload)
+    pub.wait_for_all_acked(Duration(seconds=5))
+    print(
+        f"bare {me}/{k}: {(rounds - 1) / wall:.1f} rounds/s over {rounds} rounds; matched after "
+        f"{matched:.2f} s "
+        f"({time.monotonic() - t_start - wall:.2f} s from process start)",
+        flush=True,
+    )
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,36 @@
+"""Runs of `polymatch` for the families that measure the ROS node set (trade, distributed,
+graphs): a scene file in the run's directory, the command under ``timeout``, and the agents'
+run records it wrote."""
+
+import os
+import subprocess
+import sys
+
+
+def write_scene(directory, name, text):
+    """Write the scene ``text`` to ``directory/name``; return the path."""
+    path = os.path.join(directory, name)
+    with open(path, "w") as fh:
+        fh.write(text)
+    return path
+
+
+def run_cli(env, argv, timeout):
+    """`python -m polymatch_ros.cli ARGV` under ``timeout -k 5 TIMEOUT``; its CompletedProcess
+    with the output as text."""
+    return subprocess.run(
+        ["timeout", "-k", "5", str(timeout), sys.executable, "-m", "polymatch_ros.cli"] + argv,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+
+
+def agent_records(path):
+    """The agents' run records a `polymatch run --records` wrote (none if the run failed early)."""
+    from polymatch_ros.ros.wire import run_records
+
+    if not os.path.exists(path):
+        return []
+    with open(path, encoding="utf-8") as fh:
+        return [r for r in run_records(fh) if r.role == "agent"]

@@ -1,0 +1,7 @@
+"""`python -m polymatch_ros.cli` = `polymatch`."""
+
+import sys
+
+from . import main
+
+sys.exit(main())

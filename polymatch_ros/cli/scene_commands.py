@@ -1,0 +1,191 @@
+"""The scene commands: ``simulate``, ``explain``, ``integrators``, ``scenes`` (no ROS).
+
+    polymatch simulate SCENE     centralised run: progress, summary table, npz, PNG snapshots
+    polymatch explain SCENE      which model, representation and integrator, and why
+    polymatch integrators        the registry: order, evaluations and exchange rounds per step
+    polymatch scenes             the scenes shipped in config/
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import warnings
+from typing import Any, cast
+
+import numpy as np
+
+from ..console import (
+    SUMMARY_HEADER,
+    Progress,
+    format_table,
+    memory_size,
+    positive_float,
+    summary_rows,
+    tolerance_arg,
+    writable_output,
+)
+from ..core.errors import PolymatchError
+from ..core.limits import Limits
+from ..core.model import GroupState
+from ..core.preflight import check_run
+from ..core.scene import load_scene, shipped_config_dirs
+from ..core.simulate import Trajectory, convergence_verdict
+
+
+def _limits(args: argparse.Namespace) -> Limits | None:
+    return Limits(memory=args.memory_limit) if getattr(args, "memory_limit", None) else None
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """A centralised run of a scene: progress, summary table, verdict; npz and figure."""
+    from ..core.simulate import explain, simulate
+    save = writable_output(args.save, ".npz") if args.save else None
+    figure = writable_output(args.figure, ".png") if args.figure else None
+    scene = load_scene(args.scene, {"time.t_end": args.t_end}, limits=_limits(args))
+    samples: Any = None  # sample times (an array), or the scene's
+    if figure:
+        samples = np.unique(np.concatenate([scene.samples,
+                                            [t for t in scene.snapshots if t <= scene.t_end]]))
+    kept = len(scene.samples if samples is None else samples) if (save or figure) else 0
+    check_run(scene, args.integrator, args.dt, args.tolerance, kept_samples=kept,
+              limits=_limits(args))
+    if args.explain:
+        print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
+        return 0
+    progress = Progress(scene.t_end, args.quiet)
+    traj = simulate(scene, args.integrator, args.dt, args.tolerance, samples=samples,
+                    keep_states=bool(save or figure), progress=progress,
+                    stop_when_converged=args.stop_when_converged)
+    progress.done()
+    p = traj.plan
+    print(f"scene {scene.name}: {scene.model.n_agents} agents, d = {scene.dim}, "
+          f"integrator {p.name}"
+          + (f" dt = {p.dt:g}" if p.dt else f" tolerance = {p.tolerance:g}"))
+    print(format_table(summary_rows(traj.scene, traj.metrics[-1]), SUMMARY_HEADER))
+    print(f"t = {traj.times[-1]:g}, steps {traj.steps}, right-hand sides {traj.rhs_evals}, "
+          f"wall time {traj.wall_time:.3f} s")
+    if traj.metrics[-1].group_separation is not None:
+        print(f"distance between group centres: {traj.metrics[-1].group_separation:.4g} "
+              f"(L = {scene.model.L:g})")
+    if save:
+        save_npz(traj, save)
+        print(f"trajectory saved to {save}")
+    if figure:
+        from ..figures import snapshot_figure
+        snapshot_figure(traj, figure)
+        print(f"snapshots saved to {figure}")
+    code, msg = convergence_verdict(scene, traj.metrics[-1].diameter, traj.converged_at,
+                                    traj.stationarity, metrics=traj.metrics[-1])
+    print(msg)
+    return code
+
+
+def save_npz(traj: Trajectory, path: str) -> None:
+    """The trajectory, its metrics and the scene's polytopes, as one compressed npz."""
+    scene = traj.scene
+    model = scene.model
+    data: dict[str, Any] = {"times": np.array(traj.times), "origin": scene.origin,
+            "diameter": traj.diameters}
+    for gi, g in enumerate(model.groups):
+        key = f"group{gi}_"
+        data[key + "name"] = np.array(g.name)
+        data[key + "reference"] = g.reference
+        data[key + "edges"] = np.array(g.edges)
+        if g.scales is not None:
+            data[key + "scales"] = g.scales
+        rows = [cast(GroupState, st.groups[gi]) for st in traj.states]  # whole states
+        data[key + "centroids"] = np.array([gs.x + scene.origin for gs in rows])
+        data[key + "rotations"] = np.array([model.rotations.to_matrices(gs.rot) for gs in rows])
+        for name in ("centroid_diameter", "rotation_diameter", "matching_diameter", "energy",
+                     "orthogonality"):
+            data[key + name] = np.array([getattr(m.groups[gi], name) for m in traj.metrics])
+    np.savez_compressed(path, **data)
+
+
+def cmd_explain(args: argparse.Namespace) -> int:
+    """Which model, representation and integrator a scene uses, and why."""
+    from ..core.simulate import explain
+    scene = load_scene(args.scene, limits=_limits(args))
+    check_run(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed,
+              limits=_limits(args))
+    print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance,
+                            distributed=args.distributed)))
+    return 0
+
+
+def cmd_integrators(args: argparse.Namespace) -> int:
+    """The integrator registry as a table."""
+    from ..core.adaptive import AdaptiveLie
+    from ..core.integrators import METHODS
+    rows = []
+    for m in list(METHODS.values()) + [AdaptiveLie]:
+        i = m.info
+        models = "/".join({1: "1st", 2: "2nd"}[k] for k in i.models)
+        rows.append([i.name, i.order, i.stages, i.rounds if i.rounds else "-", i.family, models,
+                     i.summary])
+    print(format_table(rows, ["name", "order", "evals/step", "rounds/step", "family", "models",
+                              "what"]))
+    return 0
+
+
+def cmd_scenes(args: argparse.Namespace) -> int:
+    """The shipped scenes as a table."""
+    rows = []
+    for d in shipped_config_dirs()[:1]:
+        for sub in ("", "extremes"):
+            folder = os.path.join(d, sub)
+            if not os.path.isdir(folder):
+                continue
+            for f in sorted(os.listdir(folder)):
+                if not f.endswith(".yaml"):
+                    continue
+                name = os.path.join(sub, f[:-5]) if sub else f[:-5]
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        s = load_scene(os.path.join(folder, f))
+                    rows.append([name, s.dim, s.model.n_agents, s.model.order, s.description])
+                except PolymatchError as exc:
+                    rows.append([name, "?", "?", "?", f"invalid: {exc}"])
+    print(format_table(rows, ["scene", "d", "N", "order", "description"]))
+    return 0
+
+
+def add_integrator_options(p: argparse.ArgumentParser) -> None:
+    """--integrator, --dt, --tolerance and --memory-limit."""
+    p.add_argument("--integrator", "-i", metavar="NAME",
+                   help="integrator (see `polymatch integrators`)")
+    p.add_argument("--dt", type=positive_float, help="fixed step size (fixed-step methods only)")
+    p.add_argument("--tolerance", type=tolerance_arg,
+                   help="relative tolerance in [1e-14, 1) (the adaptive integrator only)")
+    p.add_argument("--memory-limit", type=memory_size, metavar="SIZE",
+                   help="refuse scenes estimated to need more memory (default 2G), e.g. 8G")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """The four scene commands' parsers."""
+    p = sub.add_parser("simulate", help="centralised simulation of a scene")
+    p.add_argument("scene", help="scene file or shipped scene name")
+    add_integrator_options(p)
+    p.add_argument("--t-end", type=positive_float, help="override time.t_end")
+    p.add_argument("--save", metavar="NPZ", help="save the trajectory (npz)")
+    p.add_argument("--figure", metavar="PNG", help="render the snapshot figure (needs matplotlib)")
+    p.add_argument("--explain", action="store_true",
+                   help="say which model and integrator, then exit")
+    p.add_argument("--stop-when-converged", action="store_true",
+                   help="stop at the first sample under tolerance")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("explain",
+                       help="which model, representation and integrator a scene uses, and why")
+    p.add_argument("scene")
+    add_integrator_options(p)
+    p.add_argument("--distributed", action="store_true", help="as the ROS node set would run it")
+    p.set_defaults(func=cmd_explain)
+
+    p = sub.add_parser("integrators", help="list the integrators")
+    p.set_defaults(func=cmd_integrators)
+    p = sub.add_parser("scenes", help="list the shipped scenes")
+    p.set_defaults(func=cmd_scenes)

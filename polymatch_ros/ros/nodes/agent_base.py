@@ -1,0 +1,319 @@
+"""What every polytope agent shares, whatever its mode (``agent.py`` picks the mode's class).
+
+The node lives in the ensemble's namespace (``__ns``, default ``/polymatch``) under the
+name the remap rules give it (``__node``; the runner uses ``agent_<i>``); its topics are
+relative (``wire.TOPICS``).  One class per mode: ``lockstep.LockstepAgent`` exchanges every
+integrator stage so the trajectory equals ``polymatch simulate`` to round-off;
+``realtime.RealtimeAgent`` steps on a wall-clock timer with the latest pose of each peer.
+What both need is here: scene and layout, publishers, the control topic and services
+(``control``), diagnostics, the run record, discovery.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from ...core.errors import ParameterError, PolymatchError
+from ...core.model import GroupState, State, System
+from ...core.simulate import plan, prepare
+from .. import wire
+from .control import AgentControl, offer_agent_services, parse_command
+from .exchange import DropCounter, Layout
+from .process import NodeApp
+
+if TYPE_CHECKING:
+    from rclpy.executors import Executor
+    from rclpy.node import Node
+    from rclpy.publisher import Publisher
+
+    from ...core.scene import Scene
+
+
+def local_state(scene: Scene, layout: Layout) -> State:
+    grp = scene.model.rotations
+    groups: list[GroupState | None] = []
+    for gs, rows in zip(scene.initial.groups, layout.rows):
+        assert gs is not None  # the scene's initial state has every group
+        groups.append(
+            GroupState(
+                gs.x[rows].copy(),
+                grp.take(gs.rot, rows),
+                None if gs.v is None else gs.v[rows].copy(),
+                None if gs.w is None else grp.algebra_take(gs.w, rows),
+            )
+        )
+    return State(0.0, tuple(groups))
+
+
+class AgentBase(NodeApp):
+    """Scene, state and publishing of the agents one process hosts; ``run()`` -> exit code.
+
+    Subclasses set ``mode`` and define ``step_size()`` and ``loop()``.
+    """
+
+    mode: str  # each mode's class names its mode
+
+    def __init__(
+        self, node: Node, params: dict[str, Any], executor: Executor | None = None
+    ) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.node, self.params = node, params
+        self.created = time.monotonic()
+        self.matched_after: float | None = None
+        self.log = node.get_logger()
+        if executor is None:  # a managed agent (``managed``) brings the one its node spins in
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+        self.executor = executor
+        self._configure(params)
+        self._make_publishers()
+
+    def _configure(self, p: dict[str, Any]) -> None:
+        from ...core.scene import load_scene, resolve_scene_path
+
+        scene = load_scene(resolve_scene_path(p["scene"]), {"time.t_end": p["t_end"] or None})
+        local = p["agents"] or [p["agent"]]
+        bad = [a for a in local if not 0 <= a < scene.model.n_agents]
+        if bad:
+            raise ParameterError(
+                f"parameter 'agents': agent {bad[0]} is not in the scene "
+                f"(0..{scene.model.n_agents - 1})"
+            )
+        self.plan = plan(scene, p["integrator"] or None, self.step_size(p), distributed=True)
+        self.scene = scene = prepare(scene, self.plan, distributed=True)
+        self.model = scene.model
+        self.grp = self.model.rotations
+        self.layout = Layout(self.model, local, p["agents_per_process"])
+        self.system = System(self.model, self.layout.rows)
+        self.state = local_state(scene, self.layout)
+        self.drops = DropCounter(self.log)
+        self.control = AgentControl(self.mode, self.on_pause)
+        self.rounds = self.steps = self.late_ticks = 0
+        self.round_time = 0.0  # wall seconds of the timed rounds (all but ``untimed_rounds``)
+        self.untimed_rounds = 0  # lockstep: the first round, which waits for every peer's start
+        self.finished = False
+
+    def step_size(self, p: dict[str, Any]) -> float | None:
+        raise NotImplementedError
+
+    def _make_publishers(self) -> None:
+        node, dim, local = self.node, self.model.dim, self.layout.local
+        self.pose_pubs = {a: wire.publisher(node, "pose", dim, a) for a in local}
+        self.final_pubs = {a: wire.publisher(node, "final_pose", dim, a) for a in local}
+        second = self.model.order == 2
+        self.twist_pubs = (
+            {a: wire.publisher(node, "twist", dim, a) for a in local} if second else {}
+        )
+        self.final_twist_pubs = (
+            {a: wire.publisher(node, "final_twist", dim, a) for a in local} if second else {}
+        )
+        self.diag_pub = wire.publisher(node, "diagnostics")
+        self.status_pub = wire.publisher(node, "status")
+        wire.subscription(node, "control", self._control)
+        self.services = offer_agent_services(node, self.control, self.log)
+        self._last_diag = 0.0
+
+    # -- control: the ensemble's commands (control topic) and this process's services -------
+    def _control(self, msg: Any) -> None:
+        command = parse_command(msg.data)
+        if command is None:
+            self.drops("control", f"bad command {msg.data[:80]!r}")
+            return
+        _, message = self.control.command(*command)
+        if command[0] != "received":
+            self.log.info(f"control {command[0]}: {message}")
+
+    def on_pause(self, paused: bool) -> None:
+        """Called when a pause or resume arrives (bridge agents command zero at once)."""
+
+    @property
+    def stop_requested(self) -> bool:
+        return self.control.stop_requested
+
+    @property
+    def start_epoch(self) -> float | None:
+        return self.control.start_epoch
+
+    @property
+    def paused(self) -> bool:
+        return self.control.paused
+
+    # -- publishing ------------------------------------------------------------------------------
+    def publish_state(self, final: bool = False) -> None:
+        """Publish every local agent's pose (and velocity); ``final``: on the latched final topics
+        only (the last step's pose is already on the pose topic: once is not a repeat).
+
+        Per-step poses nobody subscribes to are not even built (the lockstep hot loop).
+        """
+        pose_pubs, twist_pubs = (
+            (self.final_pubs, self.final_twist_pubs)
+            if final
+            else (self.pose_pubs, self.twist_pubs)
+        )
+        if final or any(p.get_subscription_count() for p in pose_pubs.values()):
+            self._publish_rows(pose_pubs, twist_pubs)
+        self._maybe_diagnostics()
+
+    def _publish_rows(
+        self, pose_pubs: dict[int, Publisher], twist_pubs: dict[int, Publisher]
+    ) -> None:
+        st, frame = self.state, self.params["frame_id"]
+        for gi in self.layout.local_groups:
+            gs, g = st.groups[gi], self.model.groups[gi]
+            assert gs is not None  # the state holds every local group
+            for r, row in enumerate(self.layout.rows[gi]):
+                a = g.start + row
+                x = gs.x[r] + self.scene.origin
+                pose_pubs[a].publish(
+                    wire.pose_message(self.grp, st.t, x, self.grp.take(gs.rot, [r]), frame)
+                )
+                if self.model.order == 2:
+                    assert gs.v is not None and gs.w is not None  # second order: velocities
+                    w_one = self.grp.algebra_take(gs.w, [r])
+                    twist_pubs[a].publish(
+                        wire.twist_message(self.grp, st.t, gs.v[r], w_one, frame)
+                    )
+
+    def diagnostic_note(self) -> tuple[str, dict[str, Any]]:
+        """(a note for the status message ('' or ending in '; '), extra {key: value})."""
+        return "", {}
+
+    def time_split(self) -> dict[str, float]:
+        """Milliseconds per round publishing stages, waiting for peers, and everything else."""
+        return {}
+
+    def record(self) -> wire.RunRecord:
+        """This process's run record (``wire.RunRecord``)."""
+        timed = self.rounds - self.untimed_rounds
+        rps = timed / self.round_time if self.round_time > 0 and timed > 0 else 0.0
+        return wire.RunRecord(
+            role="agent",
+            mode=self.mode,
+            t=float(self.state.t),
+            agents=tuple(self.layout.local),
+            finished=self.finished,
+            steps=self.steps,
+            rounds=self.rounds,
+            rounds_per_second=rps,
+            ms_per_round=self.time_split(),
+            late_ticks=self.late_ticks,
+            matched_after=self.matched_after,
+            dropped=dict(self.drops.counts),
+            peers=tuple(self.layout.peers),
+            stage_subscriptions=self.stage_subscriptions(),
+            n_agents=self.model.n_agents,
+            node=self.node.get_fully_qualified_name(),
+        )
+
+    def stage_subscriptions(self) -> int:
+        """Subscriptions to the peers' stage topics (lockstep only)."""
+        return 0
+
+    def flush_poses(self, timeout: float = 3.0) -> None:
+        """Wait until the last poses reached every subscriber (the monitor, the runner)."""
+        from rclpy.duration import Duration
+
+        pubs = [self.pose_pubs, self.twist_pubs, self.final_pubs, self.final_twist_pubs]
+        for pub in [p for group in pubs for p in group.values()] + [self.status_pub]:
+            pub.wait_for_all_acked(Duration(seconds=timeout))
+
+    def _maybe_diagnostics(self, force: bool = False) -> None:
+        """Once a second: diagnostics for people and tools, the run record for the runner."""
+        now = time.monotonic()
+        if not force and now - self._last_diag < 1.0:
+            return
+        self._last_diag = now
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        from std_msgs.msg import String
+
+        rec = self.record()
+        self.status_pub.publish(String(data=rec.to_json()))
+        status = DiagnosticStatus(
+            name=f"polymatch{self.node.get_fully_qualified_name()}",
+            hardware_id=self.node.get_fully_qualified_name(),
+        )
+        note, extra = self.diagnostic_note()
+        fine = self.drops.total == 0 and not note
+        status.level = DiagnosticStatus.OK if fine else DiagnosticStatus.WARN
+        status.message = f"{self.mode}: t = {self.state.t:.4g}; {note}{self.drops.summary()}"
+        vals = {
+            "t": rec.t,
+            "steps": rec.steps,
+            "rounds": rec.rounds,
+            "rounds_per_second": rec.rounds_per_second,
+            "dropped": self.drops.total,
+        }
+        vals.update({f"{k}_ms_per_round": v for k, v in rec.ms_per_round.items()})
+        vals.update({f"dropped: {k}": v for k, v in self.drops.counts.items()})
+        vals.update(extra)
+        vals.update(self.extra_diagnostics())
+        status.values = [
+            KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v))
+            for k, v in vals.items()
+        ]
+        arr = DiagnosticArray(status=[status])
+        arr.header.stamp = self.node.get_clock().now().to_msg()
+        self.diag_pub.publish(arr)
+
+    def extra_diagnostics(self) -> dict[str, Any]:
+        """{key: value} a mode adds to the diagnostics (realtime: the peers' clock offsets)."""
+        return {}
+
+    # -- running ---------------------------------------------------------------------------------
+    def spin_once(self, timeout: float) -> None:
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def wait_for_discovery(self, peers_matched: Callable[[], bool] | None = None,
+                           missing: Callable[[], list[int]] | None = None) -> None:
+        """Wait until ``peers_matched()`` and pose_subscribers readers on every pose topic."""
+        deadline = time.monotonic() + self.params["discovery_timeout"]
+        want = self.params["pose_subscribers"]
+        while True:
+            peers_ok = peers_matched is None or peers_matched()
+            if peers_ok and all(
+                p.get_subscription_count() >= want for p in self.pose_pubs.values()
+            ):
+                self.matched_after = time.monotonic() - self.created
+                return
+            if time.monotonic() > deadline:
+                gone = missing() if missing is not None else []
+                what = f"agent(s) {', '.join(map(str, gone))}" if gone else "all subscribers"
+                raise PolymatchError(
+                    f"discovery timed out after {self.params['discovery_timeout']:g} s "
+                    f"waiting for {what}"
+                )
+            self.spin_once(0.05)
+
+    def loop(self) -> None:
+        raise NotImplementedError
+
+    def run(self) -> int:
+        self.loop()
+        self.publish_state(final=True)
+        self.finished = True
+        self._maybe_diagnostics(force=True)
+        self.settle()
+        return 0
+
+    def settle(self) -> None:
+        """After the final pose: until its readers have it (and the lead host said so)."""
+        self.flush_poses()
+        self.hold_final_poses()
+
+    def hold_final_poses(self) -> None:
+        """On a host without the summary: keep the latched final poses alive (this process)
+        until the host with it says 'received', at most ``hold_final`` s.  Its runner may match
+        our final-pose writers only after we published: a writer that ended by then is gone
+        with its sample."""
+        deadline = time.monotonic() + self.params["hold_final"]
+        while not self.control.final_received and time.monotonic() < deadline:
+            self.spin_once(0.05)
+
+    def final_record(self) -> wire.RunRecord | None:
+        return self.record() if self.finished else None
+
+    def release(self) -> None:
+        """What the agent built beside its node (lifecycle cleanup): nothing here."""

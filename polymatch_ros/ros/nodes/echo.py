@@ -1,0 +1,143 @@
+"""`polymatch echo TOPIC`: a launch-free stand-in for `ros2 topic echo` (ros2cli is not on PyPI).
+
+    polymatch echo /polymatch/diameter                     print every value, YAML-like
+    polymatch echo /polymatch/diameter --until-below 1e-6  exit 0 once a value is below 1e-6
+    polymatch echo /diagnostics --count 3
+
+The message type is read from the ROS graph (like ros2 topic echo) and the
+subscription adopts the publisher's durability, so a late echo of a latched
+topic still prints its last value.  It runs in the caller's ROS environment
+(ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE) and ends by itself: after
+--count messages, --until-below, or --timeout seconds (exit 1 on timeout).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+import time
+from typing import TYPE_CHECKING, Any, TextIO
+
+from ...core.errors import PolymatchError
+from .process import ros_main
+
+if TYPE_CHECKING:
+    from rclpy.qos import QoSProfile
+    from rclpy.topic_endpoint_info import TopicEndpointInfo
+
+
+def message_to_lines(msg: Any, indent: str = "") -> list[str]:
+    """A YAML-like rendering of a ROS message (nested fields, arrays shortened)."""
+    lines = []
+    for name in msg.get_fields_and_field_types():
+        value = getattr(msg, name)
+        if hasattr(value, "get_fields_and_field_types"):
+            lines.append(f"{indent}{name}:")
+            lines.extend(message_to_lines(value, indent + "  "))
+        elif isinstance(value, (list, tuple)) or (
+            hasattr(value, "__len__") and not isinstance(value, str)
+        ):
+            items = list(value)
+            if items and hasattr(items[0], "get_fields_and_field_types"):
+                lines.append(f"{indent}{name}:")
+                for item in items:
+                    sub = message_to_lines(item, indent + "  ")
+                    lines.append(f"{indent}- {sub[0].strip()}" if sub else f"{indent}-")
+                    lines.extend(sub[1:])
+            else:
+                shown = ", ".join(
+                    repr(float(v)) if isinstance(v, float) else str(v) for v in items[:16]
+                )
+                more = ", ..." if len(items) > 16 else ""
+                lines.append(f"{indent}{name}: [{shown}{more}]")
+        elif isinstance(value, float):
+            lines.append(f"{indent}{name}: {value!r}")
+        else:
+            lines.append(f"{indent}{name}: {value}")
+    return lines
+
+
+def message_class(type_name: str) -> type:
+    """'std_msgs/msg/Float64' -> the Python class."""
+    pkg, _, cls = type_name.partition("/msg/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), cls)
+
+
+class Echo:
+    """Print every message of ``topic`` until --count, --until-below or --timeout (exit 1)."""
+
+    def __init__(self, topic: str, count: int | None = None, until_below: float | None = None,
+                 timeout: float | None = None, stream: TextIO = sys.stdout) -> None:
+        from rclpy.node import Node
+
+        self.node = Node(f"echo_{os.getpid()}")
+        self.topic, self.count, self.until_below, self.timeout = topic, count, until_below, timeout
+        self.stream = stream
+        self.deadline = None if timeout is None else time.monotonic() + timeout
+        self.seen = 0
+        self.done = False
+
+    def _spin(self) -> None:
+        import rclpy
+
+        rclpy.spin_once(self.node, timeout_sec=0.1)
+
+    def _qos(self) -> tuple[type, QoSProfile]:
+        """The publishers' type, and a QoS that matches them (a latched topic's last value too)."""
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        infos: list[TopicEndpointInfo] = []
+        while not infos:
+            infos = self.node.get_publishers_info_by_topic(self.topic)
+            if self.deadline is not None and time.monotonic() > self.deadline:
+                raise PolymatchError(f"no publisher on {self.topic} within {self.timeout:g} s")
+            self._spin()
+        latched = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+        reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+        qos = QoSProfile(
+            depth=10,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        )
+        return message_class(infos[0].topic_type), qos
+
+    def _receive(self, msg: Any) -> None:
+        self.seen += 1
+        self.stream.write("\n".join(message_to_lines(msg)) + "\n---\n")
+        self.stream.flush()
+        if self.count is not None and self.seen >= self.count:
+            self.done = True
+        if (
+            self.until_below is not None
+            and hasattr(msg, "data")
+            and float(msg.data) < self.until_below
+        ):
+            self.done = True
+
+    def run(self) -> int:
+        cls, qos = self._qos()
+        self.node.create_subscription(cls, self.topic, self._receive, qos)
+        while not self.done:
+            if self.deadline is not None and time.monotonic() > self.deadline:
+                below = (
+                    f", none below {self.until_below:g}" if self.until_below is not None else ""
+                )
+                raise PolymatchError(
+                    f"{self.topic}: stopped after {self.timeout:g} s and "
+                    f"{self.seen} message(s){below}"
+                )
+            self._spin()
+        return 0
+
+    def destroy(self) -> None:
+        self.node.destroy_node()
+
+
+def echo(topic: str, count: int | None = None, until_below: float | None = None,
+         timeout: float | None = None, stream: TextIO = sys.stdout) -> int:
+    """Print the messages of ``topic`` (absolute) until ``count`` messages, a value below
+    ``until_below``, or ``timeout`` seconds (an error); the exit code."""
+    return ros_main(
+        lambda argv: Echo(topic, count, until_below, timeout, stream), "polymatch", ["polymatch"]
+    )

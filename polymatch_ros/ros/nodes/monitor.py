@@ -1,0 +1,313 @@
+"""The monitor: hears every agent's pose and publishes the ensemble's diameters.
+
+    ros2 run polymatch_ros monitor --ros-args -r __ns:=/polymatch -r __node:=monitor \\
+        -p scene:=config/congruent_triangles.yaml
+    ros2 topic echo /polymatch/diameter
+
+Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPICS``):
+  diameter            std_msgs/Float64  the paper's matching diameter max_{i,j,a} |x^i_a - x^j_a|
+                                        (max over groups; similar groups at their mean scale)
+  diameter/centroid   std_msgs/Float64  max_{i,j} |xbar_i - xbar_j| (max over groups)
+  diameter/rotation   std_msgs/Float64  max_{i,j} |O_i - O_j|_F (max over groups)
+  status              std_msgs/String   its run record (JSON, ``wire.RunRecord``), latched
+  /diagnostics        diagnostic_msgs/DiagnosticArray: per-group diameters, energy,
+                      orthogonality defect, agents heard, dropped messages
+  markers             visualization_msgs/MarkerArray: each polytope's edges (LINE_LIST),
+                      one colour per group, lifetime = peer_timeout so silent agents fade
+  start, stop, reset  std_srvs/Trigger  the ensemble's services (``control``), broadcast
+  pause               std_srvs/SetBool  to every agent on the control topic
+In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
+second, the latest simulated time that every agent's pose has reached (its loop, at that rate,
+takes the poses that came since its last report and publishes it, so the last step is reported
+within 1/report_rate s); in realtime at ``rate`` Hz from the latest poses, taken only then.
+The headline topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo`
+still gets the last value.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...core.metrics import ensemble_metrics
+from ...core.model import GroupState, State
+from .. import wire
+from .control import EnsembleControl
+from .exchange import DropCounter, LeanReaders, received_at
+from .monitor_output import diagnostics, markers
+from .params import MONITOR, declare
+from .process import NodeApp, ros_main
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+    from ...core.metrics import EnsembleMetrics
+    from ...core.model import Model
+    from .exchange import MessageInfo
+
+#: an agent's velocities as heard: (v, W as one algebra row)
+Velocity = tuple[np.ndarray, np.ndarray]
+
+
+class MonitorNode(NodeApp):
+    interrupted_exit = 0  # the monitor runs until it is stopped: Ctrl-C is its normal end
+
+    def __init__(self, node: Node, params: dict[str, Any]) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+
+        from ...core.scene import load_scene, resolve_scene_path
+
+        self.node, self.params = node, params
+        self.log = node.get_logger()
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(node)
+        self.scene = load_scene(
+            resolve_scene_path(params["scene"]), {"time.t_end": params["t_end"] or None}
+        )
+        self.model = self.scene.model
+        self.grp = self.model.rotations
+        self.n = self.model.n_agents
+        self.lockstep = params["mode"] == "lockstep"
+        self.drops = DropCounter(self.log)
+        self.repeats = 0  # poses heard again at a stamp already heard: not a drop
+        self.latest: dict[int, tuple[int, wire.Row, float]] = {}  # agent -> (t key, Row, heard)
+        self.velocity: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # agent -> (t key, v, w)
+        self.pending: dict[int, dict[int, wire.Row]] = {}  # time key -> {agent: Row} (lockstep)
+        self.pending_v: dict[int, dict[int, Velocity]] = {}
+        self.completed = -1  # lockstep: the latest stamp every agent (and velocity) reached
+        # lockstep: (t, rows, velocities) of it until it is reported
+        self.unreported: tuple[float, dict[int, wire.Row], dict[int, Velocity]] | None = None
+        # (t, metrics, agents heard) of the last report
+        self.last: tuple[float, EnsembleMetrics, int] | None = None
+        self.reports = 0
+        self._wire_up()
+        rate = params["report_rate"] if self.lockstep else params["rate"]
+        self.report_period = 1.0 / rate
+        self.report_due: Callable[[], None] = (
+            self._report_completed if self.lockstep else self._report_latest
+        )
+
+    def _wire_up(self) -> None:
+        """Readers of every agent's pose (and twist); the headline, diagnostics, status and
+        marker writers; the ensemble's services.
+
+        The readers live on a lean node of their own (``exchange.LeanReaders``), and each report
+        takes what they hold first (``_drain``), so the poses do not wake the monitor between
+        reports: in realtime each reader keeps an agent's newest pose (depth 1); in lockstep
+        the poses of the steps since the last report (RELIABLE, depth 100), every one of
+        which is taken, to complete every step."""
+        node, dim = self.node, self.model.dim
+        self.readers = LeanReaders(node, "_poses")
+        kinds = ("pose", "twist") if self.model.order == 2 else ("pose",)
+        for a in range(self.n):
+            for kind in kinds:
+                self.readers.subscribe(kind, self._receiver(a, kind), dim, a, self.params["mode"])
+        self.pub = {
+            key: wire.publisher(node, key)
+            for key in ("diameter", "diameter_centroid", "diameter_rotation")
+        }
+        self.diag_pub = wire.publisher(node, "diagnostics")
+        self.status_pub = wire.publisher(node, "status")
+        self.marker_pub = wire.publisher(node, "markers") if self.params["markers"] else None
+        self.control = EnsembleControl(node, self.params["mode"])
+
+    def _decode(self, agent: int, kind: str, msg: Any) -> wire.Received | None:
+        got, reason = wire.decode_motion(
+            kind, msg, self.grp, self.model.dim, self.params["frame_id"], self.scene.t_end
+        )
+        if got is None:
+            self.drops(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
+        return got
+
+    def _fresh(self, agent: int, key: int, pending: Mapping[int, Mapping[int, Any]]) -> bool:
+        """Lockstep: True if this stamp is still to be completed.  The same stamp heard again
+        (an agent's initial pose re-announced, a repeated publish) is expected traffic, not a
+        drop; a stamp older than the last completed one is a stale message, dropped and counted."""
+        if key > self.completed and agent not in pending.get(key, {}):
+            return True
+        if key >= self.completed:
+            self.repeats += 1
+        else:
+            self.drops(f"agent {agent}", "stale pose (a stamp from the past)")
+        return False
+
+    def _receiver(self, agent: int, kind: str) -> Callable[[Any, MessageInfo], None]:
+        """The callback of one agent's pose or twist topic: the latest of each agent, and in
+        lockstep the pending report of its stamp (a pose as a Row, a twist as (v, W))."""
+        pose = kind == "pose"
+        latest: dict[int, Any] = self.latest if pose else self.velocity
+        pending: dict[int, dict[int, Any]] = self.pending if pose else self.pending_v
+
+        def receive(msg: Any, info: MessageInfo) -> None:
+            got = self._decode(agent, kind, msg)
+            if got is None:
+                return
+            value: wire.Row | Velocity
+            if pose:
+                value = wire.Row(got.vec - self.scene.origin, got.rot)
+                latest[agent] = (got.key, value, received_at(info)[1])
+            else:
+                value = velocity = (got.vec, got.rot)
+                latest[agent] = (got.key, *velocity)
+            if self.lockstep and self._fresh(agent, got.key, pending):
+                pending.setdefault(got.key, {})[agent] = value
+                self._collect_completed()
+
+        return receive
+
+    # -- reporting --------------------------------------------------------------------------
+    def _state_from(
+        self, rows: Mapping[int, wire.Row], velocities: Mapping[int, Velocity]
+    ) -> tuple[Model, State, list[int]]:
+        """The agents heard: (model of the groups present, their State, the group indices);
+        with every agent heard, the scene's own model."""
+        groups: list[GroupState | None] = []
+        sub_groups, keep = [], []
+        for gi, g in enumerate(self.model.groups):
+            present = {a - g.start: rows[a] for a in g.indices if a in rows}
+            if not present:
+                continue
+            with_v = self.model.order == 2 and all(a + g.start in velocities for a in present)
+            if with_v:
+                for r, rec in present.items():
+                    rec.v, rec.w = velocities[r + g.start]
+            e = wire.assemble(self.grp, self.model.dim, present, with_v=with_v, with_w=with_v)
+            groups.append(GroupState(e.x, e.rot, e.v, e.w))
+            scales = None if g.scales is None else g.scales[e.index]
+            sub_groups.append(replace(g, size=len(present), scales=scales))
+            keep.append(gi)
+        state = State(0.0, tuple(groups))
+        if len(rows) == self.n:
+            return self.model, state, keep
+        return replace(self.model, groups=tuple(sub_groups)), state, keep
+
+    def _collect_completed(self) -> None:
+        """Lockstep: advance to the latest simulated time all agents (and velocities) have
+        reached; its poses wait in ``unreported`` for the next report, earlier ones are
+        superseded unreported."""
+        need_v = self.model.order == 2
+        for key in sorted(self.pending):
+            rows = self.pending[key]
+            if len(rows) < self.n or (need_v and len(self.pending_v.get(key, {})) < self.n):
+                break
+            vel = self.pending_v.pop(key, {})
+            del self.pending[key]
+            self.completed = key
+            self.unreported = (key * 1e-9, rows, vel)
+        for key in [k for k in self.pending if k <= self.completed]:
+            del self.pending[key]
+
+    def _report_completed(self) -> None:
+        """Lockstep, at ``report_rate`` Hz: publish the latest completed time if it is new."""
+        self._drain()
+        if self.unreported is not None:
+            t, rows, vel = self.unreported
+            self.unreported = None
+            self._publish(t, rows, vel)
+
+    def _drain(self) -> None:
+        """Take the poses and twists the readers hold (lockstep: up to their depth, 100 each)."""
+        self.readers.drain(per_reader=200)
+
+    def _report_latest(self) -> None:
+        """Realtime, at ``rate`` Hz: the metrics of the newest pose of every agent heard within
+        ``peer_timeout``."""
+        self._drain()
+        now = time.monotonic()
+        alive = [a for a, v in self.latest.items() if now - v[2] <= self.params["peer_timeout"]]
+        if not alive:
+            return
+        rows = {a: wire.Row(self.latest[a][1].x, self.latest[a][1].rot) for a in alive}
+        vel = {a: self.velocity[a][1:] for a in alive if a in self.velocity}
+        self._publish(max(self.latest[a][0] for a in alive) * 1e-9, rows, vel)
+
+    def _evaluate(
+        self, t: float, rows: Mapping[int, wire.Row], velocities: Mapping[int, Velocity]
+    ) -> tuple[EnsembleMetrics, list[int]]:
+        """The metrics of the agents heard (Prop 2.1/2.2 quantities); they become ``last``."""
+        model, state, keep = self._state_from(rows, velocities)
+        met = ensemble_metrics(model, state)
+        self.last = (t, met, len(rows))
+        return met, keep
+
+    def _publish(
+        self, t: float, rows: Mapping[int, wire.Row], velocities: Mapping[int, Velocity]
+    ) -> None:
+        from std_msgs.msg import Float64, String
+
+        met, keep = self._evaluate(t, rows, velocities)
+        self.reports += 1
+        for key, value in (
+            ("diameter", met.diameter),
+            ("diameter_centroid", max(g.centroid_diameter for g in met.groups)),
+            ("diameter_rotation", max(g.rotation_diameter for g in met.groups)),
+        ):
+            self.pub[key].publish(Float64(data=float(value)))
+        # diagnostics and markers are volatile: built only for readers that are there
+        if self.diag_pub.get_subscription_count():
+            self.diag_pub.publish(diagnostics(self, t, met, keep, len(rows)))
+        self.status_pub.publish(String(data=self.record().to_json()))
+        if self.marker_pub is not None and self.marker_pub.get_subscription_count():
+            self.marker_pub.publish(markers(self, {a: (r.x, r.rot) for a, r in rows.items()}))
+
+    def record(self) -> wire.RunRecord:
+        t, met, heard = self.last if self.last is not None else (0.0, None, 0)
+        return wire.RunRecord(
+            role="monitor",
+            mode=self.params["mode"],
+            t=float(t),
+            diameter=None if met is None else met.diameter,
+            agents_heard=heard,
+            reports=self.reports,
+            dropped=dict(self.drops.counts),
+        )
+
+    def run(self) -> int:
+        """Serve the node (services, control) and report every ``report_period`` s.
+
+        The reports run here, not in a timer callback: a Ctrl-C (the monitor's normal end) that
+        lands inside a callback leaves rclpy's task holding the timer, and destroying the node
+        then once crashed the process (SIGSEGV)."""
+        due = time.monotonic() + self.report_period
+        while True:
+            self.executor.spin_once(timeout_sec=min(0.5, max(0.0, due - time.monotonic())))
+            now = time.monotonic()
+            if now >= due:
+                due += self.report_period
+                if due <= now:  # behind (a loaded machine): the next one a period from now
+                    due = now + self.report_period
+                self.report_due()
+
+    def destroy(self) -> None:
+        self.readers.destroy()
+        super().destroy()
+
+    def final_record(self) -> wire.RunRecord | None:
+        if self.unreported is not None:  # completed after the last tick: the record is exact
+            self._evaluate(*self.unreported)
+            self.unreported = None
+        if self.last is None:
+            return None
+        rec = self.record()
+        rec.finished = True
+        return rec
+
+
+def make_monitor(argv: list[str] | None = None) -> MonitorNode:
+    from rclpy.node import Node
+
+    node = Node("monitor", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE))
+    return MonitorNode(node, declare(node, MONITOR))
+
+
+def main(args: list[str] | None = None) -> int:
+    return ros_main(make_monitor, "monitor", args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

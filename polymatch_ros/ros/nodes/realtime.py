@@ -1,0 +1,351 @@
+"""Realtime: each agent steps on its own wall-clock timer with the latest pose of each peer.
+
+Peers that fall silent longer than ``peer_timeout`` are dropped from the sums of
+(A-1)/(A-2) and re-admitted when they speak again (Theorem 4.2 under delays and churn).
+Each peer's clock offset is estimated from its pose stamps (clock_offset.py) and published in
+the diagnostics.
+
+A tick's work: wait on the agent node (control, services, parameters) until the tick is due,
+take what the peers' readers hold (``PeerTable.drain``: their own lean node, one wait, at
+most one pose per peer), step, publish.  The peers' poses do not wake the agent between
+ticks: their readers keep the newest (depth 1), and the middleware's reception time stamps
+each one for the clock offsets and the silence timeout.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from collections.abc import Callable, Iterable
+from types import SimpleNamespace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...core.model import System
+from ...core.simulate import drive
+from ...core.solver import Method
+from .. import wire
+from .agent_base import AgentBase, local_state
+from .clock_offset import ClockOffsets
+from .exchange import LeanReaders, MessageInfo, received_at
+from .runtime_params import RuntimeParams
+
+if TYPE_CHECKING:
+    from rclpy.executors import Executor
+    from rclpy.node import Node
+
+    from ...core.model import Request
+    from .exchange import DropCounter, Layout
+
+#: per group the arrays the core asks for (``wire.assemble``), None for groups not needed
+Ensemble = tuple[SimpleNamespace | None, ...]
+
+
+class PeerTable:
+    """The latest pose (and velocity) heard from each peer, and who is still alive.
+
+    Its readers live on a lean node of their own (``exchange.lean_node``, topic names resolved
+    by the agent node): ``drain()`` takes what they hold, at the tick, without waking the agent
+    for every pose in between.
+    """
+
+    def __init__(self, node: Node, layout: Layout, frame_id: str, timeout: float,
+                 drops: DropCounter, origin: np.ndarray, delay: float, t_max: float | None,
+                 clock: ClockOffsets | None = None, velocities: bool = True) -> None:
+        self.node, self.layout, self.drops = node, layout, drops
+        self.clock = clock  # ClockOffsets fed with every pose's stamp and arrival, or None
+        # injected transport delay (s): a pose is used this long after arrival
+        self.delay = float(delay)
+        # agent -> [(arrival, kind, values)] not yet delivered
+        self.pending: defaultdict[int, list[tuple[float, str, Any]]] = defaultdict(list)
+        # poses are absolute; the core works in offsets
+        self.origin = np.asarray(origin, dtype=float)
+        self.model = layout.model
+        self.grp = self.model.rotations
+        self.frame_id, self.timeout, self.t_max = frame_id, timeout, t_max
+        self.latest: dict[int, SimpleNamespace] = {}  # agent -> (t, x, rot, v, heard)
+        self.silent: set[int] = set()
+        dim = self.model.dim
+        self.readers = LeanReaders(node, "_peers")
+        # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
+        want_v = velocities and self.model.order == 2 and self.model.centroids_exact
+        for a in layout.peers:
+            kinds = ["pose"]
+            if want_v and self.layout.owner[a][0] in layout.local_groups:
+                kinds.append("twist")
+            for kind in kinds:
+                self.readers.subscribe(kind, self._receiver(a, kind), dim, a, "realtime")
+
+    @classmethod
+    def of_agent(cls, agent: AgentBase, clock: ClockOffsets | None = None) -> PeerTable:
+        """The table of a realtime or bridge agent (``AgentBase``), from its parameters; a bridge
+        agent (centroids measured, never advanced by the flow) hears no peer velocities."""
+        p = agent.params
+        return cls(agent.node, agent.layout, p["frame_id"], p["peer_timeout"], agent.drops,
+                   agent.scene.origin, p["delay"], agent.scene.t_end, clock,
+                   velocities=agent.mode != "bridge")
+
+    def _entry(self, agent: int) -> SimpleNamespace:
+        return self.latest.setdefault(
+            agent, SimpleNamespace(t=-np.inf, x=None, rot=None, v=None, heard=0.0)
+        )
+
+    def _receiver(self, agent: int, kind: str) -> Callable[[Any, MessageInfo], None]:
+        """The callback of one peer's pose or twist topic: decoded messages wait in ``pending``
+        (a pose as (t, offset x, rotation), a twist as its centroid velocity), stamped with the
+        time the middleware received them."""
+
+        def receive(msg: Any, info: MessageInfo) -> None:
+            got, reason = wire.decode_motion(
+                kind, msg, self.grp, self.model.dim, self.frame_id, self.t_max
+            )
+            if got is None:
+                self.drops(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
+                return
+            wall, mono = received_at(info)
+            if kind == "pose" and self.clock is not None:
+                self.clock.add(agent, got.t, wall)
+            value: Any = (got.t, got.vec - self.origin, got.rot) if kind == "pose" else got.vec
+            self.pending[agent].append((mono, kind, value))
+
+        return receive
+
+    def drain(self) -> None:
+        """Take the poses and twists the peers' readers hold (depth 1: one of each per peer,
+        unless more come while they are taken)."""
+        self.readers.drain(per_reader=4)
+
+    def destroy(self) -> None:
+        """The readers' lean node (lifecycle cleanup, shutdown)."""
+        self.readers.destroy()
+
+    def _deliver(self, now: float) -> None:
+        """Move every pose and velocity that has waited ``delay`` into the table."""
+        for agent, queue in self.pending.items():
+            keep: list[tuple[float, str, Any]] = []
+            for arrival, kind, values in queue:
+                if now - arrival < self.delay:
+                    keep.append((arrival, kind, values))
+                    continue
+                e = self._entry(agent)
+                if kind == "twist":
+                    e.v = values
+                    continue
+                t, x, rot = values
+                if t < e.t and agent not in self.silent:
+                    self.drops(f"agent {agent}", "out-of-order pose")
+                    continue
+                # an older stamp from a peer that had fallen silent is a restarted peer: a new
+                # incarnation, admitted from its own clock
+                e.t, e.x, e.rot, e.heard = t, x, rot, arrival + self.delay
+                if agent in self.silent:
+                    self.silent.discard(agent)
+                    self.node.get_logger().info(f"agent {agent} is back: re-admitted to the sums")
+            queue[:] = keep
+
+    def newest_time(self) -> float | None:
+        """The newest simulated time heard from any peer (None if none): the ensemble's clock."""
+        self.drain()
+        self._deliver(time.monotonic())
+        times = [e.t for e in self.latest.values() if e.x is not None and np.isfinite(e.t)]
+        return max(times) if times else None
+
+    def active(self) -> list[int]:
+        """Peers heard within the timeout (what their readers hold taken first); logs once
+        when one falls silent."""
+        self.drain()
+        now = time.monotonic()
+        self._deliver(now)
+        alive = []
+        for a in self.layout.peers:
+            e = self.latest.get(a)
+            if e is None or e.x is None:
+                continue
+            if now - e.heard > self.timeout:
+                if a not in self.silent:
+                    self.silent.add(a)
+                    self.node.get_logger().warning(
+                        f"agent {a} silent for {self.timeout:g} s: dropped from the sums"
+                    )
+                continue
+            alive.append(a)
+        return alive
+
+    def ensemble(self, request: Request, alive: Iterable[int]) -> Ensemble:
+        """Frozen peers + the local stage rows, per needed group, ``index`` = the rows present."""
+        model = self.model
+        out: list[SimpleNamespace | None] = []
+        alive = set(alive)
+        with_v = model.order == 2 and "v" in request.fields
+        for gi, g in enumerate(model.groups):
+            if gi not in self.layout.groups_needed:
+                out.append(None)
+                continue
+            rows: dict[int, wire.Row] = {}
+            for a in g.indices:
+                if a in alive:
+                    p = self.latest[a]
+                    rows[a - g.start] = wire.Row(p.x, p.rot, p.v)
+            own = len(self.layout.rows[gi]) > 0
+            local = (self.layout.rows[gi], request.stage.groups[gi]) if own else None
+            out.append(
+                wire.assemble(self.grp, model.dim, rows, local, with_rot=own, with_v=with_v)
+            )
+        return tuple(out)
+
+
+class RealtimeAgent(RuntimeParams, AgentBase):
+    """Steps on a wall-clock timer (``rate`` Hz, ``time_scale`` simulated s per s) with the newest
+    peer poses; starts on the runner's ``start <epoch>`` (start_time -1) or at ``start_time``."""
+
+    mode = "realtime"
+
+    def __init__(
+        self, node: Node, params: dict[str, Any], executor: Executor | None = None
+    ) -> None:
+        super().__init__(node, params, executor)
+        self.clock = ClockOffsets(params["time_scale"], params["clock_offset_warn"])
+        self.peers = PeerTable.of_agent(self, self.clock)
+        # process CPU time (s) when the ticks began and ended
+        self.cpu_span: tuple[float, float | None] | None = None
+        self.watch_parameters()
+
+    def rebuild_system(self) -> None:
+        self.system = System(self.model, self.layout.rows)
+
+    def record(self) -> wire.RunRecord:
+        rec = super().record()
+        rec.clock_offsets = self.clock.offsets()
+        return rec
+
+    def extra_diagnostics(self) -> dict[str, Any]:
+        """Each peer's estimated clock offset (s, its clock ahead of ours); warns once per peer
+        whose offset passes ``clock_offset_warn``."""
+        for agent, offset in self.clock.over_threshold():
+            self.node.get_logger().warning(
+                f"agent {agent}: clock offset {offset:+.3f} s is past "
+                f"{self.clock.threshold:g} s (estimated from its pose stamps)"
+            )
+        return {f"clock_offset_s: agent {a}": v for a, v in sorted(self.clock.offsets().items())}
+
+    def step_size(self, p: dict[str, Any]) -> float:
+        return p["time_scale"] / p["rate"]
+
+    def time_split(self) -> dict[str, float]:
+        """CPU milliseconds per tick of the whole process (the middleware's threads too), over
+        the ticks so far."""
+        if self.rounds == 0 or self.cpu_span is None:
+            return {}
+        start, end = self.cpu_span
+        return {"cpu": ((end or time.process_time()) - start) / self.rounds * 1e3}
+
+    def _start_epoch(self: AgentBase) -> float:
+        """Wall-clock time of t = 0: the runner's 'start', or the start_time parameter."""
+        if self.params["start_time"] >= 0:
+            return self.params["start_time"] or time.time()
+        last = 0.0
+        while self.start_epoch is None and not self.stop_requested:
+            self.spin_once(0.05)
+            if time.monotonic() - last > 0.5:  # keep announcing the initial pose
+                self.publish_state()
+                self._maybe_diagnostics(force=True)  # the runner counts agents that are up
+                last = time.monotonic()
+        return self.start_epoch if self.start_epoch is not None else time.time()
+
+    def _wait_tick(self, next_tick: float, period: float) -> None:
+        """Serve the agent node (control, services, parameters) until the tick is due; the
+        peers' poses wait in their readers for ``PeerTable.active``."""
+        while True:
+            left = next_tick - time.monotonic()
+            if left <= 0 or self.stop_requested:
+                break
+            self.spin_once(min(left, 0.05))
+        if time.monotonic() - next_tick > period:  # behind schedule: the CPU is short
+            self.late_ticks += 1
+
+    def loop(self) -> None:
+        self.wait_for_discovery()
+        self.publish_state()
+        start = self._start_epoch()
+        self.clock.start(start)
+        while time.time() < start and not self.stop_requested:  # the ensemble starts together
+            self.spin_once(min(0.05, max(0.0, start - time.time())))
+        method, h, period = self.plan.method, self.plan.dt, 1.0 / self.params["rate"]
+        assert isinstance(method, Method) and h is not None  # distributed plans: fixed step
+        next_tick = self._join_clock(start, period, h)
+        t0 = time.monotonic()
+        self.cpu_span = (time.process_time(), None)
+        while self.state.t < self.scene.t_end - 1e-12 and not self.stop_requested:
+            next_tick += period
+            self._wait_tick(next_tick, period)
+            if self.apply_runtime():  # kappa, gamma, rate set while running
+                h, period = self.step_size(self.params), 1.0 / self.params["rate"]
+            t = self.state.t
+            step = min(h, self.scene.t_end - t)  # the last tick ends the run at t_end exactly
+            if self._held(t + step):
+                continue
+            alive = self.peers.active()
+
+            def answer(request: Request, stage: int, alive: list[int] = alive) -> Ensemble:
+                return self.peers.ensemble(request, alive)
+
+            self.state.coupling = None
+            self.state = drive(method, self.system, self.state, step, answer)
+            self.state.t = t + step
+            self.steps += 1
+            self.rounds += 1
+            self.round_time = time.monotonic() - t0
+            self.publish_state()
+        self.cpu_span = (self.cpu_span[0], time.process_time())
+
+    def release(self) -> None:
+        """The peers' lean node (lifecycle cleanup)."""
+        self.peers.destroy()
+
+    def destroy(self) -> None:
+        self.peers.destroy()
+        super().destroy()
+
+    def _held(self, t_next: float) -> bool:
+        """Reset and pause (``control.AgentControl``): back to the initial state at the tick
+        past the reset epoch; while paused, the state held and published at the tick's time.
+        True if this tick does not step."""
+        if self.control.take_reset(time.time()):
+            self.state = local_state(self.scene, self.layout)
+            self.log.info(f"reset: back to the initial state at t = {t_next:.4g}")
+        if not self.paused:
+            return False
+        self.state.t = t_next
+        self.publish_state()
+        return True
+
+    def _join_clock(self, start: float, period: float, h: float) -> float:
+        """Set the initial simulated time of a realtime run; return the monotonic time of tick 0.
+
+        Tick k is due at ``start + k * period`` on every agent, and an agent a little late (a
+        loaded CPU) catches up tick by tick.  An agent (re)joining a running ensemble - later
+        than the peer timeout - starts from its initial state on the ensemble's clock instead of
+        replaying the past: the newest simulated time its peers publish, so that it agrees with
+        an ensemble that runs behind the wall-clock schedule (a CPU short of the rate), or the
+        wall-clock schedule when it hears no peer within the peer timeout.
+        """
+        behind = max(0.0, time.time() - start)
+        if behind <= self.params["peer_timeout"]:
+            self.state.t = 0.0
+            return time.monotonic() - behind
+        heard_by = time.monotonic() + self.params["peer_timeout"]
+        while (
+            self.peers.newest_time() is None
+            and time.monotonic() < heard_by
+            and not self.stop_requested
+        ):
+            self.spin_once(0.05)
+        newest = self.peers.newest_time()
+        skipped = int(round(newest / h)) if newest is not None else int(behind / period)
+        self.state.t = skipped * h
+        return (
+            time.monotonic()
+            if newest is not None
+            else time.monotonic() - (behind - skipped * period)
+        )

@@ -1,0 +1,105 @@
+"""Parameters changed while an agent runs (``ros2 param set``): checked now, applied next tick.
+
+In realtime and bridge modes ``params.RUNTIME`` (kappa, gamma, rate, speed and acceleration
+limits) may be set while running: a value is checked against its range (``params.check_value``)
+in the set callback - a bad one is rejected with the reason - and applied at the agent's next
+tick, so a tick never mixes old and new gains.  Every other parameter, and all of them in
+lockstep, are declared read-only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+from ...core.errors import ParameterError
+from .params import AGENT, RUNTIME, check_value
+
+if TYPE_CHECKING:
+    from rclpy.impl.rcutils_logger import RcutilsLogger
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from ...core.model import Model, State
+    from ...core.scene import Scene
+
+SPEC = {p.name: p for p in AGENT}
+
+
+def gains(model: Model, params: dict[str, Any]) -> Model:
+    """``model`` with the kappa and gamma parameters (0 = the scene's value) of (A-1)/(A-2)."""
+    kappa = params["kappa"] or model.kappa
+    gamma = params["gamma"] or model.gamma
+    return replace(model, kappa=kappa, gamma=gamma)
+
+
+def validate(changes: Iterable[Parameter]) -> tuple[dict[str, Any] | None, str | None]:
+    """(accepted {name: value}, None) or (None, reason) for rclpy ``Parameter``-like changes."""
+    accepted = {}
+    for param in changes:
+        if param.name not in RUNTIME:
+            return None, f"parameter {param.name!r} is read-only while running"
+        try:
+            accepted[param.name] = check_value(SPEC[param.name], param.value)
+        except ParameterError as exc:
+            return None, str(exc)
+    return accepted, None
+
+
+class RuntimeParams:
+    """Mixin of realtime and bridge agents: ``watch_parameters()`` once, ``apply_runtime()``
+    each tick (True when something changed; ``self.params`` then holds the new values)."""
+
+    # what the agent (``agent_base.AgentBase``) it is mixed into provides
+    node: Node
+    log: RcutilsLogger
+    scene: Scene
+    model: Model
+    params: dict[str, Any]
+    state: State
+    pending: dict[str, Any]
+
+    def watch_parameters(self) -> None:
+        """Take kappa and gamma from the parameters, then accept changes while running."""
+        self.pending = {}
+        self.model = gains(self.scene.model, self.params)
+        self.rebuild_system()
+        self.node.add_on_set_parameters_callback(self._on_set)
+
+    def _on_set(self, changes: list[Parameter]) -> Any:
+        from rcl_interfaces.msg import SetParametersResult
+
+        accepted, reason = validate(changes)
+        if accepted is None:
+            self.log.warning(f"parameter change rejected: {reason}")
+            return SetParametersResult(successful=False, reason=reason)
+        self.pending.update(accepted)
+        return SetParametersResult(successful=True)
+
+    def apply_runtime(self) -> bool:
+        """Apply the accepted changes (next tick); rebuild the model when the gains changed."""
+        if not getattr(self, "pending", None):
+            return False
+        changed, self.pending = self.pending, {}
+        old = {k: self._in_use(k) for k in changed}
+        self.params.update(changed)
+        if "kappa" in changed or "gamma" in changed:
+            self.model = gains(self.scene.model, self.params)
+            self.rebuild_system()
+        described = ", ".join(f"{k} {old[k]:g} -> {self._in_use(k):g}" for k in changed)
+        self.log.info(f"parameters applied at t = {self.state.t:.4g}: {described}")
+        return True
+
+    def _in_use(self, name: str) -> Any:
+        """The value in use: the model's gains (0 = the scene's), else the parameter."""
+        return getattr(self.model, name) if name in ("kappa", "gamma") else self.params[name]
+
+    def rebuild_system(self) -> None:
+        raise NotImplementedError
+
+    def diagnostic_note(self) -> tuple[str, dict[str, Any]]:
+        """The gains in use and the runtime parameters, for the diagnostics."""
+        extra = {"kappa": float(self.model.kappa), "gamma": float(self.model.gamma)}
+        extra.update({k: self.params[k] for k in RUNTIME if k not in extra})
+        return "", extra

@@ -1,0 +1,99 @@
+"""`polymatch run SCENE --mode bridge`: N simulated robots, N bridged agents and the monitor.
+
+Robot i runs in namespace ``/<ensemble>/robot_<i>`` (topics ``measured_pose``, ``cmd_vel``, or
+``cmd_accel`` and Odometry poses for a second-order scene); agent i is remapped onto them.  The
+matching diameter the monitor reports comes from measured poses, so it cannot fall below what
+the noise makes: the run's tolerance is the larger of the scene's and the noise floor
+(``core.command.noise_floor``).  With ``--robot-log DIR`` each robot also writes its true and
+measured pose at every step to ``DIR/robot_<i>.txt`` (``robot_sim.POSE_LOG_COLUMNS``).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+from ...core.command import bridge_model, noise_floor
+from ...core.errors import ParameterError
+from ...core.scene import Scene
+from .. import wire
+from .children import Child
+from .plan import BridgeOptions, RunPlan
+
+
+def scene_noise_floor(scene: Scene, position_noise: float, angle_noise: float) -> float:
+    """``core.command.noise_floor`` for the scene's largest vertex radius."""
+    radius = max(float(np.max(np.linalg.norm(g.reference, axis=1))) for g in scene.model.groups)
+    return float(noise_floor(position_noise, angle_noise, radius, scene.model.dim))
+
+
+def robot_log(directory: str, agent: int) -> str:
+    """The pose log file of robot ``agent`` in ``directory``."""
+    return os.path.join(os.path.abspath(directory), f"robot_{agent}.txt")
+
+
+def prepare(scene: Scene, bridge: BridgeOptions, only: str | None) -> Scene:
+    """The scene with the noise-floor tolerance; one-line errors for what bridge cannot run
+    (``only``: the --only option, which bridge mode does not take)."""
+    bridge_model(scene.model)  # d <= 3; second order damped
+    for name in ("lag", "position_noise", "angle_noise"):
+        value = getattr(bridge, name)
+        if not np.isfinite(value) or value < 0:
+            raise ParameterError(f"--{name.replace('_', '-')} must be >= 0, got {value:g}")
+    if only is not None:
+        raise ParameterError("--mode bridge runs every robot on this host (no --only)")
+    if bridge.robot_log is not None and not os.path.isdir(bridge.robot_log):
+        raise ParameterError(f"--robot-log: {bridge.robot_log} is not a directory")
+    floor = scene_noise_floor(scene, bridge.position_noise, bridge.angle_noise)
+    return replace(scene, tolerance=max(scene.tolerance, floor))
+
+
+def agent_args(bridge: BridgeOptions, order: int) -> list[str]:
+    """Extra --ros-args of every bridged agent (``order``: the scene model's)."""
+    out = [
+        "-p", f"max_linear_speed:={bridge.max_linear_speed!r}",
+        "-p", f"max_angular_speed:={bridge.max_angular_speed!r}",
+    ]
+    if order == 2:
+        out += ["-p", "pose_type:=odometry",
+                "-p", f"max_linear_accel:={bridge.max_linear_accel!r}",
+                "-p", f"max_angular_accel:={bridge.max_angular_accel!r}"]
+    return out
+
+
+def remaps(agent: int) -> list[str]:
+    """Agent ``agent``'s own pose and command topics: its robot's."""
+    return [
+        "-r", f"measured_pose:=robot_{agent}/measured_pose",
+        "-r", f"cmd_vel:=robot_{agent}/cmd_vel",
+        "-r", f"cmd_accel:=robot_{agent}/cmd_accel",
+    ]
+
+
+def robots(plan: RunPlan, env: dict[str, str]) -> list[Child]:
+    """Start one simulated robot per agent (``Child``ren, ended by PID like the agents)."""
+    bridge = plan.bridge
+    if bridge is None:
+        raise ParameterError("simulated robots run in bridge mode only")
+    out = []
+    for a in plan.hosts.agents:
+        argv = [
+            sys.executable, "-m", "polymatch_ros.ros.nodes.robot", "--ros-args",
+            "-r", f"__ns:={wire.namespace(plan.hosts.ensemble)}/robot_{a}",
+            "-r", "__node:=robot",
+            "-p", f"scene:={os.path.abspath(plan.scene_path)}",
+            "-p", f"agent:={a}",
+            "-p", f"lag:={bridge.lag!r}",
+            "-p", f"position_noise:={bridge.position_noise!r}",
+            "-p", f"angle_noise:={bridge.angle_noise!r}",
+            "-p", "rate:=30.0",
+        ]
+        if plan.scene.model.order == 2:
+            argv += ["-p", "pose_type:=odometry"]
+        if bridge.robot_log is not None:
+            argv += ["-p", f"pose_log:={robot_log(bridge.robot_log, a)}"]
+        out.append(Child(f"robot_{a}", argv, env))
+    return out

@@ -1,0 +1,403 @@
+"""The runner's processes: supervised children, the partition of agents into processes, and
+the DDS participant limit of LOCALHOST discovery."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING
+
+from ...console import Progress
+from ...core.errors import ParameterError, PolymatchError
+from .. import wire
+from ..nodes.teardown import EXIT_GRACE, TEARDOWN_SECONDS, hung_in_teardown
+from .plan import Packing, RunPlan
+
+if TYPE_CHECKING:
+    from .watcher import Watcher
+
+# A process that reported its result ends within its teardown watchdog (TEARDOWN_SECONDS +
+# EXIT_GRACE); one still running this long after its final run record is ended by the runner.
+OVERSTAY_SECONDS = 2 * TEARDOWN_SECONDS + EXIT_GRACE
+
+
+def _child_setup() -> None:
+    """In the child, before exec: a process group of its own, and SIGTERM when the runner dies
+    (Linux): nothing outlives it.
+
+    Its own group keeps a terminal's Ctrl-C (sent to the foreground group) for the runner, which
+    stops the children in order.  Not a session of its own: Linux gives each session its own
+    scheduling group (``/proc/sys/kernel/sched_autogroup_enabled``), and lockstep processes in
+    separate groups waited about twice as long for each other's messages (8 agents: 124 and 132
+    rounds/s in separate sessions, 168 and 174 in one; ``polymatch bench distributed``,
+    deployed against agents, is the figure that showed it).
+    """
+    os.setpgid(0, 0)
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+class Child:
+    """A supervised process: last lines of output kept (shown on failure); ended by its PID."""
+
+    name: str
+    proc: subprocess.Popen[str]
+    lines: deque[str]
+    reported_at: float | None
+    ended_by_runner: bool
+    thread: threading.Thread
+
+    def __init__(self, name: str, argv: Sequence[str], env: Mapping[str, str]) -> None:
+        self.name = name
+        self.proc = subprocess.Popen(
+            argv,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            text=True,
+            bufsize=1,
+            preexec_fn=_child_setup,
+        )
+        self.lines = deque(maxlen=200)
+        self.reported_at = None  # monotonic time its finished run record arrived
+        self.ended_by_runner = False  # it reported, then overstayed, and the runner ended it
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None  # a pipe: stdout=PIPE
+        for line in self.proc.stdout:
+            line = line.rstrip("\n")
+            self.lines.append(line)
+            if self.reported_at is None and line.startswith("{"):
+                rec = wire.RunRecord.from_json(line)
+                if rec is not None and rec.finished:
+                    self.reported_at = time.monotonic()
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def poll(self) -> int | None:
+        return self.proc.poll()
+
+    def stop(self, grace: float = 3.0) -> int | None:
+        """SIGINT, then SIGTERM, then SIGKILL — each to this child's PID only."""
+        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
+            if self.proc.poll() is not None:
+                break
+            try:
+                os.kill(self.proc.pid, sig)
+            except ProcessLookupError:
+                break
+            try:
+                self.proc.wait(timeout=wait)
+            except subprocess.TimeoutExpired:
+                continue
+        # its last lines (the run record) may still be in the pipe: once the process has
+        # ended, the reader reaches EOF at once unless a loaded machine starves it
+        self.thread.join(timeout=5.0 if self.proc.poll() is not None else 1.0)
+        return self.proc.poll()
+
+    def tail(self, n: int = 5) -> list[str]:
+        return list(self.lines)[-n:]
+
+    def hung_in_teardown(self) -> bool:
+        """Reported its final line, then its DDS teardown hung and its watchdog (or, past
+        ``OVERSTAY_SECONDS``, the runner) ended it."""
+        return self.ended_by_runner or bool(hung_in_teardown(self.proc.poll(), list(self.lines)))
+
+    def ended_well(self) -> bool:
+        code = self.proc.poll()
+        return code == 0 or (code is not None and self.hung_in_teardown())
+
+    def end_if_overstaying(self, seconds: float) -> bool:
+        """A process that printed its finished run record and is still running ``seconds``
+        later is stuck in its teardown (its own watchdog did not end it): end it by its PID.
+        Its result is in; True if it was ended here."""
+        if self.reported_at is None or self.proc.poll() is not None:
+            return False
+        if time.monotonic() - self.reported_at < seconds:
+            return False
+        self.ended_by_runner = True
+        self.stop(grace=1.0)
+        return True
+
+    def records(self) -> list[wire.RunRecord]:
+        """The run records this child printed (``wire.run_records``)."""
+        return wire.run_records(list(self.lines))
+
+
+def partition(agents: int | Iterable[int], k: int) -> list[list[int]]:
+    """The agents (a count, or a list of indices) in consecutive processes of at most ``k``."""
+    chosen = list(range(agents)) if isinstance(agents, int) else list(agents)
+    return [chosen[s : s + k] for s in range(0, len(chosen), k)]
+
+
+def parse_only(text: str | None, n_agents: int) -> list[int]:
+    """``--only 0-7,12`` -> the sorted agent indices it names, each in 0..n_agents-1.
+
+    Raises ParameterError (one line) for anything else.
+    """
+    spec = (text or "").strip()
+    chosen: set[int] = set()
+    for part in spec.split(","):
+        first, dash, last = (piece.strip() for piece in part.partition("-"))
+        if not _index(first) or (dash and not _index(last)):
+            raise ParameterError(
+                f"--only {spec!r}: list agent indices and ranges, e.g. --only 0-7,12"
+            )
+        low, high = int(first), int(last) if dash else int(first)
+        if low > high:
+            raise ParameterError(f"--only {spec!r}: the range {part.strip()} runs backwards")
+        if high >= n_agents:
+            raise ParameterError(
+                f"--only {spec!r}: agent {high} is not in 0..{n_agents - 1} "
+                f"(the scene has {n_agents} agents)"
+            )
+        chosen.update(range(low, high + 1))
+    return sorted(chosen)
+
+
+def _index(text: str) -> bool:
+    return text.isascii() and text.isdigit()
+
+
+def describe_agents(agents: Sequence[int]) -> str:
+    """[0, 1, 2, 3, 12] -> '0-3,12' (the --only form)."""
+    runs: list[str] = []
+    start: int | None = None
+    for position, agent in enumerate(agents):
+        start = agent if start is None else start
+        if position + 1 == len(agents) or agents[position + 1] != agent + 1:
+            runs.append(f"{start}" if start == agent else f"{start}-{agent}")
+            start = None
+    return ",".join(runs)
+
+
+# rmw_fastrtps, under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, probes the first 32 participant
+# ports on 127.0.0.1 (its UDP maxInitialPeersRange): two participants beyond that never meet.
+LOCALHOST_PARTICIPANTS = 32
+
+
+def fewest_agents_per_process(n_agents: int, own: int) -> int:
+    """Agents per process that keep ``own`` + the agent processes within LOCALHOST_PARTICIPANTS."""
+    return -(-n_agents // (LOCALHOST_PARTICIPANTS - own))
+
+
+def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> int:
+    """-k as given (checked against the participant limit), else 1 if it fits, else the fewest."""
+    own = 1 + (1 if packing.monitor else 0)  # the runner's node, the monitor
+    need = fewest_agents_per_process(n_agents, own)
+    if packing.requested is None:
+        if localhost and need > 1:
+            if not packing.quiet:
+                print(
+                    f"polymatch run: {n_agents} agents + {own} own processes exceed the "
+                    f"{LOCALHOST_PARTICIPANTS} DDS participants LOCALHOST discovery reaches: "
+                    f"{need} agents per process (-k {need})",
+                    file=sys.stderr,
+                )
+            return need
+        return 1
+    procs = -(-n_agents // packing.requested)
+    if localhost and procs + own > LOCALHOST_PARTICIPANTS:
+        raise PolymatchError(
+            f"{procs} agent processes + {own} own = {procs + own} DDS participants, but LOCALHOST "
+            f"discovery reaches {LOCALHOST_PARTICIPANTS} per domain (rmw_fastrtps' initial-peer "
+            f"range); use -k {need} or more"
+        )
+    return packing.requested
+
+
+MONITOR_GRACE_SECONDS = 10.0
+
+
+def stop_all(children: Sequence[Child], monitor: Child | None, watcher: Watcher | None) -> None:
+    """End every child by its PID; the monitor last, after the watcher heard its last reports."""
+    for c in children:
+        c.stop()
+    if monitor is not None:
+        t0 = time.monotonic()
+        while watcher is not None and time.monotonic() - t0 < 0.5:
+            watcher.spin(0.05)
+        # its final record is the summary's monitor line: on a loaded machine (or under a
+        # flood of rogue messages) it can take more than the agents' 3 s to write it
+        monitor.stop(grace=MONITOR_GRACE_SECONDS)
+
+
+# How long the host that prints the summary waits, after its own agents ended, for the latched
+# final poses: of its own agents (in flight), of the agents on other hosts (still finishing).
+FINAL_POSE_SECONDS = 3.0
+REMOTE_FINAL_POSE_SECONDS = 30.0
+
+
+class Supervision:
+    """The runner's loop: progress, start (realtime), stop on convergence, failures, the end.
+
+    ``plan.hosts.lead`` (this host runs the monitor or every agent) starts a realtime ensemble
+    and waits for the final poses of all agents; ``plan.hosts.agents`` are this host's agents.
+    """
+
+    plan: RunPlan
+    watcher: Watcher
+    children: list[Child]
+    monitor: Child | None
+    progress: Progress
+    rounds_per_step: int
+    rate_mark: tuple[float, float] | None  # (wall clock, ensemble time) the rate counts from
+    rps: float
+    below_since: float | None
+    stop_sent: float
+    graph_checked: bool
+    started: bool
+    start_sent: float
+    received_sent: bool
+
+    def __init__(self, plan: RunPlan, watcher: Watcher, children: list[Child],
+                 monitor: Child | None, progress: Progress) -> None:
+        self.plan, self.watcher, self.progress = plan, watcher, progress
+        self.children, self.monitor = children, monitor
+        self.rounds_per_step = (
+            1 if plan.realtime else max(1, plan.numerics.method.info.rounds)
+        )
+        self.rate_mark, self.rps = None, 0.0
+        self.below_since, self.stop_sent = None, 0.0
+        self.graph_checked = False
+        self.started, self.start_sent, self.received_sent = False, 0.0, False
+
+    def failure(self) -> tuple[int, str] | None:
+        """The first child that ended badly, as (code, message), or None."""
+        # poll first: a child that exits between "not ended well" (still running) and "has
+        # ended" would be taken for a failure with exit code 0
+        failed = [c for c in self.children if c.poll() is not None and not c.ended_well()]
+        if (
+            self.monitor is not None
+            and self.monitor.poll() is not None
+            and not self.monitor.ended_well()
+        ):
+            failed.append(self.monitor)
+        if not failed:
+            return None
+        c = failed[0]
+        detail = " | ".join(line for line in c.tail(3) if line.strip())
+        return 1, f"{c.name} (pid {c.pid}) exited with code {c.poll()}: {detail}"
+
+    def last_words(self, most: int = 3) -> str:
+        """'; <process>: <its last line>' for up to ``most`` processes still running: what they
+        were doing when the run timed out (a lockstep agent says which peers it waits for)."""
+        running = [c for c in self.children if c.poll() is None and c.tail(1)]
+        return "".join(f"; {c.name}: {c.tail(1)[0].strip()}" for c in running[:most])
+
+    def check_graph(self) -> None:
+        """Once every agent is up: its node and the monitor are in the ensemble's namespace."""
+        if self.graph_checked or not self.watcher.agents_up():
+            return
+        names = [c.name for c in self.children] + (["monitor"] if self.monitor is not None else [])
+        self.graph_checked = self.watcher.check_graph(names)
+
+    def start_clock(self) -> None:
+        """Realtime: once every agent is up, call the ensemble's ``start`` service (t = 0 on every
+        agent ``control.START_LEAD`` s later); again each second while an agent has not begun
+        stepping - the service re-sends the same epoch to one whose control reader matched late
+        (agents take the first start only)."""
+        now = time.monotonic()
+        if not self.watcher.agents_up() or now - self.start_sent <= 1.0:
+            return
+        waiting = any(r.steps == 0 and not r.finished for r in self.watcher.agents.values())
+        if (waiting or not self.started) and self.watcher.start():
+            self.started, self.start_sent = True, now
+
+    def watch(self, interrupted: Sequence[int], start: float) -> tuple[int, str]:
+        """Until the run ends: (exit code, error message or "")."""
+        watcher, plan = self.watcher, self.plan
+        lead, timeout = plan.hosts.lead, plan.timing.timeout
+        self.started, self.start_sent, self.received_sent = False, 0.0, False
+        by_name = {c.name: c for c in self.children}
+        lifecycle = watcher.drive_lifecycle(
+            list(by_name), lambda name: " | ".join(by_name[name].tail(2)).strip()
+        )
+        while True:
+            watcher.spin(0.05)
+            lifecycle.step()
+            if plan.realtime and lead:
+                self.start_clock()
+            self.check_graph()
+            if interrupted:
+                self.progress.done()
+                return 130, "interrupted: stopped every process"
+            failed = self.failure()
+            if failed:
+                self.progress.done()
+                return failed
+            for c in self.children:
+                c.end_if_overstaying(OVERSTAY_SECONDS)
+            if lead and not self.received_sent and self.final_everywhere():
+                watcher.received()  # the agents hold their final poses until this
+                self.received_sent = True
+            if all(c.ended_well() for c in self.children):
+                return self.await_final_poses()
+            if time.monotonic() > start + timeout:
+                self.progress.done()
+                last = self.last_words()
+                return 1, f"timed out after {timeout:g} s (raise --timeout){last}"
+            self.show_progress()
+
+    def final_everywhere(self) -> bool:
+        """Every final pose is here and, in lockstep, the monitor (if any) has reported the
+        final step with every agent: nobody needs another message from the agents."""
+        if not self.watcher.have_final():
+            return False
+        if self.plan.realtime or self.monitor is None:
+            return True
+        return self.watcher.monitor_reported_final()
+
+    def await_final_poses(self) -> tuple[int, str]:
+        """(0, "") once the lead host has every agent's final pose (other hosts: at once)."""
+        if not self.plan.hosts.lead:
+            return 0, ""
+        remote = not self.plan.every_agent_here
+        seconds = REMOTE_FINAL_POSE_SECONDS if remote else FINAL_POSE_SECONDS
+        drain = time.monotonic() + seconds
+        while time.monotonic() < drain and not self.watcher.have_final():
+            self.watcher.spin(0.05)
+        if self.watcher.have_final() and not self.received_sent:
+            self.watcher.received()  # the other hosts' agents may end now
+        if not self.watcher.have_final():  # no summary from a partial state: an error
+            missing = sorted(set(range(self.plan.n_agents)) - set(self.watcher.poses))
+            return 1, (
+                f"no final pose from agents {describe_agents(missing) or '(velocities)'} "
+                f"within {seconds:g} s after the agents of this host ended"
+            )
+        return 0, ""
+
+    def show_progress(self) -> None:
+        t, d = self.watcher.ensemble_time(), self.watcher.diameter
+        if t is None or d is None:
+            return
+        now = time.monotonic()
+        if self.rate_mark is None or t < self.rate_mark[1]:
+            self.rate_mark = (now, t)  # (re)start the rate where the ensemble's time is
+        elif now - self.rate_mark[0] > 1.0:
+            steps = (t - self.rate_mark[1]) / max(self.plan.numerics.dt or 0.0, 1e-12)
+            self.rps = steps * self.rounds_per_step / (now - self.rate_mark[0])
+            self.rate_mark = (now, t)
+        self.progress(t, d, f"  {self.rps:7.1f} rounds/s")
+        if d < self.plan.scene.tolerance and self.watcher.all_heard():
+            self.below_since = t if self.below_since is None else self.below_since
+            if t - self.below_since >= self.plan.timing.hold and now - self.stop_sent > 0.5:
+                self.watcher.stop()
+                self.stop_sent = now
+        else:
+            self.below_since = None

@@ -1,0 +1,317 @@
+"""`polymatch run SCENE`: a whole distributed ensemble from one scene file, without launch.
+
+Starts the monitor and one process per agent (or per K agents) in the ensemble's namespace
+(``-r __ns:=/<ensemble>``, nodes ``agent_<i>`` and ``monitor``), all with loopback discovery
+and a fresh ROS_DOMAIN_ID unless the user set them; shows progress (simulated time,
+diameter, rounds/s); stops at t_end or once the diameter has stayed under the scene's
+tolerance; prints a summary (final diameters per group, in lockstep the deviation from the
+centralised solution, wall time, rounds/s) from the agents' final poses and run records; and
+ends every process it started, by PID, also on Ctrl-C and when a child dies.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import random
+import signal
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from types import FrameType
+
+from ...console import Progress
+from ...core.errors import PolymatchError
+from .. import wire
+from ..nodes.teardown import teardown_watchdog
+from . import bridge_run
+from .children import (  # noqa: F401 (API)
+    LOCALHOST_PARTICIPANTS,
+    REMOTE_FINAL_POSE_SECONDS,
+    Child,
+    Supervision,
+    _agents_per_process,
+    describe_agents,
+    fewest_agents_per_process,
+    parse_only,
+    partition,
+    stop_all,
+)
+from .discovery import (
+    DISCOVERY_VARIABLES,
+    DiscoveryEnvironments,
+    DiscoveryServer,
+    discovery_environments,
+    start_discovery_server,
+)
+from .environment import reserved_domain_id, ros_environment
+from .plan import RunPlan
+from .summary import RunOutcome, report, verdict
+from .watcher import Watcher
+
+
+@dataclass(frozen=True)
+class RunContext:
+    """A run as it starts on this host: its plan, the ROS environment and domain of its
+    processes, the discovery environments (None for LOCALHOST) and the packing chosen."""
+
+    plan: RunPlan
+    env: dict[str, str]                   # every process's environment (LOCALHOST discovery)
+    domain: int                           # ROS_DOMAIN_ID
+    envs: DiscoveryEnvironments | None    # client/super-client/server overlays, --discovery
+    agents_per_process: int               # -k as given, or chosen (``_agents_per_process``)
+
+
+def run(plan: RunPlan) -> int:
+    """Start, watch and end this host's processes of ``plan``; the run's exit code.
+
+    The caller ends the process with it (``teardown.end_process``): rclpy ran in this process.
+    """
+    with reserved_domain_id() as domain, tempfile.TemporaryDirectory(
+        prefix="polymatch_run_"
+    ) as directory:
+        env = ros_environment(domain)
+        spec = plan.hosts.discovery
+        envs = None if spec.kind == "localhost" else discovery_environments(spec, directory)
+        packing = _agents_per_process(
+            plan.packing, len(plan.hosts.agents), envs is None and _localhost(env)
+        )
+        context = RunContext(plan, env, domain, envs, packing)
+        _adopt(env if envs is None else envs.for_role("super_client", env))
+        server = _start_server(context, directory)
+        try:
+            code = _run(context)
+        finally:
+            if server is not None:
+                server.stop()
+    return code
+
+
+def _localhost(env: dict[str, str]) -> bool:
+    return env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+
+
+def _adopt(env: dict[str, str]) -> None:
+    """The runner's own node (the watcher) runs with the environment of its processes."""
+    for key in (
+        "ROS_AUTOMATIC_DISCOVERY_RANGE",
+        "ROS_DOMAIN_ID",
+        "RMW_IMPLEMENTATION",
+        "FASTRTPS_DEFAULT_PROFILES_FILE",
+        "FASTDDS_BUILTIN_TRANSPORTS",
+    ) + DISCOVERY_VARIABLES:
+        if key in env:
+            os.environ[key] = env[key]
+        elif key in DISCOVERY_VARIABLES:
+            os.environ.pop(key, None)
+
+
+def _start_server(context: RunContext, directory: str) -> DiscoveryServer | None:
+    """``--discovery server`` (no address): a discovery server of this run on 127.0.0.1."""
+    envs, spec = context.envs, context.plan.hosts.discovery
+    if envs is None or spec.kind != "server" or spec.port:
+        return None
+    return start_discovery_server(
+        envs.spec.port,
+        envs.spec.host,
+        seconds=context.plan.timing.timeout + 60.0,
+        env=envs.for_role("server", context.env),
+        log_path=os.path.join(directory, "discovery_server.log"),
+    )
+
+
+def _run_id(plan: RunPlan) -> int:
+    """A fresh random id; on hosts that each run some agents (--only), the same id on every
+    host: a hash of what all of them must agree on (scene file, times, method, ensemble,
+    domain)."""
+    if plan.every_agent_here:
+        return random.randrange(1, 2**31 - 1)
+    with open(plan.scene_path, "rb") as fh:
+        shared = [fh.read()]
+    numerics = plan.numerics
+    agreed = (plan.scene.t_end, plan.mode, numerics.name, numerics.dt, plan.hosts.ensemble)
+    shared += [repr(agreed).encode()]
+    shared += [os.environ.get("ROS_DOMAIN_ID", "").encode()]
+    digest = hashlib.sha256(b"\0".join(shared)).digest()
+    return 1 + int.from_bytes(digest[:4], "big") % (2**31 - 2)
+
+
+def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
+    """(--ros-args of the monitor, of every agent process) without the node's own remaps."""
+    plan, timing, k = context.plan, context.plan.timing, context.agents_per_process
+    common = [
+        "-r",
+        f"__ns:={wire.namespace(plan.hosts.ensemble)}",
+        "-p",
+        f"scene:={os.path.abspath(plan.scene_path)}",
+        "-p",
+        f"t_end:={plan.scene.t_end!r}",
+    ]
+    agent = common + [
+        "-p",
+        f"mode:={plan.mode}",
+        "-p",
+        f"run_id:={_run_id(plan)}",
+        "-p",
+        f"agents_per_process:={k}",
+        "-p",
+        f"pose_subscribers:={1 if plan.hosts.monitor else 0}",
+        "-p",
+        "autostart:=false",  # the runner drives the lifecycle (``lifecycle_driver``)
+        "-p",
+        f"integrator:={plan.numerics.name}",
+        "-p",
+        f"round_timeout:={timing.round_timeout!r}",
+        # start-up of many processes on few cores takes a while: scale the patience
+        "-p",
+        f"discovery_timeout:={30.0 + 2.0 * len(partition(plan.n_agents, k))!r}",
+        "-p",
+        f"peer_timeout:={timing.peer_timeout!r}",
+        "-p",
+        # every agent keeps its latched final pose alive until the lead host has them all: a
+        # writer that exits before the runner's reader matched it takes its sample along
+        f"hold_final:={REMOTE_FINAL_POSE_SECONDS!r}",
+    ]
+    agent += _stepping_args(plan)
+    if plan.bridge is not None:
+        agent += bridge_run.agent_args(plan.bridge, plan.scene.model.order)
+    monitor_mode = "realtime" if plan.realtime else "lockstep"
+    monitor = common + ["-p", f"mode:={monitor_mode}"]
+    monitor += ["-p", f"peer_timeout:={timing.peer_timeout!r}"]
+    if plan.realtime:
+        monitor += ["-p", "rate:=10.0"]
+    return monitor, agent
+
+
+def _stepping_args(plan: RunPlan) -> list[str]:
+    """The agents' --ros-args of how they step: on the wall clock (realtime), or by dt."""
+    timing = plan.timing
+    if plan.realtime:
+        return [
+            "-p",
+            f"rate:={timing.rate!r}",
+            "-p",
+            f"time_scale:={timing.time_scale!r}",
+            "-p",
+            "start_time:=-1.0",
+            "-p",
+            f"delay:={timing.delay!r}",
+        ]
+    return ["-p", f"dt:={plan.numerics.dt!r}"]
+
+
+def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
+    """(monitor or None, agent children): the processes of this host, started.
+
+    ``context.envs`` (DiscoveryEnvironments, None for LOCALHOST) gives the agents the client
+    and the monitor the super-client environment.
+    """
+    plan, env, envs = context.plan, context.env, context.envs
+    agent_env = env if envs is None else envs.for_role("client", env)
+    monitor_env = env if envs is None else envs.for_role("super_client", env)
+    mon_args, agent_args = _node_args(context)
+    py = [sys.executable, "-m"]
+    monitor = None
+    if plan.hosts.monitor:
+        monitor = Child(
+            "monitor",
+            py
+            + ["polymatch_ros.ros.nodes.monitor", "--ros-args"]
+            + mon_args
+            + ["-r", "__node:=monitor"],
+            monitor_env,
+        )
+    children = []
+    for agents in partition(plan.hosts.agents, context.agents_per_process):
+        name = f"agent_{agents[0]}" if len(agents) == 1 else f"agents_{agents[0]}_{agents[-1]}"
+        sel = (
+            ["-p", f"agent:={agents[0]}"]
+            if len(agents) == 1
+            else ["-p", "agents:=[" + ",".join(map(str, agents)) + "]"]
+        )
+        children.append(
+            Child(
+                name,
+                py
+                + ["polymatch_ros.ros.nodes.agent", "--ros-args"]
+                + agent_args
+                + sel
+                + (bridge_run.remaps(agents[0]) if plan.bridge is not None else [])
+                + ["-r", f"__node:={name}"],
+                agent_env,
+            )
+        )
+    return monitor, children
+
+
+def _announce(context: RunContext) -> None:
+    """The run's first line (stderr, unless --quiet): what runs here, how, where."""
+    plan, envs = context.plan, context.envs
+    if plan.outputs.quiet:
+        return
+    n, here = plan.n_agents, len(plan.hosts.agents)
+    which = f"{n} agents" if here == n else (
+        f"{here} of {n} agents ({describe_agents(plan.hosts.agents)})")
+    discovery = context.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] if envs is None else envs.spec
+    print(
+        f"polymatch run: {which} in {len(partition(here, context.agents_per_process))} "
+        f"processes, {plan.mode}, integrator {plan.numerics.name}, dt {plan.numerics.dt:g}, "
+        f"ROS_DOMAIN_ID={context.domain}, discovery {discovery}, "
+        f"ensemble {wire.namespace(plan.hosts.ensemble)}",
+        file=sys.stderr, flush=True,
+    )
+
+
+def _run(context: RunContext) -> int:
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    plan = context.plan
+    _announce(context)
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    children: list[Child] = []
+    robots: list[Child] = []
+    monitor: Child | None = None
+    watcher: Watcher | None = None
+    interrupted: list[int] = []
+
+    def interrupt(sig: int, frame: FrameType | None) -> None:
+        interrupted.append(sig)
+
+    old = {s: signal.signal(s, interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+    start = time.monotonic()
+    code, message = 1, "not started"
+    progress = Progress(plan.scene.t_end, plan.outputs.quiet)
+    try:
+        name = "runner" if plan.every_agent_here else f"runner_{plan.hosts.agents[0]}"
+        watcher = Watcher(plan.scene, plan.hosts.ensemble, name)
+        if plan.hosts.lead and not plan.hosts.monitor:
+            watcher.host_ensemble_services(plan.mode)
+        if plan.bridge is not None:
+            robots = bridge_run.robots(plan, context.env)
+        monitor, children = _start(context)
+        supervision = Supervision(plan, watcher, children, monitor, progress)
+        code, message = supervision.watch(interrupted, start)
+    except PolymatchError as exc:
+        code, message = exc.exit_code, str(exc)
+    finally:
+        stop_all(children, monitor, watcher)
+        stop_all(robots, None, None)
+        for s, h in old.items():
+            signal.signal(s, h)
+    try:
+        wall = time.monotonic() - start
+        report(plan, RunOutcome(watcher, children, monitor, progress, code, message, wall))
+        final = watcher.final_state() if watcher is not None else None
+        if code == 0 and plan.hosts.lead and final is not None:
+            code = verdict(plan.scene, final)
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        with teardown_watchdog(exit_code=code):
+            if watcher is not None:
+                watcher.destroy()
+            if rclpy.ok():
+                rclpy.shutdown()
+    return code

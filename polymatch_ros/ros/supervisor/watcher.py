@@ -1,0 +1,199 @@
+"""The runner's own small node: progress, the ensemble's services, the agents' final poses, the
+graph check."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+from ...core.errors import PolymatchError
+from ...core.model import GroupState, State
+from .. import wire
+from ..nodes.control import ControlClient
+
+if TYPE_CHECKING:
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from ...core.model import Model
+    from ...core.scene import Scene
+    from .lifecycle_driver import LifecycleDriver
+
+
+class Watcher:
+    """Lives in the ensemble's namespace (``/<ensemble>/runner``; ``runner_<first agent>`` on
+    a host that runs some of the agents).
+
+    It hears the headline diameter and every process's run record (``status``: progress,
+    agents up), calls the ensemble's start and stop services (``control``), and takes each
+    agent's *final* pose from its latched ``final_pose``/``final_twist`` topics for the
+    summary - not the per-step poses, so supervising a run adds no load to the lockstep
+    rounds.
+    """
+
+    node: Node
+    executor: SingleThreadedExecutor
+    scene: Scene
+    model: Model
+    grp: Any                                        # the scene's rotation group
+    diameter: float | None                          # the latest headline diameter
+    monitor: wire.RunRecord | None                  # the monitor's latest run record
+    agents: dict[tuple[int, ...], wire.RunRecord]   # agents of a process -> its latest record
+    poses: dict[int, tuple[float, wire.Row]]        # agent -> (t, final pose)
+    velocities: dict[int, tuple[Any, Any]]          # agent -> (v, w) of its final twist
+    control: Any                                    # publisher of the 'received' handshake
+    services: ControlClient
+    ensemble_control: Any                           # the services, when no monitor runs
+
+    def __init__(self, scene: Scene, ensemble: str, name: str = "runner") -> None:
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        self.node = Node(name, namespace=wire.namespace(ensemble))
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+        self.scene, self.model = scene, scene.model
+        self.grp = self.model.rotations
+        self.diameter = None
+        self.monitor = None  # the monitor's latest run record
+        self.agents = {}  # agents tuple -> latest run record of that process
+        self.poses, self.velocities = {}, {}
+        node, dim = self.node, self.model.dim
+        wire.subscription(node, "diameter", self._diam)
+        wire.subscription(node, "status", self._status)
+        self.control = wire.publisher(node, "control")  # the 'received' handshake
+        self.services = ControlClient(node)  # start and stop: the ensemble's services
+        for a in range(self.model.n_agents):
+            wire.subscription(node, "final_pose", self._pose(a), dim, a)
+            if self.model.order == 2:
+                wire.subscription(node, "final_twist", self._twist(a), dim, a)
+
+    def _diam(self, msg: Any) -> None:
+        self.diameter = float(msg.data)
+
+    def _status(self, msg: Any) -> None:
+        rec = wire.RunRecord.from_json(msg.data)
+        if rec is None:
+            return
+        if rec.role == "monitor":
+            self.monitor = rec
+        elif rec.agents not in self.agents or rec.t >= self.agents[rec.agents].t:
+            self.agents[rec.agents] = rec
+
+    def _pose(self, agent: int) -> Callable[[Any], None]:
+        def receive(msg: Any) -> None:
+            got, _ = wire.decode_pose_msg(msg, self.grp, self.model.dim, t_max=self.scene.t_end)
+            if got is not None:
+                self.poses[agent] = (got.t, wire.Row(got.vec - self.scene.origin, got.rot))
+
+        return receive
+
+    def _twist(self, agent: int) -> Callable[[Any], None]:
+        def receive(msg: Any) -> None:
+            got, _ = wire.decode_twist_msg(msg, self.grp, self.model.dim, t_max=self.scene.t_end)
+            if got is not None:
+                self.velocities[agent] = (got.vec, got.rot)
+
+        return receive
+
+    def spin(self, timeout: float) -> None:
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def agent_time(self) -> dict[int, float]:
+        """{agent: simulated time} from the agents' run records."""
+        return {a: rec.t for agents, rec in self.agents.items() for a in agents}
+
+    def agents_up(self) -> bool:
+        return len(self.agent_time()) >= self.model.n_agents
+
+    def ensemble_time(self) -> float | None:
+        """Simulated time of the ensemble: the monitor's last report, else the slowest agent's."""
+        if self.monitor is not None:
+            return self.monitor.t
+        times = self.agent_time()
+        return min(times.values()) if len(times) >= self.model.n_agents else None
+
+    def all_heard(self) -> bool:
+        """The monitor's last report covered every agent."""
+        return self.monitor is not None and self.monitor.agents_heard >= self.model.n_agents
+
+    def check_graph(self, names: Sequence[str]) -> bool:
+        """Every node of ``names`` is in the ensemble's namespace, and no name is taken twice."""
+        ns = self.node.get_namespace()
+        found = [n for n, space in self.node.get_node_names_and_namespaces() if space == ns]
+        twice = sorted({n for n in found if found.count(n) > 1})
+        if twice:
+            raise PolymatchError(
+                f"node name {ns}/{twice[0]} is taken twice: another ensemble named "
+                f"{ns.strip('/')!r} runs in this ROS domain (use --ensemble)"
+            )
+        return not set(names) - set(found)
+
+    def pose_times(self) -> dict[int, float]:
+        """Simulated time of every agent's final pose."""
+        return {a: p[0] for a, p in self.poses.items()}
+
+    def have_final(self) -> bool:
+        return len(self.poses) >= self.model.n_agents and (
+            self.model.order == 1 or len(self.velocities) >= self.model.n_agents
+        )
+
+    def monitor_reported_final(self) -> bool:
+        """The monitor's last report is of the final poses' step, with every agent heard."""
+        times = self.pose_times()
+        return (
+            self.monitor is not None
+            and bool(times)
+            and self.monitor.agents_heard >= self.model.n_agents
+            and self.monitor.t >= max(times.values()) - 1e-9
+        )
+
+    def stop(self) -> bool:
+        """The ensemble's ``stop`` service; False while it is not up yet."""
+        return self.services.call("stop")
+
+    def received(self) -> None:
+        """'received' on the control topic: every final pose is here (runs across hosts)."""
+        from rclpy.duration import Duration
+        from std_msgs.msg import String
+
+        self.control.publish(String(data="received"))
+        self.control.wait_for_all_acked(Duration(seconds=2.0))
+
+    def start(self) -> bool:
+        """The ensemble's ``start`` service; False while it is not up yet."""
+        return self.services.call("start")
+
+    def drive_lifecycle(self, names: Sequence[str],
+                        last_words: Callable[[str], str]) -> LifecycleDriver:
+        """A ``LifecycleDriver`` that configures and activates the agent nodes ``names``
+        (``last_words(name)``: that process's last line, for the error of a refused
+        transition)."""
+        from .lifecycle_driver import LifecycleDriver
+
+        return LifecycleDriver(self.node, self.node.get_namespace(), names, last_words)
+
+    def host_ensemble_services(self, mode: str) -> None:
+        """On a host that runs every agent and no monitor: this node offers them."""
+        from ..nodes.control import EnsembleControl
+
+        self.ensemble_control = EnsembleControl(self.node, mode)
+
+    def final_state(self) -> State | None:
+        """The final pose of every agent as a core State (None if some agent never reported)."""
+        if len(self.poses) < self.model.n_agents:
+            return None
+        groups = []
+        for g in self.model.groups:
+            rows = {a - g.start: self.poses[a][1] for a in g.indices}
+            with_v = self.model.order == 2 and all(a in self.velocities for a in g.indices)
+            if with_v:
+                for a in g.indices:
+                    rows[a - g.start].v, rows[a - g.start].w = self.velocities[a]
+            e = wire.assemble(self.grp, self.model.dim, rows, with_v=with_v, with_w=with_v)
+            groups.append(GroupState(e.x, e.rot, e.v, e.w))
+        return State(min(p[0] for p in self.poses.values()), tuple(groups))
+
+    def destroy(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()

@@ -1,0 +1,151 @@
+"""The input contract: bad input -> one line `polymatch: error: KEY.PATH: ...`, exit 2, fast.
+
+Concrete inputs for every class of the contract (test/support/input_cases.py), command-line parse
+errors, real subprocesses under an address-space limit, and a property-based test that
+mutates valid scenes (test/support/input_fuzz.py; `python test/support/soak_inputs.py` runs it
+longer).
+"""
+
+import os
+import resource
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from input_cases import BASE, CASES, PARSE_CASES, bomb, nested, scene
+from input_fuzz import Timeout, address_space_limit, contract_violation, fuzz, run_main
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIG = ROOT / "config"
+
+
+def _refusal(tmp_path, data, args):
+    path = tmp_path / "scene.yaml" if data is not None else tmp_path
+    if data is not None:
+        path.write_bytes(data)
+    argv = ["simulate", str(path), "-q"] + args
+    if "EXPLAIN" in args:
+        argv = ["explain", str(path)] + [a for a in args if a != "EXPLAIN"]
+    start = time.monotonic()
+    with address_space_limit(2 * 2**30):
+        code, out, err = run_main(argv, 20.0)
+    return code, err.replace(str(path), "DIR" if data is None else "SCENE"), \
+        time.monotonic() - start
+
+
+@pytest.mark.parametrize("cls,name,data,args,want", CASES,
+                         ids=[f"class{c[0]}_{c[1]}" for c in CASES])
+def test_bad_input_is_one_line_exit_2_naming_the_key(tmp_path, cls, name, data, args, want):
+    code, err, seconds = _refusal(tmp_path, data, args)
+    assert code == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("polymatch: error: " + want), err
+    assert seconds < 10
+
+
+@pytest.mark.parametrize("name,argv,want", PARSE_CASES, ids=[c[0] for c in PARSE_CASES])
+def test_command_line_parse_error_is_one_line_with_help_hint(name, argv, want):
+    code, out, err = run_main(argv, 20.0)
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("polymatch: error: " + want), err
+    assert "--help`)" in err
+
+
+def test_valid_base_scene_runs_so_the_refusals_are_not_blanket(tmp_path):
+    path = tmp_path / "scene.yaml"
+    path.write_bytes(BASE)
+    code, out, err = run_main(["simulate", str(path), "-q"], 60.0)
+    assert contract_violation(code, out, err) is None and code in (0, 3), err
+    path.write_bytes(scene("time: {t_end: 1e3}", "integrator: {method: rkmk4, dt: 1e-3}"))
+    code, out, err = run_main(["explain", str(path)], 60.0)     # 1e6 steps: within max_steps
+    assert code == 0, err
+
+
+def test_yaml_1_2_exponents_are_numbers_and_shipped_scenes_load():
+    from polymatch_ros.core import load_scene
+    s = load_scene(scene("integrator: {method: rkmk4, dt: 1e-2}").decode())
+    assert s.integrator.dt == 0.01
+    scenes = [p for p in sorted(CONFIG.glob("**/*.yaml")) if "params" not in p.parts]
+    assert len(scenes) >= 10                # config/params/ holds ROS parameter files
+    for path in scenes:
+        load_scene(path)
+
+
+def test_save_without_suffix_reports_the_file_written(tmp_path):
+    path = tmp_path / "scene.yaml"
+    path.write_bytes(BASE)
+    code, out, err = run_main(["simulate", str(path), "-q", "--save", str(tmp_path / "traj")], 60)
+    assert code in (0, 3), err
+    assert f"trajectory saved to {tmp_path / 'traj.npz'}" in out
+    assert np.load(tmp_path / "traj.npz")["times"][-1] == pytest.approx(2.0)
+
+
+def test_scene_tolerance_unused_by_auto_pick_warns_one_line(tmp_path):
+    path = tmp_path / "scene.yaml"
+    path.write_bytes(scene("model: {order: 2, mass: 1e-8, gamma: 2.0}",
+                           "integrator: {method: auto, tolerance: 1e-6}"))
+    code, out, err = run_main(["explain", str(path)], 60.0)
+    assert code == 0
+    assert err.startswith("polymatch: warning: integrator.tolerance = 1e-06 is not used: etd2")
+
+
+def test_writable_output_helper_appends_suffix_and_refuses_missing_directory(tmp_path):
+    from polymatch_ros.console import writable_output
+    from polymatch_ros.core import ParameterError
+    assert writable_output(tmp_path / "x", ".npz") == str(tmp_path / "x.npz")
+    assert writable_output(tmp_path / "x.NPZ", ".npz") == str(tmp_path / "x.NPZ")
+    with pytest.raises(ParameterError, match="does not exist"):
+        writable_output(tmp_path / "missing" / "x.png", ".png")
+    with pytest.raises(ParameterError, match="is a directory"):
+        writable_output(tmp_path, "")
+
+
+SUBPROCESS_CASES = [
+    ("binary", bytes(range(256)) * 64, []),
+    ("billion_laughs", bomb(), []),
+    ("count_1e9", scene(groups="  - {shape: triangle, count: 1000000000}"), []),
+    ("nested_1e5", nested(100_000), []),
+    ("file_50mb", BASE + b"#" * (50 * 2**20), []),
+    ("hypercube_30", scene("dimension: 30", groups="  - {shape: {hypercube: 30}, count: 2}"), []),
+]
+
+
+def _limit_memory():
+    resource.setrlimit(resource.RLIMIT_AS, (1536 * 2**20, 1536 * 2**20))
+
+
+@pytest.mark.parametrize("name,data,args", SUBPROCESS_CASES, ids=[c[0] for c in SUBPROCESS_CASES])
+def test_real_process_refuses_within_seconds_and_1_5_gib(tmp_path, name, data, args):
+    path = tmp_path / "scene.yaml"
+    path.write_bytes(data)
+    start = time.monotonic()
+    res = subprocess.run([sys.executable, "-m", "polymatch_ros.cli", "simulate", str(path), "-q"]
+                         + args, capture_output=True, text=True, timeout=60,
+                         preexec_fn=_limit_memory, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.count("\n") == 1 and res.stderr.startswith("polymatch: error: "), res.stderr
+    assert time.monotonic() - start < 30
+
+
+def test_harness_bound_is_not_reported_as_an_internal_error(tmp_path):
+    """The harness's CPU bound ends a long run as ``Timeout``, past the CLI's catch-all; a
+    loaded machine (wall time) does not end it."""
+    path = tmp_path / "scene.yaml"
+    path.write_bytes(scene("time: {t_end: 1e3}", "integrator: {method: rkmk4, dt: 1e-3}"))
+    start = time.process_time()
+    with pytest.raises(Timeout):
+        run_main(["simulate", str(path), "-q"], 0.5)
+    assert 0.4 <= time.process_time() - start < 5.0     # the timer ticks at the clock rate
+
+
+@pytest.mark.slow
+def test_mutated_scenes_keep_the_contract_property_based():
+    """A few hundred mutated scenes (types, magnitudes, nesting, keys, encodings, aliases)."""
+    stats = fuzz(300, Counter(), derandomize=True)
+    assert sum(stats.values()) >= 300
+    assert any(k.startswith("ran") for k in stats)          # mutations do not break everything
+    assert sum(v for k, v in stats.items() if k.startswith("refused")) > 100

@@ -1,0 +1,319 @@
+"""Bad input from the network or the command line never poisons the ensemble.
+
+- a rogue publisher on an agent's pose and stage topics (NaN, non-unit quaternions,
+  foreign run ids) changes nothing in a lockstep result, and the drops are counted;
+- bad ROS parameters are one line and exit code 2;
+- the package builds with colcon (from PyPI) in a scratch workspace and the installed
+  `agent` and `monitor` executables start; a one-agent scene runs to t_end.
+"""
+
+import os
+import re
+import signal
+import subprocess
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import yaml
+from ros_harness import PY, REPO, _children, cli_argv, needs_ros, node_argv, scene_path
+
+from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.simulate import simulate
+
+pytestmark = needs_ros
+
+
+# Simulated seconds of the flooded run: each agent matches the rogue's writer on its own
+# (measured: 0 to about 1.3 s after the first agent); a run of t_end 1 lasts about 1.3 s, and
+# in 2 of 28 runs one agent had not matched it before the end, so it had nothing to drop.
+ROGUE_T_END = 4.0
+
+
+def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
+    # the rogue outlives the longest run this test allows (30 s to start flooding + the run's
+    # 150 s): it is still sending when the run ends, and the harness ends it by its PID
+    rogue = ros.start([PY, os.path.join(REPO, "test", "support", "rogue_publisher.py"),
+                      "polymatch", "3", "200"], timeout=210)
+    deadline = time.monotonic() + 30                  # the flood is on before the run starts
+    while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert "rogue: flooding" in ros.output(rogue), ros.output(rogue)
+    out = tmp_path / "final.npz"
+    proc = ros.start(
+        cli_argv("run", scene_path("congruent_triangles"), "--t-end", ROGUE_T_END,
+                 "--integrator", "rkmk4", "--no-compare", "--save", out, "--timeout", 150, "-q",
+                 "--round-timeout", 60),  # the flood is under test, not the timeout
+        timeout=180,
+    )
+    t0 = time.monotonic()
+    rc = ros.wait(proc, 190)
+    text = ros.output(proc)
+    assert rc in (0, 3), text
+    took = time.monotonic() - t0
+    assert rogue.poll() is None, (
+        f"the rogue must still be sending when the run ends (the run took {took:.0f} s)\n"
+        + text + "\n" + ros.output(rogue)
+    )
+    scene = load_scene(scene_path("congruent_triangles"))
+    data = np.load(out)
+    traj = simulate(replace(scene, t_end=ROGUE_T_END), "rkmk4", 0.05, samples=[ROGUE_T_END],
+                    metrics=False)
+    want = scene.model.rotations.to_matrices(traj.final.groups[0].rot)
+    assert np.max(np.abs(data["group0_rotations"] - want)) <= 1e-12
+    assert (
+        np.max(np.abs(data["group0_centroids"] - (traj.final.groups[0].x + scene.origin))) <= 1e-12
+    )
+    # every agent of the group listens to agent 3's stages: each dropped the rogue's
+    drops = re.findall(r"^agent (\d+): finished.*; dropped (\d+) messages \((.*)\)$", text, re.M)
+    assert len(drops) >= 7, text
+    reasons = " ".join(d[2] for d in drops)
+    assert "non-finite value" in reasons and "unknown sender (run id)" in reasons
+    mon = re.search(r"^monitor: .*dropped (\d+) messages \((.*)\)$", text, re.M)
+    assert (
+        mon
+        and "quaternion far from unit norm" in mon.group(2)
+        and "non-finite value" in mon.group(2)
+    ), text
+
+
+def _refused(ros, argv):
+    """Start ``argv``: it must exit with code 2 and one line (no traceback); that line."""
+    proc = ros.start(argv, timeout=60)
+    assert ros.wait(proc, 70) == 2
+    text = ros.output(proc).strip()
+    assert len(text.splitlines()) == 1 and "Traceback" not in text, text
+    return text
+
+
+@pytest.mark.parametrize(
+    "node,params,expect",
+    [
+        ("nodes.agent", {"agent": 99}, "agent 99 is not in the scene"),
+        ("nodes.agent", {"mode": "fast"}, "expected lockstep or realtime"),
+        ("nodes.agent", {"dt": "abc"}, "expected a number"),
+        ("nodes.agent", {"rate": -5.0}, "out of range"),
+        ("nodes.agent", {"integrator": "rk45"}, "unknown integrator"),
+        ("nodes.monitor", {"rate": -1.0}, "out of range"),
+        ("nodes.monitor", {"markers": "maybe"}, "expected a boolean"),
+    ],
+)
+def test_bad_node_parameter_is_one_line_and_exit_code_2(ros, node, params, expect):
+    text = _refused(ros, node_argv(node, "congruent_triangles", **params))
+    assert expect in text, text
+
+
+def test_missing_scene_is_one_line_and_exit_code_2(ros):
+    argv = [PY, "-m", "polymatch_ros.ros.nodes.monitor", "--ros-args", "-p",
+            "scene:=/nonexistent.yaml"]
+    assert "no such scene file" in _refused(ros, argv)
+
+
+def _scene_file(path, group, shape, count, dimension, dt, t_end, **extra):
+    """A one-group first-order rkmk4 scene, written to ``path`` (YAML)."""
+    spec = {"name": path.stem, "dimension": dimension, **extra, "model": {"order": 1},
+            "integrator": {"method": "rkmk4", "dt": dt}, "time": {"t_end": t_end},
+            "groups": [{"name": group, "shape": shape, "count": count}]}
+    path.write_text(yaml.safe_dump(spec, sort_keys=False), encoding="utf-8")
+    return path
+
+
+def test_colcon_build_and_installed_executables_start(ros, tmp_path):
+    colcon = os.path.join(os.path.dirname(PY), "colcon")
+    if not os.path.exists(colcon):
+        pytest.skip("colcon is not installed in this environment")
+    ws = tmp_path / "ws"
+    ws.mkdir()
+    build = subprocess.run(
+        [
+            "timeout",
+            "-k",
+            "5",
+            "300",
+            colcon,
+            "build",
+            "--base-paths",
+            REPO,
+            "--build-base",
+            str(ws / "build"),
+            "--install-base",
+            str(ws / "install"),
+        ],
+        cwd=ws,
+        capture_output=True,
+        text=True,
+    )
+    assert build.returncode == 0, build.stdout + build.stderr
+    prefix = ws / "install" / "polymatch_ros"
+    exe = prefix / "lib" / "polymatch_ros"
+    assert (exe / "agent").exists() and (exe / "monitor").exists()
+    assert (prefix / "share" / "polymatch_ros" / "config" / "congruent_triangles.yaml").exists()
+    site = prefix / "lib" / "python3.11" / "site-packages"
+    ros.env["PYTHONPATH"] = str(site)
+    ros.env["AMENT_PREFIX_PATH"] = f"{prefix}:{ros.env.get('AMENT_PREFIX_PATH', '')}"
+    scene = _scene_file(tmp_path / "one_agent.yaml", "solo", "tetrahedron", 1, 3, 0.1, 2.0)
+    agent = ros.start(
+        [str(exe / "agent"), "--ros-args", "-p", f"scene:={scene}", "-p", "agent:=0"], timeout=60
+    )
+    assert ros.wait(agent, 70) == 0, ros.output(agent)
+    assert "agent 0: finished at t = 2 after 20 steps" in ros.output(agent)
+    # a shipped scene by name, found through the ament index of the colcon install
+    monitor = ros.start(
+        [str(exe / "monitor"), "--ros-args", "-p", "scene:=congruent_triangles"], timeout=60
+    )
+    # Ctrl-C only once it runs ROS (rclpy.init loads the RMW, then takes SIGINT): before, the
+    # interpreter is still importing (seconds on a loaded machine) and a SIGINT is its own
+    assert _wait_for_rmw(monitor.pid, 45), ros.output(monitor)
+    time.sleep(4.0)
+    assert monitor.poll() is None, ros.output(monitor)
+    ros.kill(monitor, signal.SIGINT)
+    assert ros.wait(monitor, 20) == 0, ros.output(monitor)
+
+
+def _descendants(pid):
+    """PIDs below ``pid`` (children, grandchildren), read from /proc."""
+    from ros_harness import _children
+
+    out, todo = [], [pid]
+    while todo:
+        for c in _children(todo.pop()):
+            out.append(c)
+            todo.append(c)
+    return out
+
+
+def _wait_for_rmw(pid, timeout):
+    """True once a process below ``pid`` has loaded Fast DDS's RMW library (rclpy.init)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for child in _descendants(pid):
+            try:
+                with open(f"/proc/{child}/maps") as fh:
+                    if "librmw_fastrtps" in fh.read():
+                        return True
+            except OSError:
+                pass
+        time.sleep(0.2)
+    return False
+
+
+def _alive(pid):
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().split()[2] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "child-dies"])
+def test_runner_ends_every_process_it_started(ros, how):
+    """`polymatch run` ends all its processes by PID on Ctrl-C and when a child dies."""
+    proc = ros.start(
+        cli_argv("run", scene_path("congruent_triangles"), "--t-end", 500, "--timeout", 120),
+        timeout=150,
+    )
+    deadline = time.monotonic() + 60
+    kids = []
+    while time.monotonic() < deadline:
+        kids = [p for p in _descendants(proc.pid) if _alive(p)]
+        if (
+            len(kids) >= 10
+            and "rounds/s" in ros.output(proc)
+            and "t =    0.000" not in ros.output(proc)[-200:]
+        ):
+            break
+        time.sleep(0.5)
+    assert len(kids) >= 10, ros.output(proc)  # runner + monitor + 8 agents (+ wrappers)
+    runner = _children(proc.pid)[0]
+    if how == "ctrl-c":
+        os.kill(runner, signal.SIGINT)
+        expect_code, expect_text = 130, "interrupted"
+    else:
+        agent = [p for p in _children(runner) if "agent_3" in open(f"/proc/{p}/cmdline").read()][0]
+        os.kill(agent, signal.SIGKILL)
+        expect_code, expect_text = 1, "agent_3"
+    assert ros.wait(proc, 40) == expect_code, ros.output(proc)
+    assert expect_text in ros.output(proc)
+    time.sleep(0.5)
+    assert not [p for p in kids if _alive(p)], "a process outlived the runner"
+
+
+def _three_agents_running(ros, tmp_path, t_end, round_timeout):
+    """Three lockstep agents, returned once each is well into its rounds (diagnostics show
+    t > 0.5): a fixed sleep could strike during discovery on a loaded machine, where the first
+    rounds also allow discovery_timeout."""
+    scene = _scene_file(
+        tmp_path / "three.yaml", "triangles", "triangle", 3, 2, 0.01, t_end, seed=3
+    )
+    agents = [
+        ros.agent(str(scene), i, timeout=90, round_timeout=round_timeout, discovery_timeout=20.0)
+        for i in range(3)
+    ]
+    diag = ros.start(cli_argv("echo", "/diagnostics", "--timeout", 80), timeout=90)
+    assert _wait_until_all_step(ros, diag, agents, 3, t_min=0.5, timeout=40), ros.output(diag)[
+        -2000:
+    ]
+    assert all(a.poll() is None for a in agents), [ros.output(a) for a in agents]
+    return agents
+
+
+def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
+    """Lockstep: SIGKILL one agent mid-run; its neighbours stop with a one-line error naming it
+    as gone (its writer unmatched once its DDS lease ran out)."""
+    agents = _three_agents_running(ros, tmp_path, 1000.0, round_timeout=2.0)  # ~1e5 steps
+    ros.kill(agents[2])
+    for a in agents[:2]:
+        assert ros.wait(a, 30) == 1, ros.output(a)
+        text = ros.output(a)
+        errors = [line for line in text.splitlines() if line.startswith("agent: error:")]
+        assert len(errors) == 1 and "timed out after 2 s waiting for agent(s) " in errors[0], text
+        # the vanished agent is named; the other survivor may be named too: when the victim's
+        # last message reached one survivor and not the other (a SIGKILLed writer repairs
+        # nothing), that survivor is a round behind and both time out, each naming the other
+        named = re.search(r"waiting for agent\(s\) ([0-9, ]+)", errors[0]).group(1)
+        others = {int(k) for k in named.split(",")}
+        assert 2 in others and others <= {0, 1, 2} - {agents.index(a)}, errors[0]
+        gone = re.search(r"; agent\(s\) ([0-9, ]+) left", errors[0])
+        assert gone is not None and gone.group(1).strip(), errors[0]
+        assert "Traceback" not in text
+
+
+def test_a_stalled_peer_is_waited_for_and_the_run_completes(ros, tmp_path):
+    """Lockstep: one agent is frozen (SIGSTOP) for 4 s, four times round_timeout, as a loaded
+    machine can starve a process.  Its writer stays matched (the DDS lease is 10 s), so its
+    neighbours wait instead of failing, and all three finish the run.  (With stall_timeout
+    below the freeze the same run fails naming agent 2 "present but silent".)"""
+    agents = _three_agents_running(ros, tmp_path, 8.0, round_timeout=1.0)   # 800 steps
+    frozen = _children(agents[2].pid)
+    assert frozen
+    for pid in frozen:
+        os.kill(pid, signal.SIGSTOP)
+    try:
+        time.sleep(4.0)
+        assert all(a.poll() is None for a in agents), [ros.output(a)[-600:] for a in agents]
+    finally:
+        for pid in frozen:
+            os.kill(pid, signal.SIGCONT)
+    for a in agents:
+        assert ros.wait(a, 60) == 0, ros.output(a)[-1500:]
+        assert "finished at t = 8" in ros.output(a), ros.output(a)[-1500:]
+
+
+def _wait_until_all_step(ros, diag, agents, n, t_min, timeout):
+    """True once each of agents 0..n-1 has reported (diagnostics) a simulated time above t_min."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        reached = {
+            int(a)
+            for a, t in re.findall(
+                r"agent_(\d+)\s*\n\s*message: lockstep: t = ([0-9.e+-]+)", ros.output(diag)
+            )
+            if float(t) > t_min
+        }
+        if reached >= set(range(n)):
+            return True
+        if any(a.poll() is not None for a in agents):
+            return False
+        time.sleep(0.2)
+    return False

@@ -1,0 +1,140 @@
+"""Independent helpers for the core test-suite (test_core_*.py).
+
+Everything here is written from the paper's formulas and the documented array
+layouts, *not* by calling the core's own conversion or metric code, so the
+tests compare the core against an independent computation.
+"""
+
+from itertools import combinations
+
+import numpy as np
+from scipy.spatial.distance import pdist
+
+from benchmarks.extremes.scenes import scene_data
+from polymatch_ros.core import load_scene
+
+J2 = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+
+def rot_matrices(rep, g):
+    """(N, d, d) rotation matrices from a group array, from the documented layouts."""
+    if rep.name == "angle":                      # angles theta (N,)
+        c, s = np.cos(g), np.sin(g)
+        out = np.empty((len(g), 2, 2))
+        out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -s, s, c
+        return out
+    if rep.name == "so3":                        # structure of arrays (3, 3, N)
+        return np.moveaxis(np.asarray(g), 2, 0).copy()
+    if rep.name == "matrix":                     # (N, d, d)
+        return np.array(g, dtype=float)
+    raise AssertionError(f"unknown representation {rep.name}")
+
+
+def skew_matrices(rep, a):
+    """(N, d, d) skew matrices hat(a) from an algebra array."""
+    if rep.name == "angle":                      # scalars w, hat(w) = w J
+        return np.asarray(a)[:, None, None] * J2
+    if rep.name == "so3":                        # vectors (3, N)
+        x, y, z = np.asarray(a)
+        out = np.zeros((x.shape[0], 3, 3))
+        out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -z, y, -x
+        out[:, 1, 0], out[:, 2, 0], out[:, 2, 1] = z, -y, x
+        return out
+    if rep.name == "matrix" and rep.dim == 4 and np.ndim(a) == 2:
+        return _so4_hat(np.asarray(a, dtype=float))
+    if rep.name == "matrix":
+        return np.array(a, dtype=float)
+    raise AssertionError(f"unknown representation {rep.name}")
+
+
+def _hamilton(u, v):
+    """Quaternion products u v of (4, N) arrays: (u0 v0 - u.v, u0 v + v0 u + u x v)."""
+    return np.concatenate([(u[0] * v[0] - np.sum(u[1:] * v[1:], axis=0))[None],
+                           u[0] * v[1:] + v[0] * u[1:] + np.cross(u[1:], v[1:], axis=0)])
+
+
+def _so4_hat(parts):
+    """so(4) held as self-dual parts (6, N) = (a, b) -> (N, 4, 4): W x = a x - x b."""
+    n = parts.shape[1]
+    a = np.concatenate([np.zeros((1, n)), parts[:3]])
+    b = np.concatenate([np.zeros((1, n)), parts[3:]])
+    out = np.empty((n, 4, 4))
+    for j in range(4):                            # column j: the image of the unit e_j
+        e = np.zeros((4, n))
+        e[j] = 1.0
+        out[:, :, j] = (_hamilton(a, e) - _hamilton(e, b)).T
+    return out
+
+
+def defect(mats):
+    """max_i |O_i^T O_i - I|_F (Lemma 2.1)."""
+    d = mats.shape[1]
+    gram = np.einsum("nki,nkj->nij", mats, mats)
+    return float(np.max(np.linalg.norm(gram - np.eye(d), axis=(1, 2))))
+
+
+def brute_diameter(points):
+    """max_{i,j} |p_i - p_j| by scipy's pdist (independent of metrics.point_set_diameter)."""
+    p = np.asarray(points, dtype=float).reshape(len(points), -1)
+    return float(pdist(p).max()) if len(p) > 1 else 0.0
+
+
+def brute_rotation_diameter(mats):
+    """max_{i,j} |O_i - O_j|_F over explicit pairs."""
+    pairs = combinations(range(len(mats)), 2)
+    return max((float(np.linalg.norm(mats[i] - mats[j])) for i, j in pairs), default=0.0)
+
+
+def vertices(model, state, gi):
+    """(N, n, d) vertices x^i_a = xbar^i + s^i O^i r_a of group gi."""
+    grp = model.groups[gi]
+    gs = state.groups[gi]
+    mats = rot_matrices(model.rotations, gs.rot)
+    s = np.ones(len(mats)) if grp.scales is None else np.asarray(grp.scales)
+    return gs.x[:, None, :] + s[:, None, None] * np.einsum("nij,aj->nai", mats, grp.reference)
+
+
+def brute_matching_diameter(model, state, gi):
+    """max_{i,j,a} |x^i_a - x^j_a|, brute force over pairs of polytopes and vertices."""
+    v = vertices(model, state, gi)
+    best = 0.0
+    for i, j in combinations(range(v.shape[0]), 2):
+        best = max(best, float(np.max(np.linalg.norm(v[i] - v[j], axis=1))))
+    return best
+
+
+def rotation_energy(model, gs):
+    """E = (m/N) sum |O_i'|^2 + kappa/(2N^2) sum_{i,k} |O_i - O_k|^2 with O_i' = W_i O_i
+    (Prop. 2.2 i)."""
+    rep = model.rotations
+    mats = rot_matrices(rep, gs.rot)
+    n = len(mats)
+    kinetic = 0.0
+    if gs.w is not None:
+        odot = np.einsum("nij,njk->nik", skew_matrices(rep, gs.w), mats)
+        kinetic = model.mass / n * float(np.sum(odot * odot))
+    diff = mats[:, None] - mats[None, :]
+    return kinetic + model.kappa / (2.0 * n * n) * float(np.sum(diff * diff))
+
+
+def state_error(scene_a, state_a, scene_b, state_b):
+    """Per-component max errors between two states: {'rot', 'w', 'x', 'v'} (matrices compared)."""
+    out = {"rot": 0.0, "w": 0.0, "x": 0.0, "v": 0.0}
+    ra, rb = scene_a.model.rotations, scene_b.model.rotations
+    for ga, gb in zip(state_a.groups, state_b.groups):
+        rot_diff = rot_matrices(ra, ga.rot) - rot_matrices(rb, gb.rot)
+        out["rot"] = max(out["rot"], float(np.max(np.abs(rot_diff))))
+        out["x"] = max(out["x"], float(np.max(np.abs(ga.x - gb.x))))
+        if ga.v is not None and gb.v is not None:
+            out["v"] = max(out["v"], float(np.max(np.abs(ga.v - gb.v))))
+        if ga.w is not None and gb.w is not None:
+            w_diff = skew_matrices(ra, ga.w) - skew_matrices(rb, gb.w)
+            out["w"] = max(out["w"], float(np.max(np.abs(w_diff))))
+    return out
+
+
+def make_scene(dim, order=1, *, count=4, t_end=1.0, method="rkmk4", dt=0.01, **kw):
+    """An inline scene dict -> Scene (the YAML format of config/*.yaml): one group "g0"
+    (``scene_data``'s arguments) integrated by ``method`` at ``dt``."""
+    return load_scene(scene_data(dim, order, count=count, t_end=t_end, group_name="g0",
+                                 integrator={"method": method, "dt": dt}, **kw))

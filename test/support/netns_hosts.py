@@ -1,0 +1,37 @@
+"""Several "hosts" on one machine for the tests: benchmarks/hosts/namespaces.py (network
+namespaces joined by a bridge in a namespace of its own), and ``provided_hosts``, a pytest
+fixture's body.
+
+    with NetnsHosts(3) as net:              # or the pytest fixture in a test module
+        net.addresses                       # ['10.213.7.1', '10.213.7.2', '10.213.7.3']
+        net.add_loss(1, percent=10)         # nftables: drop 10% of what host 1 receives
+"""
+
+from benchmarks.hosts.namespaces import (  # noqa: F401 (the tests' names)
+    DDS_FILTER,
+    LOSS_TABLE,
+    PREFIX,
+    Capture,
+    NetnsHosts,
+    namespaces,
+    remove_stale,
+    root_interfaces,
+    unavailable_reason,
+)
+
+
+def provided_hosts(count, tools=()):
+    """A fixture's body: ``count`` namespace hosts for one test (skipped where they or ``tools``
+    are unavailable), closed afterwards with no namespace left over."""
+    import pytest
+
+    reason = unavailable_reason(tools)
+    if reason:
+        pytest.skip(reason)
+    hosts = NetnsHosts(count)
+    try:
+        hosts.create()
+        yield hosts
+    finally:
+        hosts.close()
+        assert hosts.left_over() == []

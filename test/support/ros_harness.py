@@ -1,0 +1,205 @@
+"""Launch-free helpers for the multi-process ROS tests.
+
+Every process started here runs with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST,
+a ROS_DOMAIN_ID reserved for the test alone (domain_coordinator), under
+`timeout -k`, and is ended by its own PID when the test finishes.  Fast DDS
+shared-memory segments left behind by processes a test SIGKILLs are removed
+afterwards (only new ones that no live process still maps).
+"""
+
+import contextlib
+import glob
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from proc_group import children as _children
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CONFIG = os.path.join(REPO, "config")
+PY = sys.executable
+
+
+def scene_path(name):
+    return os.path.join(CONFIG, name if name.endswith(".yaml") else name + ".yaml")
+
+
+def ros_available():
+    try:
+        import rclpy  # noqa: F401
+        return True
+    except ImportError:
+        return False
+
+
+needs_ros = pytest.mark.skipif(not ros_available(), reason="rclpy is not installed")
+
+
+def _mapped_shm():
+    held = set()
+    for maps in glob.glob("/proc/[0-9]*/maps"):
+        try:
+            with open(maps) as fh:
+                for line in fh:
+                    if "/dev/shm/" in line:
+                        held.add(line.split()[-1])
+        except OSError:
+            continue
+    return held
+
+
+class Ros:
+    """A test's private ROS world: one domain id, loopback discovery, processes ended by PID."""
+
+    def __init__(self, domain):
+        from polymatch_ros.ros.supervisor.environment import private_ros_environment
+
+        self.domain = domain
+        self.env = private_ros_environment(domain)
+        assert self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+        self.procs = []
+        self.shm_before = set(glob.glob("/dev/shm/fastrtps_*"))
+
+    def start(self, argv, timeout, name=""):
+        """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file."""
+        log = open(
+            os.path.join(
+                os.environ.get("TMPDIR", "/tmp"),
+                f"polymatch_test_{os.getpid()}_{len(self.procs)}.log",
+            ),
+            "w+",
+        )
+        proc = subprocess.Popen(
+            ["timeout", "-k", "5", str(timeout)] + list(argv),
+            env=self.env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            cwd=REPO,
+        )
+        proc.log, proc.name = log, name
+        self.procs.append(proc)
+        return proc
+
+    def agent(self, scene, agent, timeout=120, **params):
+        argv = node_argv("nodes.agent", scene, agent=agent, **params) + [
+            "-r",
+            f"__node:=agent_{agent}",
+        ]
+        return self.start(argv, timeout, f"agent {agent}")
+
+    def monitor(self, scene, timeout=120, **params):
+        return self.start(
+            node_argv("nodes.monitor", scene, **params) + ["-r", "__node:=monitor"],
+            timeout,
+            "monitor",
+        )
+
+    @staticmethod
+    def output(proc):
+        proc.log.flush()
+        proc.log.seek(0)
+        return proc.log.read()
+
+    @staticmethod
+    def wait(proc, timeout):
+        try:
+            return proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def kill(self, proc, sig=signal.SIGKILL):
+        """Signal one process by PID: the `timeout` wrapper's child too, for SIGKILL."""
+        if proc.poll() is None:
+            if sig == signal.SIGKILL:
+                for child in _children(proc.pid):
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(child, signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(proc.pid, sig)
+
+    def close(self, keep_logs=None):
+        """End every process by PID; with ``keep_logs`` (a directory) keep each one's output."""
+        for proc in self.procs:
+            if proc.poll() is None:
+                self.kill(proc, signal.SIGINT)
+        deadline = time.monotonic() + 5
+        for proc in self.procs:
+            left = max(0.1, deadline - time.monotonic())
+            if self.wait(proc, left) is None:
+                self.kill(proc, signal.SIGKILL)
+                self.wait(proc, 5)
+            proc.log.close()
+            if keep_logs:
+                os.makedirs(keep_logs, exist_ok=True)
+                label = (proc.name or "process").replace(" ", "_")
+                shutil.copy(
+                    proc.log.name,
+                    os.path.join(keep_logs, f"{self.procs.index(proc):02d}_{label}.log"),
+                )
+            with contextlib.suppress(OSError):
+                os.unlink(proc.log.name)
+        held = _mapped_shm()
+        for path in set(glob.glob("/dev/shm/fastrtps_*")) - self.shm_before:
+            if path not in held:
+                with contextlib.suppress(OSError):
+                    os.unlink(path)
+
+
+def cli_argv(*args):
+    """``polymatch ARGS...`` as this interpreter runs it (every argument as a string)."""
+    return [PY, "-m", "polymatch_ros.cli", *map(str, args)]
+
+
+def placed_vertices(model, groups, origin):
+    """Every agent's vertices per group: origin + x_i + O_i times the reference shape."""
+    out = []
+    for g, gs in zip(model.groups, groups):
+        mats = model.rotations.to_matrices(gs.rot)
+        out.append(
+            gs.x + origin + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2)
+        )
+    return out
+
+
+def node_argv(module, scene, **params):
+    argv = [
+        PY,
+        "-m",
+        f"polymatch_ros.ros.{module}",
+        "--ros-args",
+        "-p",
+        f"scene:={scene_path(scene)}",
+    ]
+    for key, value in params.items():
+        if isinstance(value, (list, tuple)):
+            value = "[" + ",".join(map(str, value)) + "]"
+        elif isinstance(value, float):
+            value = repr(value)
+        argv += ["-p", f"{key}:={value}"]
+    return argv
+
+
+@pytest.fixture
+def ros(request):
+    """A private ROS world; with POLYMATCH_KEEP_LOGS=DIR the processes' output of a failed test
+    is kept
+    in DIR/<test name>/ (what test/support/repeat_tests.py uses to look into a failure)."""
+    from domain_coordinator import domain_id
+
+    with domain_id() as dom:
+        world = Ros(dom)
+        try:
+            yield world
+        finally:
+            keep = os.environ.get("POLYMATCH_KEEP_LOGS")
+            failed = (
+                getattr(request.node, "rep_call", None) is not None
+                and request.node.rep_call.failed
+            )
+            world.close(os.path.join(keep, request.node.name) if keep and failed else None)
