@@ -29,26 +29,11 @@ FOLDER_MARKERS = {"ros": ("ros",), "hosts": ("hosts",), "benchmarks": ("ros", "s
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark every test by its folder (``FOLDER_MARKERS``), then spread the multi-process tests
-    evenly through the run (``spread``)."""
+    """Mark every test by its folder (``FOLDER_MARKERS``)."""
     for item in items:
         folder = pathlib.Path(item.fspath).resolve().relative_to(HERE).parts[0]
         for name in FOLDER_MARKERS.get(folder, ()):
             item.add_marker(getattr(pytest.mark, name))
-    items[:] = spread(items, lambda item: bool(item.get_closest_marker("ros")
-                                               or item.get_closest_marker("hosts")))
-
-
-def spread(items, heavy):
-    """``items`` with those that ``heavy`` picks spread evenly among the others, each kind in
-    its own order.  xdist's workers take the list in contiguous shares, so in folder order the
-    realtime ROS tests (wall-clock control loops, many processes each) all ran at the end at
-    once and starved each other; spread, each worker runs one now and then beside numerics."""
-    picked = [item for item in items if heavy(item)]
-    rest = [item for item in items if not heavy(item)]
-    keyed = [((k + 0.5) / len(picked), 0, k, item) for k, item in enumerate(picked)]
-    keyed += [((k + 0.5) / len(rest), 1, k, item) for k, item in enumerate(rest)]
-    return [entry[-1] for entry in sorted(keyed, key=lambda entry: entry[:3])]
 
 
 @pytest.hookimpl(wrapper=True, tryfirst=True)
