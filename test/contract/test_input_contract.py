@@ -137,9 +137,12 @@ def test_harness_bound_is_not_reported_as_an_internal_error(tmp_path):
     path = tmp_path / "scene.yaml"
     path.write_bytes(scene("time: {t_end: 1e3}", "integrator: {method: rkmk4, dt: 1e-3}"))
     start = time.process_time()
-    with pytest.raises(Timeout):
+    with pytest.raises(Timeout) as ended:
         run_main(["simulate", str(path), "-q"], 0.5)
-    assert 0.4 <= time.process_time() - start < 5.0     # the timer ticks at the clock rate
+    used = time.process_time() - start
+    assert used < 5.0
+    if ended.value.clock == "cpu":  # else the wall-clock guard (10 s) came first: a loaded CPU
+        assert used >= 0.4, used  # the timer ticks at the clock rate
 
 
 @pytest.mark.slow

@@ -26,11 +26,13 @@ PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BOUND = 150  # s: only a hang takes this long
 
 
-def _probe(ros, *actions, timeout=BOUND):
+def _probe(ros, *actions, timeout=BOUND, beside=None):
+    """The probe's output; on failure also the tail of ``beside``'s (the run it probes)."""
     proc = ros.start([PY, PROBE, *actions], timeout=timeout, name="probe")
     rc = ros.wait(proc, timeout + 10)
     text = ros.output(proc)
-    assert rc == 0, text
+    run = "" if beside is None else "\n--- the run:\n" + ros.output(beside)[-4000:]
+    assert rc == 0, text + run
     return text
 
 
@@ -103,6 +105,7 @@ def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converge
         "call /polymatch/pause false",
         "sleep 1",
         "pose 0",
+        beside=run,
     )
     assert all(ok for _, ok, _ in _results(text)), text
     assert re.findall(r"^STATE (\S+)$", text, re.M) == ["active"], text

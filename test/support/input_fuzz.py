@@ -167,8 +167,13 @@ class Timeout(BaseException):
 
     A ``BaseException``, as ``KeyboardInterrupt`` is: the CLI's catch-all (``except
     Exception``, the contract's "internal error" line) must not turn the harness's own bound
-    into a verdict on the code under test.
+    into a verdict on the code under test.  ``clock`` names the bound that ran out: "cpu" or
+    "wall" (the hang guard).
     """
+
+    def __init__(self, clock: str) -> None:
+        super().__init__(f"the {clock} bound ran out")
+        self.clock = clock
 
 
 # The wall-clock bound is a hang guard only, this many times the CPU bound: on a loaded
@@ -184,7 +189,7 @@ def run_main(argv, seconds):
     out, err = io.StringIO(), io.StringIO()
 
     def expire(signum, frame):
-        raise Timeout()
+        raise Timeout("cpu" if signum == signal.SIGPROF else "wall")
 
     old = {sig: signal.signal(sig, expire) for sig in (signal.SIGPROF, signal.SIGALRM)}
     signal.setitimer(signal.ITIMER_PROF, seconds)

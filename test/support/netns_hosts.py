@@ -22,16 +22,19 @@ from benchmarks.hosts.namespaces import (  # noqa: F401 (the tests' names)
 
 def provided_hosts(count, tools=()):
     """A fixture's body: ``count`` namespace hosts for one test (skipped where they or ``tools``
-    are unavailable), closed afterwards with no namespace left over."""
+    are unavailable), closed afterwards with no namespace left over.  The hosts' processes
+    run in one of the suite's ROS slots (``ros_harness.ros_slot``)."""
     import pytest
+    from ros_harness import ros_slot
 
     reason = unavailable_reason(tools)
     if reason:
         pytest.skip(reason)
-    hosts = NetnsHosts(count)
-    try:
-        hosts.create()
-        yield hosts
-    finally:
-        hosts.close()
-        assert hosts.left_over() == []
+    with ros_slot():
+        hosts = NetnsHosts(count)
+        try:
+            hosts.create()
+            yield hosts
+        finally:
+            hosts.close()
+            assert hosts.left_over() == []

@@ -185,14 +185,46 @@ def node_argv(module, scene, **params):
     return argv
 
 
+# How many tests run ROS worlds at once, across the pytest workers.  Their processes are
+# CPU-bound on two cores (four worlds at once kept a load average near 30), and a control loop
+# that runs on the wall clock (realtime agents, bridged robots) or a round timeout fails when it
+# gets a sliver of a core; the other workers run the core's tests meanwhile.
+ROS_SLOTS = int(os.environ.get("POLYMATCH_TEST_ROS_SLOTS", "2"))
+SLOT_DIR = os.path.join(os.environ.get("TMPDIR", "/tmp"), "polymatch_test_ros_slots")
+
+
+@contextlib.contextmanager
+def ros_slot(slots=ROS_SLOTS, poll=0.2):
+    """Hold one of ``slots`` machine-wide slots (an exclusive ``flock`` on one of ``slots``
+    files) while the block runs; wait for one while all are held.  The kernel releases the
+    lock of a process that dies, so a crashed worker holds nothing."""
+    import fcntl
+
+    os.makedirs(SLOT_DIR, exist_ok=True)
+    while True:
+        for i in range(slots):
+            fh = open(os.path.join(SLOT_DIR, f"slot_{i}"), "a")
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                fh.close()
+                continue
+            try:
+                yield i
+            finally:
+                fh.close()  # closing the file drops the lock
+            return
+        time.sleep(poll)
+
+
 @pytest.fixture
 def ros(request):
-    """A private ROS world; with POLYMATCH_KEEP_LOGS=DIR the processes' output of a failed test
-    is kept
-    in DIR/<test name>/ (what test/support/repeat_tests.py uses to look into a failure)."""
+    """A private ROS world, in one of ``ROS_SLOTS`` slots; with POLYMATCH_KEEP_LOGS=DIR the
+    processes' output of a failed test is kept in DIR/<test name>/ (what
+    test/support/repeat_tests.py uses to look into a failure)."""
     from domain_coordinator import domain_id
 
-    with domain_id() as dom:
+    with ros_slot(), domain_id() as dom:
         world = Ros(dom)
         try:
             yield world

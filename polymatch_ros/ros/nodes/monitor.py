@@ -55,8 +55,6 @@ Velocity = tuple[np.ndarray, np.ndarray]
 
 
 class MonitorNode(NodeApp):
-    interrupted_exit = 0  # the monitor runs until it is stopped: Ctrl-C is its normal end
-
     def __init__(self, node: Node, params: dict[str, Any]) -> None:
         from rclpy.executors import SingleThreadedExecutor
 
@@ -306,7 +304,8 @@ def make_monitor(argv: list[str] | None = None) -> MonitorNode:
 
 
 def main(args: list[str] | None = None) -> int:
-    return ros_main(make_monitor, "monitor", args)
+    # the monitor runs until it is stopped: Ctrl-C is its normal end, even while it starts
+    return ros_main(make_monitor, "monitor", args, interrupted_exit=0)
 
 
 if __name__ == "__main__":

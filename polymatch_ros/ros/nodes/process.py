@@ -46,13 +46,17 @@ class NodeApp:
         self.node.destroy_node()
 
 def ros_main(
-    factory: Callable[[list[str]], Any], label: str, argv: list[str] | None = None
+    factory: Callable[[list[str]], Any],
+    label: str,
+    argv: list[str] | None = None,
+    interrupted_exit: int = 130,
 ) -> NoReturn:
     """Run ``factory(argv).run()`` and end the process with its exit code (``end_process``:
     after the bounded teardown, nothing of the interpreter's own finalization runs).
 
     The application may define ``report()`` (final lines, printed also after an
-    interruption), ``destroy()`` and ``interrupted_exit`` (the code for Ctrl-C; 130).
+    interruption) and ``destroy()``.  ``interrupted_exit`` is the exit code of a Ctrl-C, also
+    of one that lands while the application is still being built.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
@@ -68,7 +72,7 @@ def ros_main(
         print(f"{label}: error: {exc}", file=sys.stderr, flush=True)
         code = exc.exit_code
     except (KeyboardInterrupt, ExternalShutdownException):
-        code = getattr(app, "interrupted_exit", 130)
+        code = interrupted_exit
     finally:
         # a second Ctrl-C must not cut the report or the teardown short: ``timeout`` passes a
         # SIGINT on to its child and to its process group, so the child gets it twice, and one
