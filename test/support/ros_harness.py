@@ -191,13 +191,33 @@ def node_argv(module, scene, **params):
 # gets a sliver of a core; the other workers run the core's tests meanwhile.
 ROS_SLOTS = int(os.environ.get("POLYMATCH_TEST_ROS_SLOTS", "2"))
 SLOT_DIR = os.path.join(os.environ.get("TMPDIR", "/tmp"), "polymatch_test_ros_slots")
+# The niceness of a slot's processes where the user may raise priorities (root): ahead of the
+# other workers' numerical tests, as a robot's control processes run ahead of batch work.  A
+# second-order bridged run diverged beside eight busy loops at niceness 0 and converged at -5.
+SLOT_NICENESS = -5
+
+
+@contextlib.contextmanager
+def _ahead_of_batch_work():
+    """This process (and every process it starts meanwhile) at ``SLOT_NICENESS``, if allowed."""
+    before = os.getpriority(os.PRIO_PROCESS, 0)
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, SLOT_NICENESS)
+    except PermissionError:
+        yield
+        return
+    try:
+        yield
+    finally:
+        os.setpriority(os.PRIO_PROCESS, 0, before)
 
 
 @contextlib.contextmanager
 def ros_slot(slots=ROS_SLOTS, poll=0.2):
     """Hold one of ``slots`` machine-wide slots (an exclusive ``flock`` on one of ``slots``
-    files) while the block runs; wait for one while all are held.  The kernel releases the
-    lock of a process that dies, so a crashed worker holds nothing."""
+    files) while the block runs, ahead of batch work (``_ahead_of_batch_work``); wait for one
+    while all are held.  The kernel releases the lock of a process that dies, so a crashed
+    worker holds nothing."""
     import fcntl
 
     os.makedirs(SLOT_DIR, exist_ok=True)
@@ -210,7 +230,8 @@ def ros_slot(slots=ROS_SLOTS, poll=0.2):
                 fh.close()
                 continue
             try:
-                yield i
+                with _ahead_of_batch_work():
+                    yield i
             finally:
                 fh.close()  # closing the file drops the lock
             return
