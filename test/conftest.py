@@ -41,12 +41,20 @@ def pytest_configure(config):
 FOLDER_MARKERS = {"ros": ("ros",), "hosts": ("hosts",), "benchmarks": ("ros", "slow")}
 
 
+# Tests that run ROS processes on the wall clock (discovery, round timeouts, realtime ticks,
+# robots) on two shared cores get one rerun (pytest-rerunfailures; ``-ra`` lists each rerun):
+# a test that fails twice fails the run.
+RERUN_FOLDERS = {"ros", "hosts", "benchmarks"}
+
+
 def pytest_collection_modifyitems(config, items):
-    """Mark every test by its folder (``FOLDER_MARKERS``)."""
+    """Mark every test by its folder (``FOLDER_MARKERS``); one rerun in ``RERUN_FOLDERS``."""
     for item in items:
         folder = pathlib.Path(item.fspath).resolve().relative_to(HERE).parts[0]
         for name in FOLDER_MARKERS.get(folder, ()):
             item.add_marker(getattr(pytest.mark, name))
+        if folder in RERUN_FOLDERS:
+            item.add_marker(pytest.mark.flaky(reruns=1))
 
 
 @pytest.hookimpl(wrapper=True, tryfirst=True)

@@ -99,7 +99,6 @@ def test_lockstep_under_ten_percent_loss_equals_the_centralised_run(net, tmp_pat
           f"{time.monotonic() - started:.1f} s")
 
 
-@pytest.mark.flaky(reruns=1)  # a wall-clock control loop, starved by other tests
 def test_realtime_converges_under_loss_and_delay(net, tmp_path):
     started = time.monotonic()
     scene_file = scene_with(tmp_path, REALTIME_SCENE, AGENTS)

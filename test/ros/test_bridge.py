@@ -352,7 +352,7 @@ def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
 
     # the robot restarted (at its initial pose): its agent drives it again, non-zero commands
     robots[0] = _robot(ros, scene, 0, position_noise=0.0005)
-    assert _wait(lambda: len(_twists(ros.output(echo))) > len(seen) + 5, 20), (
+    assert _wait(lambda: len(_twists(ros.output(echo))) > len(seen) + 5, 40), (
         ros.output(agents[0])[-2000:]
     )
     assert np.abs(_twists(ros.output(echo))[-1]).max() > 0.0
@@ -383,7 +383,6 @@ def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
     assert final and float(final.group(1)) < tolerance, text[-2000:]
 
 
-@pytest.mark.flaky(reruns=1)  # a wall-clock control loop, starved by other tests
 @needs_ros
 def test_second_order_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
     """The shipped second-order scene (A-1): 8 double-integrator robots commanded accelerations

@@ -279,7 +279,6 @@ def test_vanished_peer_makes_neighbours_round_time_out_naming_it(ros, tmp_path):
         assert "Traceback" not in text
 
 
-@pytest.mark.flaky(reruns=1)  # a wall-clock control loop, starved by other tests
 def test_a_stalled_peer_is_waited_for_and_the_run_completes(ros, tmp_path):
     """Lockstep: one agent is frozen (SIGSTOP) for 4 s, four times round_timeout, as a loaded
     machine can starve a process.  Its writer stays matched (the DDS lease is 10 s), so its

@@ -11,7 +11,6 @@ import os
 import re
 
 import numpy as np
-import pytest
 from ros_harness import PY, cli_argv, needs_ros, scene_path
 
 from polymatch_ros.core.scene import load_scene
@@ -81,7 +80,6 @@ def test_lockstep_pause_holds_every_process_and_stop_ends_all_at_the_same_step(r
     assert finals[0].t < 1000.0
 
 
-@pytest.mark.flaky(reruns=1)  # a wall-clock control loop, starved by other tests
 def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converges(ros):
     """Through ``polymatch run`` (which starts and stops the ensemble by its services)."""
     run = ros.start(
