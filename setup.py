@@ -1,11 +1,24 @@
 """ament_python package setup: `colcon build` (ROS from apt) or `pip install .` (ROS from PyPI)."""
 
 import os
+import sys
 from glob import glob
 
 from setuptools import find_packages, setup
 
 package_name = "polymatch_ros"
+
+# The node executables `ros2 run polymatch_ros agent|monitor|robot` finds in lib/polymatch_ros
+# (setup.cfg's script_dir): colcon's ament_python build runs setup.py's own commands (egg_info,
+# build, install or develop).  pip builds a wheel (PEP 517: dist_info, bdist_wheel,
+# editable_wheel), whose scripts land on the user's PATH: there only `polymatch` goes, and the
+# nodes are `polymatch agent|monitor|robot`.
+NODE_SCRIPTS = [
+    "agent = polymatch_ros.ros.nodes.agent:main",
+    "monitor = polymatch_ros.ros.nodes.monitor:main",
+    "robot = polymatch_ros.ros.nodes.robot:main",
+]
+BUILDING_A_WHEEL = bool({"dist_info", "bdist_wheel", "editable_wheel"} & set(sys.argv))
 
 setup(
     name=package_name,
@@ -29,11 +42,7 @@ setup(
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
-        "console_scripts": [
-            "polymatch = polymatch_ros.cli:main",
-            "agent = polymatch_ros.ros.nodes.agent:main",
-            "monitor = polymatch_ros.ros.nodes.monitor:main",
-            "robot = polymatch_ros.ros.nodes.robot:main",
-        ],
+        "console_scripts": ["polymatch = polymatch_ros.cli:main"]
+        + ([] if BUILDING_A_WHEEL else NODE_SCRIPTS),
     },
 )

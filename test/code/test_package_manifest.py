@@ -2,9 +2,13 @@
 ``exec_depend`` keys, so a missing key is a node that fails on a ROS machine."""
 
 import ast
+import importlib.metadata
 import pathlib
 import sys
+import sysconfig
 import xml.etree.ElementTree as ET
+
+import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "polymatch_ros"
@@ -44,3 +48,15 @@ def test_the_import_scan_sees_ros_and_python_dependencies():
 
 def test_test_tools_are_test_depends():
     assert {"python3-pytest", "python3-hypothesis"} <= declared("test_depend")
+
+
+def test_pip_puts_only_polymatch_on_the_path():
+    """pip (a wheel) installs one console script; the node executables are colcon's, in
+    lib/polymatch_ros (the colcon test checks them), and ``polymatch agent|monitor|robot``."""
+    purelib = sysconfig.get_paths()["purelib"]
+    installed = [d for d in importlib.metadata.distributions(path=[purelib])
+                 if d.metadata["Name"] == "polymatch_ros"]
+    if not installed:
+        pytest.skip("polymatch_ros is not pip-installed in this interpreter")
+    scripts = {e.name for e in installed[0].entry_points if e.group == "console_scripts"}
+    assert scripts == {"polymatch"}

@@ -147,7 +147,7 @@ def test_colcon_build_and_installed_executables_start(ros, tmp_path):
     assert build.returncode == 0, build.stdout + build.stderr
     prefix = ws / "install" / "polymatch_ros"
     exe = prefix / "lib" / "polymatch_ros"
-    assert (exe / "agent").exists() and (exe / "monitor").exists()
+    assert all((exe / name).exists() for name in ("agent", "monitor", "robot", "polymatch"))
     assert (prefix / "share" / "polymatch_ros" / "config" / "congruent_triangles.yaml").exists()
     site = prefix / "lib" / "python3.11" / "site-packages"
     ros.env["PYTHONPATH"] = str(site)
