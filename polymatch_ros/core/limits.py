@@ -2,7 +2,7 @@
 
 Every bound here is checked before the thing it bounds is allocated, so a bad scene is
 refused in a fraction of a second with a one-line ``SceneError`` (exit code 2) that names
-the key, the estimate and the limit.  README.md, "Scene files", says why each value.
+the key, the estimate and the limit.  docs/guide/scenes.md says why each value.
 """
 
 import math

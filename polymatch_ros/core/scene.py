@@ -2,7 +2,7 @@
 
 Every validation error is a ``SceneError`` whose message starts with the
 offending key path (``groups[1].rotations.within: ...``); the CLI prints it
-as one line and exits with code 2.  The format is documented in README.md.
+as one line and exits with code 2.  The format is documented in docs/guide/scenes.md.
 
 Centroids are stored as offsets from ``Scene.origin`` (the mean of the
 initial centroids).  The dynamics is translation invariant, so this changes

@@ -65,7 +65,7 @@ def with_representation(scene: Scene, representation: str) -> Scene:
 
 
 def recommend(scene: Scene, distributed: bool = False) -> tuple[str, str]:
-    """(method name, reason) recommended for the scene's kind (README, speed vs accuracy)."""
+    """(method name, reason) recommended for the scene (docs/guide/speed-and-accuracy.md)."""
     m = scene.model
     if m.order == 1:
         if scene.integrator.tolerance is not None and not distributed:

@@ -75,7 +75,7 @@ def parse_yaml(text: str, label: str = "scene") -> Any:
         raise SceneError(f"{label}: not a usable YAML value ({detail})") from None
     if data is None:
         raise SceneError(f"{label}: empty; a scene is a mapping of keys "
-                         f"(dimension, groups, ...; see README 'Scene files')")
+                         f"(dimension, groups, ...; see docs/guide/scenes.md)")
     return data
 
 

@@ -1,4 +1,4 @@
-"""Concrete bad inputs, one or more per class of the input contract (README, "Scene files").
+"""Concrete bad inputs, one or more per class of the input contract (docs/guide/scenes.md).
 
 Each case: (class number, test id, scene file bytes or None for a path argument, extra
 command-line arguments, the start of the expected error after "polymatch: error: ").

@@ -1,6 +1,6 @@
 """Mutated scene files and the input contract they must satisfy (shared by the test and the soak).
 
-Contract (README, "Scene files"): a scene file given to ``polymatch simulate`` either runs
+Contract (docs/guide/scenes.md): a scene file given to ``polymatch simulate`` either runs
 (exit 0, or 3 with a finite diameter: "did not converge" is a verdict, not a crash) or is
 refused with exit 2 and exactly one ``polymatch: error: ...`` line on stderr (warning
 lines may precede it) -- never a traceback, an internal error, a hang or unbounded memory.

@@ -25,7 +25,7 @@ NETWORK_PROFILE: str = os.path.join(os.path.dirname(PROFILE), "fastdds_profile_n
 # a peer's port broken, after which messages between two live processes stop for good while
 # every other link works (Fast DDS issue #5053): a lockstep round then waits for ever for one
 # peer, or the runner never hears the agents' final poses.  Measured with two 8-agent lockstep
-# runs side by side, over and over, on 2 busy cores (notes in README, "Transport"): 8 failures
+# runs side by side, over and over, on 2 busy cores (docs/guide/ros-interface.md): 8 failures
 # in 44 runs over shared memory, none over UDP.  Under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 # FASTDDS_BUILTIN_TRANSPORTS does not remove shared memory (its listener threads and
 # /dev/shm segments are there), so the loopback profile (``PROFILE``) names the transport

@@ -101,7 +101,7 @@ class RunRecord:
         return "monitor" if self.role == "monitor" else "agent " + ",".join(map(str, self.agents))
 
     def describe(self) -> str:
-        """The line for people (README: `polymatch run -v` shows the agents')."""
+        """The line for people (`polymatch run -v` shows the agents')."""
         if self.role == "monitor":
             return (
                 f"monitor: last report t = {self.t:.6g}, matching diameter {self.diameter:.3e}, "
