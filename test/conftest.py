@@ -42,7 +42,7 @@ FOLDER_MARKERS = {"ros": ("ros",), "hosts": ("hosts",), "benchmarks": ("ros", "s
 
 
 # Tests that run ROS processes on the wall clock (discovery, round timeouts, realtime ticks,
-# robots) on two shared cores get one rerun (pytest-rerunfailures; ``-ra`` lists each rerun):
+# robots) on two shared cores get one rerun (pytest-rerunfailures; ``-raR`` lists each rerun):
 # a test that fails twice fails the run.
 RERUN_FOLDERS = {"ros", "hosts", "benchmarks"}
 
