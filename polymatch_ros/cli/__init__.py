@@ -13,7 +13,8 @@
 
 Errors are one line on stderr and a non-zero exit code: 2 for bad input
 (scene, parameters, command line), 3 for a run that did not converge although
-the scene expects it, 1 for anything else.  POLYMATCH_DEBUG=1 shows the
+the scene expects it, 4 for a `polymatch run` ended by the ensemble's stop service
+before it converged, 1 for anything else.  POLYMATCH_DEBUG=1 shows the
 traceback of an unexpected error instead of its one line.
 
 The benchmarks live beside the package, in a checkout: ``python -m benchmarks FAMILY``.

@@ -118,6 +118,27 @@ def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converge
     assert rc == 0 and "converged" in out, out[-3000:]
 
 
+def test_a_run_stopped_by_the_stop_service_says_so_and_exits_4(ros):
+    """``polymatch run`` in lockstep, its ensemble stopped from outside (as by ``ros2 service
+    call /polymatch/stop``) long before it converges: every process ends, and the run reports
+    ``stopped by request``, not that it did not converge at t_end."""
+    run = ros.start(
+        cli_argv("run", scene_path(SCENE), "--t-end", "1000", "--timeout", str(BOUND)),
+        timeout=BOUND + 20,
+        name="runner",
+    )
+    text = _probe(ros, "until_t 0.5", "call /polymatch/stop", beside=run)
+    assert [(name, ok) for name, ok, _ in _results(text)] == [("/polymatch/stop", True)], text
+    rc = ros.wait(run, BOUND + 30)
+    out = ros.output(run)
+    stopped = re.search(r"^stopped by request at t = (\S+) \(the ensemble's stop service, "
+                        r"called at t = (\S+)\): matching diameter (\S+), tolerance", out, re.M)
+    assert rc == 4 and stopped, out[-3000:]
+    assert 0.5 <= float(stopped.group(1)) < 1000 and float(stopped.group(2)) >= 0.5
+    assert float(stopped.group(3)) >= load_scene(scene_path(SCENE)).tolerance
+    assert "did not converge" not in out
+
+
 def test_lifecycle_agent_walks_every_transition_and_steps_only_when_active(ros):
     """A managed agent (autostart off) through lifecycle_msgs ChangeState: unconfigured it has
     no pose topic; configured it has one but is silent; cleanup removes it; active it moves;

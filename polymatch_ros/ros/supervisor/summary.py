@@ -142,11 +142,24 @@ def _summary(plan: RunPlan, final: State, records: list[RunRecord], wall: float,
         )
 
 
-def verdict(scene: Scene, final: State) -> int:
-    """The scene's convergence verdict on the agents' final state (printed); its exit code."""
+#: the exit code of a run that the ensemble's stop service ended before it converged
+EXIT_STOPPED_BY_REQUEST = 4
+
+
+def verdict(scene: Scene, final: State, stop_requested_at: float | None = None) -> int:
+    """The scene's convergence verdict on the agents' final state (printed); its exit code.
+
+    A run that someone stopped through the ensemble's stop service (``stop_requested_at``: the
+    ensemble's time then) and that has not converged says so, with its own exit code
+    (``EXIT_STOPPED_BY_REQUEST``), not that it "did not converge at t_end"."""
     met = ensemble_metrics(scene.model, final)
     converged_at = final.t if met.diameter < scene.tolerance else None
     code, msg = convergence_verdict(scene, met.diameter, converged_at)
+    if code != 0 and stop_requested_at is not None:
+        print(f"stopped by request at t = {final.t:g} (the ensemble's stop service, called at "
+              f"t = {stop_requested_at:g}): matching diameter {met.diameter:.3e}, tolerance "
+              f"{scene.tolerance:g}")
+        return EXIT_STOPPED_BY_REQUEST
     print(msg)
     return code
 

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from ...core.errors import PolymatchError
 from ...core.model import GroupState, State
 from .. import wire
-from ..nodes.control import ControlClient
+from ..nodes.control import ControlClient, parse_command
 
 if TYPE_CHECKING:
     from rclpy.executors import SingleThreadedExecutor
@@ -44,6 +44,8 @@ class Watcher:
     control: Any                                    # publisher of the 'received' handshake
     services: ControlClient
     ensemble_control: Any                           # the services, when no monitor runs
+    stop_requested_at: float | None                 # ensemble time of a stop not the runner's
+    stop_sent: bool                                 # the runner called the stop service
 
     def __init__(self, scene: Scene, ensemble: str, name: str = "runner") -> None:
         from rclpy.executors import SingleThreadedExecutor
@@ -62,11 +64,23 @@ class Watcher:
         wire.subscription(node, "diameter", self._diam)
         wire.subscription(node, "status", self._status)
         self.control = wire.publisher(node, "control")  # the 'received' handshake
+        self.stop_requested_at, self.stop_sent = None, False
+        wire.subscription(node, "control", self._control)  # a stop someone else asked for
         self.services = ControlClient(node)  # start and stop: the ensemble's services
         for a in range(self.model.n_agents):
             wire.subscription(node, "final_pose", self._pose(a), dim, a)
             if self.model.order == 2:
                 wire.subscription(node, "final_twist", self._twist(a), dim, a)
+
+    def _control(self, msg: Any) -> None:
+        """A 'stop' on the control topic that the runner did not send: the ensemble's stop
+        service, called from outside (``ros2 service call /polymatch/stop ...``)."""
+        command = parse_command(msg.data)
+        if command is None or command[0] != "stop" or self.stop_sent:
+            return
+        if self.stop_requested_at is None:
+            times = self.agent_time()
+            self.stop_requested_at = self.ensemble_time() or min(times.values(), default=0.0)
 
     def _diam(self, msg: Any) -> None:
         self.diameter = float(msg.data)
@@ -150,6 +164,7 @@ class Watcher:
 
     def stop(self) -> bool:
         """The ensemble's ``stop`` service; False while it is not up yet."""
+        self.stop_sent = True
         return self.services.call("stop")
 
     def received(self) -> None:
