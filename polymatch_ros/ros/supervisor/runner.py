@@ -304,7 +304,7 @@ def _run(context: RunContext) -> int:
         wall = time.monotonic() - start
         report(plan, RunOutcome(watcher, children, monitor, progress, code, message, wall))
         final = watcher.final_state() if watcher is not None else None
-        if code == 0 and plan.hosts.lead and final is not None:
+        if code == 0 and plan.hosts.lead and watcher is not None and final is not None:
             code = verdict(plan.scene, final, watcher.stop_requested_at)
     finally:
         sys.stdout.flush()
