@@ -1,0 +1,56 @@
+"""The shipped parameter files (config/params/, one per node, the ``/**:`` wildcard) hold only
+parameters their node declares, each of its declared type and in its range, and a node starts
+from its file (``--params-file``)."""
+
+import pathlib
+
+import pytest
+import yaml
+from ros_harness import CONFIG, PY, needs_ros
+
+from polymatch_ros.ros.nodes.params import AGENT, MONITOR, check_value
+from polymatch_ros.ros.nodes.robot import ROBOT
+
+PARAMS = pathlib.Path(CONFIG) / "params"
+FILES = {"agent.yaml": AGENT, "bridge_agent.yaml": AGENT, "monitor.yaml": MONITOR,
+         "robot.yaml": ROBOT}
+# rclpy's parameter types: a float parameter refuses an int, an int one a float
+ROS_TYPES = {bool: (bool,), int: (int,), float: (float,), str: (str,)}
+
+
+def _values(name):
+    data = yaml.safe_load((PARAMS / name).read_text())
+    assert list(data) == ["/**"] and list(data["/**"]) == ["ros__parameters"], data
+    return data["/**"]["ros__parameters"]
+
+
+def test_every_node_has_its_file_and_no_file_is_unchecked():
+    assert sorted(p.name for p in PARAMS.glob("*.yaml")) == sorted(FILES)
+
+
+@pytest.mark.parametrize("name", sorted(FILES))
+def test_a_param_file_holds_declared_parameters_of_their_type_and_range(name):
+    spec = {p.name: p for p in FILES[name]}
+    values = _values(name)
+    assert values and not {"scene", "agent"} & set(values)  # given per node
+    for key, value in values.items():
+        assert key in spec, f"{name}: {key} is not a parameter of this node"
+        default = spec[key].default
+        assert type(value) in ROS_TYPES[type(default)], f"{name}: {key}: {value!r}"
+        assert check_value(spec[key], value) == value
+
+
+@needs_ros
+def test_an_agent_runs_from_its_param_file(ros, tmp_path):
+    """One lockstep agent alone (a one-agent scene) from config/params/agent.yaml."""
+    scene = tmp_path / "solo.yaml"
+    scene.write_text(
+        "name: solo\ndimension: 3\nseed: 1\nmodel: {order: 1}\n"
+        "integrator: {method: rkmk4, dt: 0.1}\ntime: {t_end: 1.0}\n"
+        "groups:\n  - {name: one, shape: tetrahedron, count: 1}\n"
+    )
+    agent = ros.start([PY, "-m", "polymatch_ros.cli", "agent", "--ros-args", "--params-file",
+                       str(PARAMS / "agent.yaml"), "-p", f"scene:={scene}", "-p", "agent:=0"],
+                      timeout=60)
+    assert ros.wait(agent, 70) == 0, ros.output(agent)
+    assert "agent 0: finished at t = 1 after 10 steps" in ros.output(agent), ros.output(agent)
