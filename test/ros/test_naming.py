@@ -75,3 +75,29 @@ def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
     assert not [n for n in graph["seen"] if n.count("/") == 1 and "agent" in n], (
         graph
     )  # none at the root
+
+
+def test_a_second_run_of_the_same_ensemble_refuses_before_it_starts_a_process(ros):
+    """The same scene and ensemble name in the same (user-given) domain while a run is going:
+    the second ``polymatch run`` refuses in one line, starts no process, and the first run
+    goes on to converge."""
+    import time
+
+    from ros_harness import cli_argv
+
+    first = ros.start(cli_argv("run", scene_path("congruent_triangles"), "--timeout", "150"),
+                      timeout=170, name="first")
+    deadline = time.monotonic() + 90
+    while "t = " not in ros.output(first) and time.monotonic() < deadline:
+        time.sleep(0.2)  # its agents are up once it shows progress
+    assert first.poll() is None and "t = " in ros.output(first), ros.output(first)[-2000:]
+    second = ros.start(cli_argv("run", scene_path("congruent_triangles"), "--timeout", "60"),
+                       timeout=80, name="second")
+    assert ros.wait(second, 90) == 1, ros.output(second)
+    errors = [line for line in ros.output(second).splitlines() if "error" in line]
+    assert len(errors) == 1 and errors[0].startswith(
+        "polymatch: error: an ensemble named 'polymatch' already runs in this ROS domain"
+    ) and "nothing started" in errors[0], ros.output(second)
+    assert "[agent_" not in ros.output(second) and "t = " not in ros.output(second)
+    assert ros.wait(first, 160) == 0, ros.output(first)[-3000:]
+    assert "converged" in ros.output(first)

@@ -18,6 +18,7 @@ import signal
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from types import FrameType
 
@@ -61,6 +62,7 @@ class RunContext:
     domain: int                           # ROS_DOMAIN_ID
     envs: DiscoveryEnvironments | None    # client/super-client/server overlays, --discovery
     agents_per_process: int               # -k as given, or chosen (``_agents_per_process``)
+    shared_domain: bool                   # the user's ROS_DOMAIN_ID, or discovery beyond loopback
 
 
 def run(plan: RunPlan) -> int:
@@ -68,6 +70,9 @@ def run(plan: RunPlan) -> int:
 
     The caller ends the process with it (``teardown.end_process``): rclpy ran in this process.
     """
+    # a domain reserved for this run holds no other ensemble; the user's, or one reached
+    # beyond loopback, may (``Watcher.refuse_names_in_use``)
+    shared = bool(os.environ.get("ROS_DOMAIN_ID")) or plan.hosts.discovery.kind != "localhost"
     with reserved_domain_id() as domain, tempfile.TemporaryDirectory(
         prefix="polymatch_run_"
     ) as directory:
@@ -77,7 +82,7 @@ def run(plan: RunPlan) -> int:
         packing = _agents_per_process(
             plan.packing, len(plan.hosts.agents), envs is None and _localhost(env)
         )
-        context = RunContext(plan, env, domain, envs, packing)
+        context = RunContext(plan, env, domain, envs, packing, shared)
         _adopt(env if envs is None else envs.for_role("super_client", env))
         server = _start_server(context, directory)
         try:
@@ -86,6 +91,24 @@ def run(plan: RunPlan) -> int:
             if server is not None:
                 server.stop()
     return code
+
+
+# How long a run in a shared domain listens to the ROS graph before it starts any process
+# (loopback discovery answers within a few hundred milliseconds)
+GRAPH_LISTEN_SECONDS = 1.0
+
+
+def _node_names(context: RunContext, runner: str) -> list[str]:
+    """The node names this host's run will take: its runner, monitor and agent processes."""
+    plan = context.plan
+    names = [runner] + (["monitor"] if plan.hosts.monitor else [])
+    return names + [_process_name(a)
+                    for a in partition(plan.hosts.agents, context.agents_per_process)]
+
+
+def _process_name(agents: Sequence[int]) -> str:
+    """The node name of the process that hosts ``agents``."""
+    return f"agent_{agents[0]}" if len(agents) == 1 else f"agents_{agents[0]}_{agents[-1]}"
 
 
 def _localhost(env: dict[str, str]) -> bool:
@@ -224,7 +247,7 @@ def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
         )
     children = []
     for agents in partition(plan.hosts.agents, context.agents_per_process):
-        name = f"agent_{agents[0]}" if len(agents) == 1 else f"agents_{agents[0]}_{agents[-1]}"
+        name = _process_name(agents)
         sel = (
             ["-p", f"agent:={agents[0]}"]
             if len(agents) == 1
@@ -286,6 +309,8 @@ def _run(context: RunContext) -> int:
     try:
         name = "runner" if plan.every_agent_here else f"runner_{plan.hosts.agents[0]}"
         watcher = Watcher(plan.scene, plan.hosts.ensemble, name)
+        if context.shared_domain:
+            watcher.refuse_names_in_use(_node_names(context, name), GRAPH_LISTEN_SECONDS)
         if plan.hosts.lead and not plan.hosts.monitor:
             watcher.host_ensemble_services(plan.mode)
         if plan.bridge is not None:

@@ -3,6 +3,7 @@ graph check."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -130,6 +131,28 @@ class Watcher:
     def all_heard(self) -> bool:
         """The monitor's last report covered every agent."""
         return self.monitor is not None and self.monitor.agents_heard >= self.model.n_agents
+
+    def refuse_names_in_use(self, names: Sequence[str], seconds: float) -> None:
+        """Before this run starts a process: listen ``seconds`` for the ROS graph and refuse,
+        in one line, if a node of ``names`` (this host's runner, agents, monitor) already runs
+        in the ensemble's namespace - another ensemble of the same name in this domain, whose
+        topics this run's agents would share."""
+        ns = self.node.get_namespace()
+        mine = set(names) - {self.node.get_name()}
+        deadline = time.monotonic() + seconds
+        while True:
+            found = [n for n, space in self.node.get_node_names_and_namespaces() if space == ns]
+            taken = sorted(set(found) & mine | ({n for n in found if found.count(n) > 1}
+                                                  & {self.node.get_name()}))
+            if taken:
+                raise PolymatchError(
+                    f"an ensemble named {ns.strip('/')!r} already runs in this ROS domain "
+                    f"(its nodes {', '.join(ns + '/' + n for n in taken[:3])}); nothing started: "
+                    f"use --ensemble NAME or another ROS_DOMAIN_ID"
+                )
+            if time.monotonic() > deadline:
+                return
+            self.spin(0.05)
 
     def check_graph(self, names: Sequence[str]) -> bool:
         """Every node of ``names`` is in the ensemble's namespace, and no name is taken twice."""
