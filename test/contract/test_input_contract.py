@@ -30,11 +30,11 @@ def _refusal(tmp_path, data, args):
     argv = ["simulate", str(path), "-q"] + args
     if "EXPLAIN" in args:
         argv = ["explain", str(path)] + [a for a in args if a != "EXPLAIN"]
-    start = time.monotonic()
+    start = time.process_time()  # CPU: on a loaded machine wall time measures the load
     with address_space_limit(2 * 2**30):
         code, out, err = run_main(argv, 20.0)
     return code, err.replace(str(path), "DIR" if data is None else "SCENE"), \
-        time.monotonic() - start
+        time.process_time() - start
 
 
 @pytest.mark.parametrize("cls,name,data,args,want", CASES,
@@ -114,6 +114,12 @@ SUBPROCESS_CASES = [
 ]
 
 
+def _children_cpu():
+    """CPU seconds of this process's ended children (user + system)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def _limit_memory():
     resource.setrlimit(resource.RLIMIT_AS, (1536 * 2**20, 1536 * 2**20))
 
@@ -122,13 +128,15 @@ def _limit_memory():
 def test_real_process_refuses_within_seconds_and_1_5_gib(tmp_path, name, data, args):
     path = tmp_path / "scene.yaml"
     path.write_bytes(data)
-    start = time.monotonic()
+    before = _children_cpu()
+    # the refusal within seconds of the process's CPU time; the wall-clock timeout is a hang
+    # guard only (on a loaded machine a process gets a sliver of a core)
     res = subprocess.run([sys.executable, "-m", "polymatch_ros.cli", "simulate", str(path), "-q"]
-                         + args, capture_output=True, text=True, timeout=60,
+                         + args, capture_output=True, text=True, timeout=180,
                          preexec_fn=_limit_memory, env={**os.environ, "PYTHONWARNINGS": "ignore"})
     assert res.returncode == 2, res.stderr
     assert res.stderr.count("\n") == 1 and res.stderr.startswith("polymatch: error: "), res.stderr
-    assert time.monotonic() - start < 30
+    assert _children_cpu() - before < 15
 
 
 def test_harness_bound_is_not_reported_as_an_internal_error(tmp_path):
