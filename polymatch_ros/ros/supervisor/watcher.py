@@ -80,8 +80,9 @@ class Watcher:
         if command is None or command[0] != "stop" or self.stop_sent:
             return
         if self.stop_requested_at is None:
-            times = self.agent_time()
-            self.stop_requested_at = self.ensemble_time() or min(times.values(), default=0.0)
+            t = self.ensemble_time()
+            self.stop_requested_at = t if t is not None else min(self.agent_time().values(),
+                                                                 default=0.0)
 
     def _diam(self, msg: Any) -> None:
         self.diameter = float(msg.data)
@@ -138,12 +139,12 @@ class Watcher:
         in the ensemble's namespace - another ensemble of the same name in this domain, whose
         topics this run's agents would share."""
         ns = self.node.get_namespace()
-        mine = set(names) - {self.node.get_name()}
         deadline = time.monotonic() + seconds
         while True:
-            found = [n for n, space in self.node.get_node_names_and_namespaces() if space == ns]
-            taken = sorted(set(found) & mine | ({n for n in found if found.count(n) > 1}
-                                                  & {self.node.get_name()}))
+            others = self._ensemble_nodes()
+            if self.node.get_name() in others:
+                others.remove(self.node.get_name())  # this runner itself, once
+            taken = sorted(set(others) & set(names))
             if taken:
                 raise PolymatchError(
                     f"an ensemble named {ns.strip('/')!r} already runs in this ROS domain "
@@ -154,10 +155,16 @@ class Watcher:
                 return
             self.spin(0.05)
 
+    def _ensemble_nodes(self) -> list[str]:
+        """The names of the nodes in the ensemble's namespace, as the graph lists them (a name
+        twice if two nodes take it)."""
+        ns = self.node.get_namespace()
+        return [n for n, space in self.node.get_node_names_and_namespaces() if space == ns]
+
     def check_graph(self, names: Sequence[str]) -> bool:
         """Every node of ``names`` is in the ensemble's namespace, and no name is taken twice."""
         ns = self.node.get_namespace()
-        found = [n for n, space in self.node.get_node_names_and_namespaces() if space == ns]
+        found = self._ensemble_nodes()
         twice = sorted({n for n in found if found.count(n) > 1})
         if twice:
             raise PolymatchError(
