@@ -17,6 +17,7 @@ from ..core.errors import ParameterError, PolymatchError
 from ..core.scene import Scene, load_scene, resolve_scene_path
 from ..core.simulate import plan as numerical_plan
 from ..ros.supervisor.plan import MODES, BridgeOptions, Hosts, Outputs, RunPlan, Timing
+from ..ros.supervisor.recovery import POLICIES, RestartPolicy
 
 # (flag, type, default, help) of the options that set how the agents step and wait
 RUN_OPTIONS = (
@@ -74,7 +75,9 @@ def build_plan(args: argparse.Namespace) -> RunPlan:
         compare=args.compare,
     )
     hosts = _hosts(args, scene, bridge is not None)
-    return RunPlan(scene_path, scene, numerics, args.mode, hosts, timing, outputs, bridge)
+    on_failure = RestartPolicy(restart=args.on_failure == "restart")
+    return RunPlan(scene_path, scene, numerics, args.mode, hosts, timing, outputs, bridge,
+                   on_failure)
 
 
 def _timing(args: argparse.Namespace, bridge: bool) -> Timing:
@@ -191,6 +194,13 @@ def _add_ensemble_options(p: argparse.ArgumentParser) -> None:
         type=positive_float,
         default=600.0,
         help="wall-clock limit for the whole run (s)",
+    )
+    p.add_argument(
+        "--on-failure",
+        choices=POLICIES,
+        default="restart",
+        help="a process that dies: restart it (default; lockstep resumes exactly, realtime "
+        "rejoins; 3 deaths within 30 s end the run) or stop the run",
     )
     p.add_argument(
         "--ensemble", default="polymatch", help="ensemble namespace (default polymatch)"

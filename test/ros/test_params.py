@@ -10,7 +10,8 @@ from polymatch_ros.ros.nodes.params import AGENT, MONITOR, check
 AGENT_NAMES = [
     "scene", "agent", "agents", "agents_per_process", "mode", "autostart", "integrator", "dt",
     "t_end", "rate", "kappa", "gamma", "time_scale", "start_time", "peer_timeout", "delay",
-    "clock_offset_warn", "hold_final", "round_timeout", "stall_timeout", "discovery_timeout",
+    "clock_offset_warn", "hold_final", "round_timeout", "stall_timeout", "peers_restart",
+    "checkpoint", "discovery_timeout",
     "pose_subscribers", "frame_id", "max_linear_speed", "max_angular_speed", "max_linear_accel",
     "max_angular_accel", "pose_timeout", "pose_type", "cmd_type", "command_frame", "run_id",
 ]
@@ -34,7 +35,8 @@ TYPE_CASES = [
     ("agent", "start_time", "abc", NUMBER), ("agent", "peer_timeout", "abc", NUMBER),
     ("agent", "delay", "abc", NUMBER), ("agent", "clock_offset_warn", "abc", NUMBER),
     ("agent", "hold_final", "abc", NUMBER), ("agent", "round_timeout", "abc", NUMBER),
-    ("agent", "stall_timeout", "abc", NUMBER), ("agent", "discovery_timeout", "abc", NUMBER),
+    ("agent", "stall_timeout", "abc", NUMBER), ("agent", "peers_restart", 1, BOOLEAN),
+    ("agent", "checkpoint", 1.5, STRING), ("agent", "discovery_timeout", "abc", NUMBER),
     ("agent", "pose_subscribers", 2.5, INTEGER), ("agent", "frame_id", 1.5, STRING),
     ("agent", "max_linear_speed", "abc", NUMBER), ("agent", "max_angular_speed", "abc", NUMBER),
     ("agent", "max_linear_accel", "abc", NUMBER), ("agent", "max_angular_accel", "abc", NUMBER),

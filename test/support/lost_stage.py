@@ -59,7 +59,7 @@ class Side:
         self.state = local_state(scene, self.layout)
         self.exchange = lockstep.LockstepExchange(
             self.node, self.layout, run_id, wire.ROTATION_TOL,
-            DropCounter(self.node.get_logger()), scene.t_end, stall_timeout=STALL)
+            DropCounter(self.node.get_logger()), scene.t_end, lockstep.Patience(STALL))
         self.scene, self.plan, self.error = scene, the_plan, None
 
     def run(self, steps):

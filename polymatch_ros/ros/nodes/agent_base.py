@@ -19,6 +19,7 @@ from ...core.errors import ParameterError, PolymatchError
 from ...core.model import GroupState, State, System
 from ...core.simulate import plan, prepare
 from .. import wire
+from .checkpoint import CheckpointFile
 from .control import AgentControl, offer_agent_services, parse_command
 from .exchange import DropCounter, Layout
 from .process import NodeApp
@@ -90,6 +91,9 @@ class AgentBase(NodeApp):
         self.system = System(self.model, self.layout.rows)
         self.state = local_state(scene, self.layout)
         self.drops = DropCounter(self.log)
+        # the state at each step's start: a restarted process resumes from it, and the runner
+        # saves it when the run ends early (``checkpoint``)
+        self.checkpoint = CheckpointFile(p["checkpoint"], p["run_id"])
         self.control = AgentControl(self.mode, self.on_pause)
         self.rounds = self.steps = self.late_ticks = 0
         self.round_time = 0.0  # wall seconds of the timed rounds (all but ``untimed_rounds``)
@@ -316,4 +320,5 @@ class AgentBase(NodeApp):
         return self.record() if self.finished else None
 
     def release(self) -> None:
-        """What the agent built beside its node (lifecycle cleanup): nothing here."""
+        """What the agent built beside its node (lifecycle cleanup): its checkpoint's files."""
+        self.checkpoint.close()

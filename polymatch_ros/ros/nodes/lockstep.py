@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from collections import defaultdict
 from collections.abc import Callable
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
@@ -30,6 +31,8 @@ if TYPE_CHECKING:
 
 #: a round: (step, stage)
 Round = tuple[int, int]
+#: a stage index past any step's last
+ROUND_MAX = 1 << 30
 #: per group the arrays the core asks for (``wire.assemble``), None for groups not needed
 Ensemble = tuple[SimpleNamespace | None, ...]
 
@@ -43,6 +46,19 @@ Ensemble = tuple[SimpleNamespace | None, ...]
 RESEND_AFTER = 1.0  # s
 
 
+@dataclass(frozen=True)
+class Patience:
+    """How a round waits for its peers, and what it keeps for one that falls behind."""
+
+    stall_timeout: float = 300.0  # past round_timeout: how long a present, silent peer is awaited
+    peers_restart: bool = False   # a peer that left is restarted by its runner: awaited like a
+    #                               slow one (up to stall_timeout), not a failure at once
+    keep_rounds: int = 2          # rounds of this process's messages kept for ``resend``
+
+
+PATIENT = Patience()
+
+
 class LockstepExchange:
     """Stage rounds: publish the local stage rows, wait for every peer's message of the same round.
 
@@ -51,7 +67,7 @@ class LockstepExchange:
     """
 
     def __init__(self, resolver: Node, layout: Layout, run_id: int, rot_tol: float,
-                 drops: DropCounter, t_max: float | None, stall_timeout: float = 300.0) -> None:
+                 drops: DropCounter, t_max: float | None, patience: Patience = PATIENT) -> None:
         self.node, self.executor = lean_node(
             resolver.get_name() + "_stages", resolver.get_namespace()
         )
@@ -75,14 +91,16 @@ class LockstepExchange:
                 return wire.decode_block(msg, grp, dim, self.run_id, block, layout.k,
                                          rot_tol, t_max)
 
-            self.links = BlockLinks(self.node, resolver, layout, decode_rows, self._take, drops)
+            self.links = BlockLinks(self.node, resolver, layout, decode_rows, self._take, drops,
+                                    patience.keep_rounds)
         else:
             def decode(msg: Any, agent: int) -> tuple[wire.Stage | None, str | None]:
                 return wire.decode_stage(msg, grp, dim, self.run_id, agent, rot_tol, t_max)
 
-            self.links = AgentLinks(self.node, resolver, layout, decode, self._take, drops)
+            self.links = AgentLinks(self.node, resolver, layout, decode, self._take, drops,
+                                    patience.keep_rounds)
         self.pubs, self.writers = self.links.pubs, self.links.writers
-        self.stall_timeout = stall_timeout
+        self.patience = patience
         self.publish_time = 0.0  # seconds spent publishing stages (for the diagnostics)
         self.wait_time = 0.0  # seconds spent waiting for (and taking) the peers' stages
 
@@ -96,6 +114,12 @@ class LockstepExchange:
                 self.drops(f"agent {agent}", "stale round (a stamp from the past)")
             return
         self.inbox[agent][key] = stage
+
+    def resume_at(self, step: int) -> None:
+        """A restarted process begins with step ``step``: the peers' resends of earlier rounds
+        are repeats, not drops."""
+        self.current = (step, 0)
+        self.taken = {a: (step - 1, ROUND_MAX) for a in self.layout.peers}
 
     def matched(self) -> bool:
         """All peers' publishers matched, and all expected remote subscribers matched."""
@@ -132,12 +156,12 @@ class LockstepExchange:
         self.links.publish(self.run_id, step, stage, flags, request.stage.t, agents, fields)
 
     def resend(self, key: Round, waiting: list[int], waited: float) -> None:
-        """Publish the last two rounds' messages again (see ``RESEND_AFTER``)."""
+        """Publish the kept rounds' messages again (see ``RESEND_AFTER``)."""
         self.resends += 1
         self.drops.logger.warning(
             f"round (step {key[0]}, stage {key[1]}): no message from agent(s) "
             f"{', '.join(map(str, waiting))} after {waited:.1f} s; re-sending this process's "
-            f"last two rounds ({self.resends} so far)",
+            f"last {self.links.keep} rounds ({self.resends} so far)",
             throttle_duration_sec=5.0,
         )
         self.links.resend()
@@ -184,14 +208,16 @@ class LockstepExchange:
         self, key: Round, timeout: float, waiting: list[int], waited: float
     ) -> None:
         """Past ``round_timeout``: fail if a peer we wait for has left (its writer is no longer
-        matched: a crash, an exit, or a SIGKILL once its DDS lease ran out), or if a peer has
-        been silent for ``stall_timeout``.  A peer that is still there is slow, not gone (a
+        matched: a crash, an exit, or a SIGKILL once its DDS lease ran out) and no runner
+        restarts it (``Patience.peers_restart``), or if a peer has been silent for
+        ``stall_timeout``.  A peer that is still there is slow, not gone (a
         loaded machine can starve one process for many seconds), so the round waits on."""
         gone = [a for a in waiting if self.writers[a].get_publisher_count() < 1]
-        if not gone and waited < self.stall_timeout:
+        stall = self.patience.stall_timeout
+        if (not gone or self.patience.peers_restart) and waited < stall:
             return
         why = (f"agent(s) {', '.join(map(str, gone))} left" if gone else
-               f"present but silent for stall_timeout = {self.stall_timeout:g} s")
+               f"present but silent for stall_timeout = {stall:g} s")
         raise RoundTimeout(
             f"lockstep round (step {key[0]}, stage {key[1]}) timed out after {timeout:g} s "
             f"waiting for agent(s) {', '.join(map(str, waiting))}; {why} "
@@ -245,11 +271,15 @@ class LockstepAgent(AgentBase):
         super().__init__(node, params, executor)
         projection = self.plan.method.info.family == "projection"
         rot_tol = wire.PROJECTION_STAGE_TOL if projection else wire.ROTATION_TOL
+        restarts = params["peers_restart"]
+        # a restarted peer resumes at the start of a step: keep a step and two rounds for it
+        keep = self.plan.method.info.rounds + 2 if restarts else 2
+        patience = Patience(params["stall_timeout"], restarts, keep)
         self.exchange = LockstepExchange(
-            node, self.layout, params["run_id"], rot_tol, self.drops, self.scene.t_end,
-            params["stall_timeout"],
+            node, self.layout, params["run_id"], rot_tol, self.drops, self.scene.t_end, patience
         )
         self.exchange.paused = self._serve_control
+        self.resumed_at: int | None = None  # the step this process resumed at, if restarted
 
     def _serve_control(self) -> bool:
         """Inside a long round wait: take control messages and service calls; paused?"""
@@ -271,6 +301,11 @@ class LockstepAgent(AgentBase):
     def stage_subscriptions(self) -> int:
         return len(list(self.exchange.node.subscriptions))
 
+    def record(self) -> wire.RunRecord:
+        rec = super().record()
+        rec.resumed_at = self.resumed_at
+        return rec
+
     def extra_diagnostics(self) -> dict[str, Any]:
         """Rounds re-sent for a peer whose message did not come, and peers' resends taken."""
         return {"stage_resends": self.exchange.resends, "stage_repeats": self.exchange.repeats}
@@ -286,23 +321,29 @@ class LockstepAgent(AgentBase):
 
     def loop(self) -> None:
         self._discover()
-        self.publish_state()
+        first = self._resume()
+        if first:  # its pose of that step is out already: the runner hears it is back
+            self._maybe_diagnostics(force=True)
+        else:
+            self.publish_state()
         method, dt = self.plan.method, self.plan.dt
         assert isinstance(method, Method) and dt is not None  # distributed plans: fixed step
         grid = step_grid(self.scene.t_end, dt)
         timeout = self.params["round_timeout"]
         # matching is not simultaneous: a peer that matched us may still be matching others and
         # start later, and its lag reaches us through every peer that waits for it in the next
-        # rounds: the first two steps also allow the peers' discovery time
+        # rounds: the first two steps (of a resumed process too) also allow discovery time
         first_wait = timeout + self.params["discovery_timeout"]
         start = last_spin = time.monotonic()
-        prev = 0.0
-        for k, t_next in enumerate(grid):
+        prev = float(grid[first - 1]) if first else 0.0
+        for k in range(first, len(grid)):
+            t_next = grid[k]
+            self.checkpoint.write(k, prev, self.state)
             stop = False
 
             def answer(request: Request, stage: int, k: int = k) -> Ensemble:
                 nonlocal stop
-                wait = first_wait if k <= 1 else timeout
+                wait = first_wait if k <= first + 1 else timeout
                 ensemble, stop_seen = self.exchange.round(
                     k, stage, request, self.stop_requested, wait
                 )
@@ -331,6 +372,19 @@ class LockstepAgent(AgentBase):
             if stop:
                 break
 
+    def _resume(self) -> int:
+        """The step to begin with: 0, or after a restart the step of this process's checkpoint,
+        its state restored and the exchange set to that step's first round."""
+        found = self.checkpoint.read()
+        if found is None:
+            return 0
+        self.state, self.steps, self.resumed_at = found.state, found.step, found.step
+        self.exchange.resume_at(found.step)
+        self.log.warning(
+            f"resumed at step {found.step} (t = {found.t:.6g}) from this process's checkpoint"
+        )
+        return found.step
+
     def settle(self) -> None:
         """Hold the final poses until the lead host says 'received': it then has every agent's
         final pose and the monitor has reported the final step, so every agent has ended its
@@ -346,6 +400,7 @@ class LockstepAgent(AgentBase):
     def release(self) -> None:
         """The exchange's lean node (lifecycle cleanup)."""
         self.exchange.destroy()
+        super().release()
 
     def destroy(self) -> None:
         self.exchange.destroy()

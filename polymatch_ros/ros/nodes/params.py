@@ -110,6 +110,19 @@ AGENT = (
         "still present (slow, not gone); a peer that left fails the round at once",
         (0.001, 1e6),
     ),
+    Param(
+        "peers_restart",
+        False,
+        "lockstep: the runner restarts a peer that dies (`polymatch run --on-failure restart`): "
+        "a round waits for a peer that left as for a slow one, and keeps a step of its "
+        "messages for the peer's resume",
+    ),
+    Param(
+        "checkpoint",
+        "",
+        "lockstep: file of this process's state at the start of each step, and where a "
+        "restarted process resumes from ('' = none)",
+    ),
     Param("discovery_timeout", 30.0, "seconds to wait until every peer is matched", (0.0, 1e6)),
     Param(
         "pose_subscribers",

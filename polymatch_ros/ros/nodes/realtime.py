@@ -266,6 +266,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
 
     def loop(self) -> None:
         self.wait_for_discovery()
+        self._resume()
         self.publish_state()
         start = self._start_epoch()
         self.clock.start(start)
@@ -293,15 +294,25 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             self.state.coupling = None
             self.state = drive(method, self.system, self.state, step, answer)
             self.state.t = t + step
+            self.checkpoint.write(self.steps, self.state.t, self.state)
             self.steps += 1
             self.rounds += 1
             self.round_time = time.monotonic() - t0
             self.publish_state()
         self.cpu_span = (self.cpu_span[0], time.process_time())
 
+    def _resume(self) -> None:
+        """Restarted: from the state of its last tick (what its peers last heard of it), on the
+        ensemble's clock as any late joiner (``_join_clock``)."""
+        found = self.checkpoint.read()
+        if found is not None:
+            self.state = found.state
+            self.log.warning(f"restarted: resumes from its state at t = {found.t:.6g}")
+
     def release(self) -> None:
         """The peers' lean node (lifecycle cleanup)."""
         self.peers.destroy()
+        super().release()
 
     def destroy(self) -> None:
         self.peers.destroy()

@@ -8,7 +8,8 @@ per-message cost of DDS and rclpy (take, deserialise, callback) is what bounds a
 on a loaded machine, not the bytes.  A process hears the blocks that hold its peers;
 on a graph those are the in-neighbours' blocks only.
 
-Both keep the messages of their last two rounds for ``resend`` and give the exchange the
+Both keep the messages of their last ``keep`` rounds for ``resend`` (two, or a step and two
+rounds where a restarted peer may resume: ``checkpoint``) and give the exchange the
 same view: which peers are matched, which have gone, and the decoded ``wire.Stage`` of
 every row that arrives (``on_stage``), or a drop (``on_drop``).
 """
@@ -70,14 +71,16 @@ class _Links:
     writers: dict[int, Subscription]
     expected: Callable[[int], int]
 
-    def __init__(self, node: Node, resolver: Node, layout: Layout) -> None:
+    def __init__(self, node: Node, resolver: Node, layout: Layout, keep: int = 2) -> None:
         self.node, self.resolver, self.layout = node, resolver, layout
+        self.keep = max(2, int(keep))
         # (turn, [(publisher, message), ...]) of the last rounds
-        self.sent: deque[tuple[int, list[tuple[Publisher, Any]]]] = deque(maxlen=2)
+        self.sent: deque[tuple[int, list[tuple[Publisher, Any]]]] = deque(maxlen=self.keep)
         self.events = quiet_events()
 
     def _turn(self) -> int:
-        return 1 - self.sent[-1][0] if self.sent else 0  # not the previous round's message
+        """The message buffer of the next round: none of the rounds kept for ``resend``."""
+        return (self.sent[-1][0] + 1) % self.keep if self.sent else 0
 
     def _publisher(self, key: str, index: int) -> Publisher:
         return wire.publisher(self.node, key, agent=index, resolver=self.resolver,
@@ -115,13 +118,14 @@ class AgentLinks(_Links):
 
     def __init__(self, node: Node, resolver: Node, layout: Layout,
                  decode: Callable[[Any, int], tuple[wire.Stage | None, str | None]],
-                 on_stage: OnStage, on_drop: OnDrop) -> None:
-        super().__init__(node, resolver, layout)
+                 on_stage: OnStage, on_drop: OnDrop, keep: int = 2) -> None:
+        super().__init__(node, resolver, layout, keep)
         from std_msgs.msg import Float64MultiArray
 
         self.pubs = {a: self._publisher("stage", a) for a in layout.local}
         self.expected = layout.expected_subscribers
-        self._out = {a: (Float64MultiArray(), Float64MultiArray()) for a in layout.local}
+        self._out = {a: tuple(Float64MultiArray() for _ in range(self.keep))
+                     for a in layout.local}
         self.writers = {}  # peer -> its stage subscription
 
         def receiver(agent: int) -> Callable[[Any], None]:
@@ -155,14 +159,15 @@ class BlockLinks(_Links):
 
     def __init__(self, node: Node, resolver: Node, layout: Layout,
                  decode_block: Callable[[Any, int], tuple[list[wire.Stage] | None, str | None]],
-                 on_stage: OnStage, on_drop: OnDrop) -> None:
-        super().__init__(node, resolver, layout)
+                 on_stage: OnStage, on_drop: OnDrop, keep: int = 2) -> None:
+        super().__init__(node, resolver, layout, keep)
         from std_msgs.msg import Float64MultiArray
 
         self.local_blocks = layout.local_blocks()
         self.pubs = {b: self._publisher("stage_block", b) for b in self.local_blocks}
         self.expected = layout.expected_block_subscribers
-        self._out = {b: (Float64MultiArray(), Float64MultiArray()) for b in self.local_blocks}
+        self._out = {b: tuple(Float64MultiArray() for _ in range(self.keep))
+                     for b in self.local_blocks}
         peers = set(layout.peers)
 
         def receiver(block: int) -> Callable[[Any], None]:

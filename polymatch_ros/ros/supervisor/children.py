@@ -3,6 +3,7 @@ the DDS participant limit of LOCALHOST discovery."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -18,8 +19,11 @@ from ...core.errors import ParameterError, PolymatchError
 from .. import wire
 from ..nodes.teardown import EXIT_GRACE, TEARDOWN_SECONDS, hung_in_teardown
 from .plan import Packing, RunPlan
+from .recovery import Recovery
 
 if TYPE_CHECKING:
+    from .discovery import DiscoveryServer
+    from .lifecycle_driver import LifecycleDriver
     from .watcher import Watcher
 
 # A process that reported its result ends within its teardown watchdog (TEARDOWN_SECONDS +
@@ -51,17 +55,27 @@ class Child:
     """A supervised process: last lines of output kept (shown on failure); ended by its PID."""
 
     name: str
+    argv: list[str]
+    env: dict[str, str] | None
+    agents: tuple[int, ...]
     proc: subprocess.Popen[str]
     lines: deque[str]
     reported_at: float | None
     ended_by_runner: bool
     thread: threading.Thread
 
-    def __init__(self, name: str, argv: Sequence[str], env: Mapping[str, str]) -> None:
-        self.name = name
+    def __init__(self, name: str, argv: Sequence[str], env: Mapping[str, str] | None,
+                 agents: Sequence[int] = ()) -> None:
+        self.name, self.argv = name, list(argv)
+        self.env = None if env is None else dict(env)  # None: the runner's own
+        self.agents = tuple(agents)  # the agents it hosts (none: the monitor)
+        self.lines = deque(maxlen=200)
+        self._launch()
+
+    def _launch(self) -> None:
         self.proc = subprocess.Popen(
-            argv,
-            env=env,
+            self.argv,
+            env=self.env,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL,
@@ -69,15 +83,24 @@ class Child:
             bufsize=1,
             preexec_fn=_child_setup,
         )
-        self.lines = deque(maxlen=200)
+        self.stopped_since: float | None = None  # monotonic time it was first seen stopped
+        self.hung_for: float | None = None  # it hung this long and the runner ended it
         self.reported_at = None  # monotonic time its finished run record arrived
         self.ended_by_runner = False  # it reported, then overstayed, and the runner ended it
-        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread = threading.Thread(target=self._read, args=(self.proc,), daemon=True)
         self.thread.start()
 
-    def _read(self) -> None:
-        assert self.proc.stdout is not None  # a pipe: stdout=PIPE
-        for line in self.proc.stdout:
+    def restart(self) -> None:
+        """The same command line again, in a new process (the old one has ended); its output
+        follows the old one's last lines."""
+        self.thread.join(timeout=1.0)
+        self.lines.append(f"--- {self.name} restarted (pid {self.proc.pid} ended with code "
+                          f"{self.proc.poll()}) ---")
+        self._launch()
+
+    def _read(self, proc: subprocess.Popen[str]) -> None:
+        assert proc.stdout is not None  # a pipe: stdout=PIPE
+        for line in proc.stdout:
             line = line.rstrip("\n")
             self.lines.append(line)
             if self.reported_at is None and line.startswith("{"):
@@ -112,6 +135,28 @@ class Child:
 
     def tail(self, n: int = 5) -> list[str]:
         return list(self.lines)[-n:]
+
+    def stopped_for(self) -> float:
+        """Seconds this process has been stopped (``kill -STOP``, a debugger), 0 if it runs;
+        from its state in /proc, sampled on each call."""
+        try:
+            with open(f"/proc/{self.proc.pid}/stat") as fh:
+                state = fh.read().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            state = ""
+        if state not in ("T", "t"):
+            self.stopped_since = None
+            return 0.0
+        now = time.monotonic()
+        self.stopped_since = now if self.stopped_since is None else self.stopped_since
+        return now - self.stopped_since
+
+    def end_hung(self) -> None:
+        """End a process that hangs, by its PID (SIGKILL: a stopped process takes no other
+        signal); it then dies as any other and the restart policy takes it."""
+        self.hung_for = self.stopped_for()
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.proc.pid, signal.SIGKILL)
 
     def hung_in_teardown(self) -> bool:
         """Reported its final line, then its DDS teardown hung and its watchdog (or, past
@@ -254,6 +299,7 @@ class Supervision:
     watcher: Watcher
     children: list[Child]
     monitor: Child | None
+    server: DiscoveryServer | None   # this run's own discovery server (``--discovery server``)
     progress: Progress
     rounds_per_step: int
     rate_mark: tuple[float, float] | None  # (wall clock, ensemble time) the rate counts from
@@ -266,9 +312,10 @@ class Supervision:
     received_sent: bool
 
     def __init__(self, plan: RunPlan, watcher: Watcher, children: list[Child],
-                 monitor: Child | None, progress: Progress) -> None:
+                 monitor: Child | None, progress: Progress,
+                 server: DiscoveryServer | None = None) -> None:
         self.plan, self.watcher, self.progress = plan, watcher, progress
-        self.children, self.monitor = children, monitor
+        self.children, self.monitor, self.server = children, monitor, server
         self.rounds_per_step = (
             1 if plan.realtime else max(1, plan.numerics.method.info.rounds)
         )
@@ -276,23 +323,68 @@ class Supervision:
         self.below_since, self.stop_sent = None, 0.0
         self.graph_checked = False
         self.started, self.start_sent, self.received_sent = False, 0.0, False
+        self.recovery = Recovery(plan.on_failure)
+        self.lifecycles: list[LifecycleDriver] = []
+        self.returning: list[Child] = []  # restarted, not heard from yet
+
+    def processes(self) -> list[Child | DiscoveryServer]:
+        """The agent processes, then the monitor and the discovery server (if any)."""
+        extra = [p for p in (self.monitor, self.server) if p is not None]
+        return [*self.children, *extra]
 
     def failure(self) -> tuple[int, str] | None:
-        """The first child that ended badly, as (code, message), or None."""
-        # poll first: a child that exits between "not ended well" (still running) and "has
-        # ended" would be taken for a failure with exit code 0
-        failed = [c for c in self.children if c.poll() is not None and not c.ended_well()]
-        if (
-            self.monitor is not None
-            and self.monitor.poll() is not None
-            and not self.monitor.ended_well()
-        ):
-            failed.append(self.monitor)
-        if not failed:
-            return None
-        c = failed[0]
-        detail = " | ".join(line for line in c.tail(3) if line.strip())
-        return 1, f"{c.name} (pid {c.pid}) exited with code {c.poll()}: {detail}"
+        """The run's end by a dead process, as (code, message), or None: under the restart
+        policy a process that died is started again after its back-off (``recovery``)."""
+        for c in self.processes():
+            # poll first: a child that exits between "not ended well" (still running) and "has
+            # ended" would be taken for a failure with exit code 0
+            if c.poll() is None or c.ended_well() or self.recovery.pending(c):
+                continue
+            error = self.recovery.died(c, self.watcher.ensemble_time())
+            if error is not None:
+                return 1, error
+        for c in self.recovery.restart_due(self.processes()):
+            self.rejoin(c)
+        self.end_hung()
+        return None
+
+    def end_hung(self) -> None:
+        """Lockstep under ``--on-failure restart``: a process stopped for longer than the round
+        timeout is taken for dead (every round waits for it): ended, then restarted and resumed.
+        Realtime peers go on without a hung process and take it back when it resumes."""
+        if self.plan.realtime or not self.plan.on_failure.restart:
+            return
+        for c in self.children:
+            if c.poll() is None and c.stopped_for() > self.plan.timing.round_timeout:
+                c.end_hung()
+
+    def rejoin(self, child: Child | DiscoveryServer) -> None:
+        """A restarted process: forget the dead one's reports, drive the new one's lifecycle
+        (agents); realtime agents get the ensemble's start again (``start_clock``).  The
+        discovery server is back once it listens (``DiscoveryServer.launch``)."""
+        if not isinstance(child, Child):
+            self.recovery.heard_again(child.name)
+            return
+        if child is self.monitor:
+            self.watcher.monitor = None
+        else:
+            self.watcher.agents.pop(child.agents, None)
+            self.lifecycles.append(self.watcher.drive_lifecycle(
+                [child.name], lambda name: " | ".join(child.tail(2)).strip()))
+        self.returning.append(child)
+
+    def note_returns(self) -> None:
+        """Restarted processes heard again: the monitor's report, an agent's run record."""
+        for child in list(self.returning):
+            if child is self.monitor:
+                heard, resumed_at = self.watcher.monitor is not None, None
+            else:
+                record = self.watcher.agents.get(child.agents)
+                heard = record is not None
+                resumed_at = record.resumed_at if record is not None else None
+            if heard:
+                self.recovery.heard_again(child.name, resumed_at)
+                self.returning.remove(child)
 
     def last_words(self, most: int = 3) -> str:
         """'; <process>: <its last line>' for up to ``most`` processes still running: what they
@@ -305,7 +397,8 @@ class Supervision:
         if self.graph_checked or not self.watcher.agents_up():
             return
         names = [c.name for c in self.children] + (["monitor"] if self.monitor is not None else [])
-        self.graph_checked = self.watcher.check_graph(names)
+        restarted = {f.process for f in self.recovery.failures}
+        self.graph_checked = self.watcher.check_graph(names, restarted)
 
     def start_clock(self) -> None:
         """Realtime: once every agent is up, call the ensemble's ``start`` service (t = 0 on every
@@ -325,12 +418,15 @@ class Supervision:
         lead, timeout = plan.hosts.lead, plan.timing.timeout
         self.started, self.start_sent, self.received_sent = False, 0.0, False
         by_name = {c.name: c for c in self.children}
-        lifecycle = watcher.drive_lifecycle(
+        self.lifecycles = [watcher.drive_lifecycle(
             list(by_name), lambda name: " | ".join(by_name[name].tail(2)).strip()
-        )
+        )]
         while True:
             watcher.spin(0.05)
-            lifecycle.step()
+            for lifecycle in self.lifecycles:
+                lifecycle.step()
+            self.lifecycles = [d for d in self.lifecycles if not d.active()]
+            self.note_returns()
             if plan.realtime and lead:
                 self.start_clock()
             self.check_graph()

@@ -245,21 +245,63 @@ def discovery_environments(spec: str | DiscoverySpec, directory: str | None = No
 
 
 class DiscoveryServer:
-    """A running ``python -m polymatch_ros.ros.supervisor.discovery_server`` (bounded by
-    ``timeout``)."""
+    """A ``python -m polymatch_ros.ros.supervisor.discovery_server`` (bounded by ``timeout``),
+    supervised like the run's other processes (``recovery.Process``): restarted on the same
+    address, its clients find it again."""
 
-    process: subprocess.Popen[bytes]
+    name = "discovery_server"
+    hung_for: float | None = None  # never taken for hung: it only answers discovery
+    argv: list[str]
+    env: dict[str, str]
     host: str
     port: int
     log_path: str
+    process: subprocess.Popen[bytes]
 
-    def __init__(self, process: subprocess.Popen[bytes], host: str, port: int,
+    def __init__(self, argv: Sequence[str], env: Mapping[str, str], host: str, port: int,
                  log_path: str) -> None:
-        self.process, self.host, self.port, self.log_path = process, host, port, log_path
+        self.argv, self.env = list(argv), dict(env)
+        self.host, self.port, self.log_path = host, port, log_path
 
     @property
     def address(self) -> str:
         return f"{self.host}:{self.port}"
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def launch(self) -> None:
+        """Start it and wait (at most ``SERVER_READY_SECONDS``) until it listens; raises
+        PolymatchError if it does not."""
+        import time
+
+        from ...core.errors import PolymatchError
+
+        with open(self.log_path, "w") as log:
+            self.process = subprocess.Popen(self.argv, env=self.env, stdout=log,
+                                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        deadline = time.monotonic() + SERVER_READY_SECONDS
+        while time.monotonic() < deadline and self.process.poll() is None:
+            if READY_LINE in self.output():
+                return
+            time.sleep(0.05)
+        self.stop()
+        lines = self.output().strip().splitlines() or ["no output"]
+        raise PolymatchError(f"discovery server on {self.address} did not start: {lines[-1]}")
+
+    def restart(self) -> None:
+        self.launch()
+
+    def poll(self) -> int | None:
+        return self.process.poll()
+
+    def ended_well(self) -> bool:
+        """It ran its time out (``timeout`` ended it) or was stopped: not a death."""
+        return self.process.poll() in (0, 124)
+
+    def tail(self, n: int = 5) -> list[str]:
+        return self.output().strip().splitlines()[-n:]
 
     def output(self) -> str:
         with open(self.log_path) as log:
@@ -284,24 +326,12 @@ def start_discovery_server(port: int, host: str = DEFAULT_SERVER_HOST, seconds: 
     listens.  It ends by itself after ``seconds`` (``timeout -k 5``); ``prefix`` is put before
     the command (e.g. ``("ip", "netns", "exec", NAME)``).  Raises PolymatchError if it fails.
     """
-    from ...core.errors import PolymatchError
     if log_path is None:
         import tempfile
         log_path = tempfile.mkstemp(prefix=f"polymatch_ds_{port}_", suffix=".log")[1]
     argv = list(prefix) + ["timeout", "-k", "5", str(seconds), sys.executable, "-m",
                            "polymatch_ros.ros.supervisor.discovery_server", "--host", host,
                            "--port", str(port), "--seconds", str(seconds)]
-    with open(log_path, "w") as log:
-        process = subprocess.Popen(argv, env=dict(os.environ if env is None else env),
-                                   stdout=log, stderr=subprocess.STDOUT,
-                                   stdin=subprocess.DEVNULL)
-    server = DiscoveryServer(process, host, port, log_path)
-    import time
-    deadline = time.monotonic() + SERVER_READY_SECONDS
-    while time.monotonic() < deadline and process.poll() is None:
-        if READY_LINE in server.output():
-            return server
-        time.sleep(0.05)
-    server.stop()
-    lines = server.output().strip().splitlines() or ["no output"]
-    raise PolymatchError(f"discovery server on {host}:{port} did not start: {lines[-1]}")
+    server = DiscoveryServer(argv, os.environ if env is None else env, host, port, log_path)
+    server.launch()
+    return server

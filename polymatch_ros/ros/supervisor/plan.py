@@ -8,8 +8,10 @@ noise-floor tolerance of bridge mode) are in it as decided, never patched in lat
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
+
+from .recovery import RestartPolicy
 
 if TYPE_CHECKING:
     from ...core.scene import Scene
@@ -90,6 +92,7 @@ class RunPlan:
     timing: Timing
     outputs: Outputs
     bridge: BridgeOptions | None = None   # bridge mode only
+    on_failure: RestartPolicy = field(default_factory=RestartPolicy)  # --on-failure
 
     @property
     def realtime(self) -> bool:

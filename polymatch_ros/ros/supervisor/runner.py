@@ -25,6 +25,7 @@ from types import FrameType
 from ...console import Progress
 from ...core.errors import PolymatchError
 from .. import wire
+from ..nodes.checkpoint import Checkpoint, CheckpointFile
 from ..nodes.teardown import teardown_watchdog
 from . import bridge_run
 from .children import (  # noqa: F401 (API)
@@ -63,6 +64,25 @@ class RunContext:
     envs: DiscoveryEnvironments | None    # client/super-client/server overlays, --discovery
     agents_per_process: int               # -k as given, or chosen (``_agents_per_process``)
     shared_domain: bool                   # the user's ROS_DOMAIN_ID, or discovery beyond loopback
+    directory: str                        # the run's private temporary directory
+    run_id: int                           # the stage messages' and checkpoints' run id
+
+    def checkpoint_path(self, name: str) -> str:
+        """The checkpoint of the agent process ``name`` ('' in bridge mode: a bridge agent's
+        state is its robot's measured pose)."""
+        if self.plan.bridge is not None:
+            return ""
+        return os.path.join(self.directory, name + ".checkpoint")
+
+    def checkpoints(self, children: Sequence[Child]) -> list[tuple[tuple[int, ...],
+                                                                   Checkpoint | None]]:
+        """Each agent process's agents and last checkpoint (None: none)."""
+        return [(c.agents, CheckpointFile(self.checkpoint_path(c.name), self.run_id).read())
+                for c in children]
+
+    def checkpoint_args(self, name: str) -> list[str]:
+        path = self.checkpoint_path(name)
+        return ["-p", f"checkpoint:={path}"] if path else []
 
 
 def run(plan: RunPlan) -> int:
@@ -82,14 +102,15 @@ def run(plan: RunPlan) -> int:
         packing = _agents_per_process(
             plan.packing, len(plan.hosts.agents), envs is None and _localhost(env)
         )
-        context = RunContext(plan, env, domain, envs, packing, shared)
+        context = RunContext(plan, env, domain, envs, packing, shared, directory,
+                             _run_id(plan))
         _adopt(env if envs is None else envs.for_role("super_client", env))
         server = _start_server(context, directory)
         try:
-            code = _run(context)
+            code = _run(context, server)
         finally:
             if server is not None:
-                server.stop()
+                server.stop()  # the one running now (``recovery`` may have restarted it)
     return code
 
 
@@ -175,7 +196,7 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
         "-p",
         f"mode:={plan.mode}",
         "-p",
-        f"run_id:={_run_id(plan)}",
+        f"run_id:={context.run_id}",
         "-p",
         f"agents_per_process:={k}",
         "-p",
@@ -191,6 +212,8 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
         f"discovery_timeout:={30.0 + 2.0 * len(partition(plan.n_agents, k))!r}",
         "-p",
         f"peer_timeout:={timing.peer_timeout!r}",
+        "-p",
+        f"peers_restart:={'true' if plan.on_failure.restart else 'false'}",
         "-p",
         # every agent keeps its latched final pose alive until the lead host has them all: a
         # writer that exits before the runner's reader matched it takes its sample along
@@ -260,9 +283,11 @@ def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
                 + ["polymatch_ros.ros.nodes.agent", "--ros-args"]
                 + agent_args
                 + sel
+                + context.checkpoint_args(name)
                 + (bridge_run.remaps(agents[0]) if plan.bridge is not None else [])
                 + ["-r", f"__node:={name}"],
                 agent_env,
+                agents,
             )
         )
     return monitor, children
@@ -286,7 +311,7 @@ def _announce(context: RunContext) -> None:
     )
 
 
-def _run(context: RunContext) -> int:
+def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -297,6 +322,7 @@ def _run(context: RunContext) -> int:
     robots: list[Child] = []
     monitor: Child | None = None
     watcher: Watcher | None = None
+    supervision: Supervision | None = None
     interrupted: list[int] = []
 
     def interrupt(sig: int, frame: FrameType | None) -> None:
@@ -316,7 +342,7 @@ def _run(context: RunContext) -> int:
         if plan.bridge is not None:
             robots = bridge_run.robots(plan, context.env)
         monitor, children = _start(context)
-        supervision = Supervision(plan, watcher, children, monitor, progress)
+        supervision = Supervision(plan, watcher, children, monitor, progress, server)
         code, message = supervision.watch(interrupted, start)
     except PolymatchError as exc:
         code, message = exc.exit_code, str(exc)
@@ -327,7 +353,9 @@ def _run(context: RunContext) -> int:
             signal.signal(s, h)
     try:
         wall = time.monotonic() - start
-        report(plan, RunOutcome(watcher, children, monitor, progress, code, message, wall))
+        failures = tuple(supervision.recovery.failures) if supervision is not None else ()
+        report(plan, RunOutcome(watcher, children, monitor, progress, code, message, wall,
+                                failures, context.checkpoints(children)))
         final = watcher.final_state() if watcher is not None else None
         if code == 0 and plan.hosts.lead and watcher is not None and final is not None:
             code = verdict(plan.scene, final, watcher.stop_requested_at)

@@ -4,6 +4,7 @@ agents' run records, the comparison with the centralised simulation, the verdict
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, cast
 
@@ -18,7 +19,9 @@ from ..wire import RunRecord
 from .plan import RunPlan
 
 if TYPE_CHECKING:
+    from ..nodes.checkpoint import Checkpoint
     from .children import Child
+    from .recovery import Failure
     from .watcher import Watcher
 
 
@@ -33,6 +36,9 @@ class RunOutcome:
     code: int                  # 0, or the exit code of the failure
     message: str               # the failure, one line ("" on success)
     wall: float                # wall-clock seconds of the run
+    failures: tuple[Failure, ...] = ()   # processes that died, and their restarts
+    # each agent process's agents and last checkpoint: the state of a run that ended early
+    checkpoints: Sequence[tuple[Sequence[int], Checkpoint | None]] = ()
 
     @property
     def processes(self) -> list[Child]:
@@ -51,9 +57,13 @@ def report(plan: RunPlan, outcome: RunOutcome) -> None:
         records.append(watcher.monitor)
         print("note: the monitor printed no final record; its last report on the status "
               "topic stands in", file=sys.stderr)
+    if watcher is not None:  # a process ended early (no final line): its last status
+        records += [watcher.agents[c.agents] for c in outcome.children
+                    if not c.records() and c.agents in watcher.agents]
     if plan.outputs.records:
         with open(plan.outputs.records, "w", encoding="utf-8") as fh:
             fh.writelines(r.to_json() + "\n" for r in records)
+            fh.writelines(f.to_json() + "\n" for f in outcome.failures)
     lead = plan.hosts.lead
     if outcome.code == 0 and lead and final is not None and watcher is not None:
         _final_progress(progress, plan.scene, final, records)
@@ -64,6 +74,9 @@ def report(plan: RunPlan, outcome: RunOutcome) -> None:
     elif outcome.message:
         progress.done()
         print(f"polymatch: error: {outcome.message}", file=sys.stderr)
+    if plan.outputs.save and lead and not (outcome.code == 0 and final is not None):
+        _save_partial(plan, outcome)
+    _failures(outcome.failures)
     for c in outcome.processes:
         if c.hung_in_teardown():
             who = "the runner" if c.ended_by_runner else "its watchdog"
@@ -72,6 +85,16 @@ def report(plan: RunPlan, outcome: RunOutcome) -> None:
                 f"shutdown spin); {who} ended it",
                 file=sys.stderr,
             )
+
+
+def _failures(failures: tuple[Failure, ...]) -> None:
+    """One line per process death and what followed (stdout, after the summary)."""
+    if not failures:
+        return
+    restarted = sum(f.restarted is not None for f in failures)
+    print(f"failures: {len(failures)} process death(s), {restarted} restarted")
+    for f in failures:
+        print(f"  {f.describe()}")
 
 
 def _host_line(here: tuple[int, ...], records: list[RunRecord], wall: float) -> None:
@@ -164,15 +187,31 @@ def verdict(scene: Scene, final: State, stop_requested_at: float | None = None) 
     return code
 
 
-def _save(path: str, scene: Scene, final: State, times: dict[int, float]) -> None:
-    data: dict[str, Any] = {"t": final.t, "origin": scene.origin}
+def _save_partial(plan: RunPlan, outcome: RunOutcome) -> None:
+    """The run ended early: save each agent's last state (``partial``), and say so."""
+    from .partial import last_state
+
+    assert plan.outputs.save is not None  # only called with --save
+    finals = {} if outcome.watcher is None else outcome.watcher.poses
+    state, times = last_state(plan.scene, finals, outcome.checkpoints)
+    _save(plan.outputs.save, plan.scene, state, times, partial=True)
+
+
+def _save(path: str, scene: Scene, final: State, times: dict[int, float],
+          partial: bool = False) -> None:
+    data: dict[str, Any] = {"t": final.t, "origin": scene.origin, "partial": partial}
     for gi, g in enumerate(scene.model.groups):
         data[f"group{gi}_times"] = np.array([times[a] for a in g.indices])
     for gi, gs in enumerate(_groups(final)):
         data[f"group{gi}_centroids"] = gs.x + scene.origin
         data[f"group{gi}_rotations"] = scene.model.rotations.to_matrices(gs.rot)
     np.savez(path, **data)
-    print(f"final poses (as received on the pose topics) saved to {path}")
+    if partial:
+        print(f"partial state saved to {path}: the run ended early; each agent's last state "
+              f"(from t = {min(times.values()):g} to {max(times.values()):g}) and its time",
+              file=sys.stderr)
+    else:
+        print(f"final poses (as received on the pose topics) saved to {path}")
 
 
 def vertex_deviation(model: Model, a: State, b: State) -> float:

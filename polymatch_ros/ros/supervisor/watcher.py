@@ -4,7 +4,7 @@ graph check."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ...core.errors import PolymatchError
@@ -161,11 +161,13 @@ class Watcher:
         ns = self.node.get_namespace()
         return [n for n, space in self.node.get_node_names_and_namespaces() if space == ns]
 
-    def check_graph(self, names: Sequence[str]) -> bool:
-        """Every node of ``names`` is in the ensemble's namespace, and no name is taken twice."""
+    def check_graph(self, names: Sequence[str], restarted: Collection[str] = ()) -> bool:
+        """Every node of ``names`` is in the ensemble's namespace, and no name is taken twice
+        (but those of ``restarted`` processes: a dead process's node stays in the graph until
+        its DDS lease runs out)."""
         ns = self.node.get_namespace()
         found = self._ensemble_nodes()
-        twice = sorted({n for n in found if found.count(n) > 1})
+        twice = sorted({n for n in found if found.count(n) > 1} - set(restarted))
         if twice:
             raise PolymatchError(
                 f"node name {ns}/{twice[0]} is taken twice: another ensemble named "

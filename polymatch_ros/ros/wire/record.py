@@ -41,6 +41,7 @@ class RunRecord:
     ``diameter`` of its last report, ``agents_heard`` in it, ``reports`` published.
     ``n_agents`` the ensemble's size and ``node`` the process's fully qualified node name
     (agents): what ``polymatch set`` waits for before it calls every agent node.
+    ``resumed_at``: the step a restarted lockstep process resumed at (None: not restarted).
     """
 
     role: str
@@ -63,6 +64,7 @@ class RunRecord:
     clock_offsets: dict[int, float] = field(default_factory=dict)
     n_agents: int = 0
     node: str = ""
+    resumed_at: int | None = None
 
     @property
     def dropped_total(self) -> int:
@@ -123,6 +125,8 @@ class RunRecord:
                 text += f" (CPU {self.ms_per_round['cpu']:.2f} ms per tick)"
         if self.matched_after is not None:
             text += f"; peers matched after {self.matched_after:.2f} s"
+        if self.resumed_at is not None:
+            text += f"; restarted, resumed at step {self.resumed_at}"
         return f"{self.name()}: {text}; {drop_summary(self.dropped)}"
 
 

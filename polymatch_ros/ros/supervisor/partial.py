@@ -1,0 +1,71 @@
+"""What a run that ended early still has: each agent's last state, and its time.
+
+A run interrupted (Ctrl-C, SIGTERM), failed or timed out has no final pose from every agent.
+Its ``--save`` then holds, per agent, the later of its final pose (if it sent one) and its
+process's last checkpoint (``nodes.checkpoint``: the state at the start of its last step);
+an agent of which neither exists (its process never stepped) keeps its initial state at
+t = 0.  The file says it is partial, and every agent's time is in it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
+
+from ...core.model import GroupState, State
+from .. import wire
+
+if TYPE_CHECKING:
+    from ...core.scene import Scene
+    from ..nodes.checkpoint import Checkpoint
+
+#: agent -> (its simulated time, its row)
+AgentRows = dict[int, tuple[float, wire.Row]]
+
+
+def checkpoint_rows(scene: Scene, agents: Sequence[int], found: Checkpoint) -> AgentRows:
+    """The rows of a process's checkpoint (its local state), by global agent index."""
+    model, grp = scene.model, scene.model.rotations
+    out: AgentRows = {}
+    for gi, gs in enumerate(found.state.groups):
+        g = model.groups[gi]
+        local = sorted(a for a in agents if g.start <= a < g.start + g.size)
+        if gs is None or not local:
+            continue
+        for r, a in enumerate(local):
+            row = wire.Row(gs.x[r].copy(), grp.take(gs.rot, [r]))
+            if gs.v is not None and gs.w is not None:
+                row.v, row.w = gs.v[r].copy(), grp.algebra_take(gs.w, [r])
+            out[a] = (found.t, row)
+    return out
+
+
+def last_state(scene: Scene, finals: Mapping[int, tuple[float, wire.Row]],
+               pieces: Sequence[tuple[Sequence[int], Checkpoint | None]]) -> tuple[State, dict]:
+    """(the ensemble's state from every agent's latest row, {agent: its time}); ``finals``
+    the final poses heard (velocities in their rows where known), ``pieces`` each process's
+    agents and checkpoint."""
+    latest: AgentRows = {}
+    for agents, found in pieces:
+        if found is not None:
+            latest.update(checkpoint_rows(scene, agents, found))
+    for a, (t, row) in finals.items():
+        if a not in latest or t >= latest[a][0]:
+            latest[a] = (t, row)
+    model, grp = scene.model, scene.model.rotations
+    times: dict[int, float] = {}
+    groups = []
+    for gi, g in enumerate(model.groups):
+        initial = scene.initial.groups[gi]
+        assert initial is not None  # a scene's initial state has every group
+        rows = {}
+        for a in g.indices:
+            if a in latest:
+                times[a], rows[a - g.start] = latest[a]
+            else:  # never stepped: where it began
+                r = a - g.start
+                times[a] = 0.0
+                rows[r] = wire.Row(initial.x[r], grp.take(initial.rot, [r]))
+        e = wire.assemble(grp, model.dim, rows, full=True)
+        groups.append(GroupState(e.x, e.rot))
+    return State(min(times.values()), tuple(groups)), times

@@ -1,0 +1,195 @@
+"""No single crash ends a run: `polymatch run` under faults (``--on-failure``, ``recovery``).
+
+Each test signals a process of a running ensemble by its PID (SIGKILL: dead; SIGSTOP then
+SIGCONT: hung, not dead; SIGTERM to the runner: ended early) and asserts the outcome the
+README's table promises: lockstep resumes exactly (the run still equals the centralised
+simulation, Theorem 4.2's scene), realtime converges, the summary lists each death, and no
+process is left over.
+"""
+
+import os
+import re
+import signal
+import time
+
+import numpy as np
+import pytest
+from ros_harness import PY, cli_argv, needs_ros, scene_path
+
+from polymatch_ros.ros.wire import run_records
+
+pytestmark = needs_ros
+
+SCENE = "congruent_triangles"
+PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "support",
+                     "service_probe.py")
+BOUND = 150  # s: only a hang takes this long
+DEVIATION = re.compile(r"max vertex deviation (\S+)")
+FAILURE = re.compile(r"^  (\S+) \(pid (\d+)\) (killed by \w+|exit code -?\d+|hung \(stopped\) "
+                     r"for)[^;]*? (?:at t = (\S+)|"
+                     r"before the ensemble's clock started); restarted after \S+ s as pid (\d+), "
+                     r"back after \S+ s", re.M)
+
+
+def _descendants(pid):
+    """Every process below ``pid`` (by /proc's parent links)."""
+    parents = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as fh:
+                    parents[int(entry)] = int(fh.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+    found, frontier = [], [pid]
+    while frontier:
+        below = [p for p, parent in parents.items() if parent in frontier]
+        found += below
+        frontier = below
+    return found
+
+
+def _process(run, node):
+    """The PID of the run's process whose node is ``node`` (``-r __node:=<node>``)."""
+    for pid in _descendants(run.pid):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as fh:
+                argv = fh.read().split(b"\0")
+        except OSError:
+            continue
+        if f"__node:={node}".encode() in argv:
+            return pid
+    raise AssertionError(f"no process of node {node} below pid {run.pid}")
+
+
+def _until(ros, t, run):
+    """Wait until every agent reached simulated time ``t`` (the service probe)."""
+    probe = ros.start([PY, PROBE, f"until_t {t}"], timeout=BOUND, name="probe")
+    assert ros.wait(probe, BOUND + 10) == 0, ros.output(probe) + ros.output(run)[-3000:]
+
+
+def _run(ros, *args):
+    return ros.start(cli_argv("run", scene_path(SCENE), "--timeout", BOUND, *args),
+                     timeout=BOUND + 20, name="runner")
+
+
+def _finish(ros, run):
+    rc = ros.wait(run, BOUND + 30)
+    return rc, ros.output(run)
+
+
+def _gone(pids):
+    """None of ``pids`` still runs (zombies of a live parent do not count)."""
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        alive = [p for p in pids if os.path.exists(f"/proc/{p}") and not _zombie(p)]
+        if not alive:
+            return True
+        time.sleep(0.2)
+    return False
+
+
+def _zombie(pid):
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return False
+
+
+def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
+    """Lockstep, four processes (round timeout 4 s): one hangs 2 s (SIGSTOP, SIGCONT) and is
+    waited for; one is killed (SIGKILL); one hangs for good and is taken for dead after the
+    round timeout.  The two are restarted, resume from their checkpoints, and the final poses
+    equal the centralised run's to 1e-9."""
+    run = _run(ros, "--t-end", "2", "--dt", "0.02", "-k", "2", "--round-timeout", "4")
+    _until(ros, 0.3, run)
+    slow = _process(run, "agents_4_5")
+    os.kill(slow, signal.SIGSTOP)
+    time.sleep(2)
+    os.kill(slow, signal.SIGCONT)
+    _until(ros, 0.8, run)
+    victim = _process(run, "agents_2_3")
+    os.kill(victim, signal.SIGKILL)
+    _until(ros, 1.2, run)
+    hung = _process(run, "agents_0_1")
+    os.kill(hung, signal.SIGSTOP)
+    before = _descendants(run.pid)
+    rc, out = _finish(ros, run)
+    assert rc == 3 and "did not converge" in out, out[-3000:]  # t_end 2 is before matching
+    assert float(DEVIATION.search(out).group(1)) <= 1e-9, out[-3000:]
+    failures = FAILURE.findall(out)
+    assert [(f[0], int(f[1]), f[2]) for f in failures] == [
+        ("agents_2_3", victim, "killed by SIGKILL"),
+        ("agents_0_1", hung, "hung (stopped) for")], out[-3000:]
+    assert [float(f[3]) >= t for f, t in zip(failures, (0.8, 1.2))] == [True, True]
+    steps = [int(s) for s in re.findall(r"resumed at step (\d+)", out)]
+    assert len(steps) == 2 and 40 <= steps[0] < steps[1] < 100, out[-3000:]
+    assert "failures: 2 process death(s), 2 restarted" in out
+    assert _gone(before + [int(f[4]) for f in failures])
+
+
+def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_path):
+    """Realtime, 8 agents: SIGKILL of agent 3, then of the monitor; both are restarted, the
+    agent rejoins the ensemble's clock from its last state and the run converges (exit 0);
+    ``--records`` lists both deaths."""
+    records = tmp_path / "records.jsonl"
+    run = _run(ros, "--mode", "realtime", "--rate", "20", "--time-scale", "4", "--t-end", "300",
+               "--records", records)
+    _until(ros, 4, run)
+    os.kill(_process(run, "agent_3"), signal.SIGKILL)
+    _until(ros, 12, run)
+    os.kill(_process(run, "monitor"), signal.SIGKILL)
+    rc, out = _finish(ros, run)
+    assert rc == 0 and "converged" in out, out[-3000:]
+    assert [f[0] for f in FAILURE.findall(out)] == ["agent_3", "monitor"], out[-3000:]
+    lines = records.read_text().splitlines()
+    deaths = [line for line in lines if line.startswith('{"polymatch_failure"')]
+    assert len(deaths) == 2 and '"code": -9' in deaths[0], lines
+    assert len(run_records(lines)) >= 2  # the run records are still readable around them
+
+
+def test_on_failure_stop_ends_the_run_at_the_first_death(ros):
+    """``--on-failure stop``: the first death ends every process, exit 1, naming it."""
+    run = _run(ros, "--mode", "realtime", "--rate", "20", "--on-failure", "stop", "-k", "2")
+    _until(ros, 1, run)
+    victim = _process(run, "agents_4_5")
+    before = _descendants(run.pid)
+    os.kill(victim, signal.SIGKILL)
+    rc, out = _finish(ros, run)
+    assert rc == 1, out[-3000:]
+    assert re.search(rf"polymatch: error: agents_4_5 \(pid {victim}\) exited with code -9", out)
+    assert "not restarted" in out and _gone(before)
+
+
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_path, mode):
+    """SIGTERM to the runner mid-run: exit 130, and --save still holds every agent's last
+    state, its time, and ``partial``; no process is left over."""
+    save = tmp_path / "poses.npz"
+    extra = ["--mode", "realtime", "--rate", "20"] if mode == "realtime" else ["--dt", "0.02"]
+    run = _run(ros, "--t-end", "500", "--save", save, "-k", "4", *extra)
+    _until(ros, 0.5, run)
+    before = _descendants(run.pid)
+    os.kill(_runner(run), signal.SIGTERM)
+    rc, out = _finish(ros, run)
+    assert rc == 130 and "partial state saved" in out, out[-3000:]
+    data = np.load(save)
+    assert bool(data["partial"]) and 0.5 <= float(data["t"]) < 500
+    times = data["group0_times"]
+    assert times.shape == (8,) and np.all(times >= 0.5) and np.all(times < 500)
+    rotations = data["group0_rotations"]
+    assert np.allclose(rotations @ rotations.transpose(0, 2, 1), np.eye(2), atol=1e-12)
+    assert _gone(before)
+
+
+def _runner(run):
+    """The `polymatch run` process below the harness's `timeout` wrapper."""
+    below = [p for p in _descendants(run.pid) if _parent(p) == run.pid]
+    assert len(below) == 1, below
+    return below[0]
+
+
+def _parent(pid):
+    with open(f"/proc/{pid}/stat") as fh:
+        return int(fh.read().rsplit(")", 1)[1].split()[1])
