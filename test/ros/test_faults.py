@@ -193,3 +193,43 @@ def _runner(run):
 def _parent(pid):
     with open(f"/proc/{pid}/stat") as fh:
         return int(fh.read().rsplit(")", 1)[1].split()[1])
+
+
+def _progress_past(ros, run, t):
+    """Wait until the run's progress line shows simulated time ``t`` or later."""
+    deadline = time.monotonic() + BOUND
+    while time.monotonic() < deadline:
+        shown = re.findall(r"^t = +(\S+) /", ros.output(run), re.M)
+        if shown and float(shown[-1]) >= t:
+            return
+        assert run.poll() is None, ros.output(run)[-3000:]
+        time.sleep(0.2)
+    raise AssertionError(f"no progress to t = {t}: " + ros.output(run)[-3000:])
+
+
+def _server(run):
+    """The PID of the run's own discovery server (below its `timeout` wrapper)."""
+    for pid in _descendants(run.pid):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as fh:
+                argv = fh.read().split(b"\0")
+        except OSError:
+            continue
+        if b"polymatch_ros.ros.supervisor.discovery_server" in argv and b"timeout" not in argv:
+            return pid
+    raise AssertionError(f"no discovery server below pid {run.pid}")
+
+
+def test_a_restarted_discovery_server_is_found_again_by_a_restarted_agent(ros):
+    """``--discovery server``: SIGKILL of the run's discovery server, then of an agent process;
+    the server is restarted on its address, the agent's new process discovers its peers
+    through it, and the run converges."""
+    run = _run(ros, "--mode", "realtime", "--rate", "20", "--time-scale", "2", "--t-end", "300",
+               "-k", "4", "--discovery", "server")
+    _progress_past(ros, run, 2)  # a probe with loopback discovery would not see this run
+    os.kill(_server(run), signal.SIGKILL)
+    _progress_past(ros, run, 6)
+    os.kill(_process(run, "agents_0_3"), signal.SIGKILL)
+    rc, out = _finish(ros, run)
+    assert rc == 0 and "converged" in out, out[-3000:]
+    assert [f[0] for f in FAILURE.findall(out)] == ["discovery_server", "agents_0_3"], out[-3000:]

@@ -20,7 +20,7 @@ class DeadProcess:
     def __init__(self, name, code=-9, lines=()):
         self.name, self.code, self.lines = name, code, list(lines)
         self.pid, self.starts = 1000, 0
-        self.hung_for = None
+        self.hung_for, self.restart_delay = None, 0.0
 
     def poll(self):
         return self.code
@@ -107,5 +107,18 @@ def test_a_failure_is_one_records_line_that_run_record_readers_skip():
     data = json.loads(line)
     assert data == {FAILURE_KEY: 1, "process": "agent_3", "pid": 77, "code": -9, "t": 2.5,
                     "last_line": "last words", "new_pid": 78, "resumed_at": 12,
-                    "restarted_after": 0.5, "back_after": 3.0}
+                    "hung_for": None, "restarted_after": 0.5, "back_after": 3.0}
     assert run_records([line]) == []
+
+
+def test_a_process_with_a_restart_delay_waits_for_it():
+    """The discovery server comes back only once its clients' lease ran out
+    (``DiscoveryServer.restart_delay``), whatever the policy's back-off."""
+    from polymatch_ros.ros.supervisor.discovery import DiscoveryServer, lease_seconds
+
+    recovery = Recovery(RestartPolicy(backoff=0.5))
+    server = DeadProcess("discovery_server")
+    server.restart_delay = DiscoveryServer.restart_delay.fget(None)
+    assert server.restart_delay == lease_seconds() + 1.0 == 11.0  # the shipped 10 s lease
+    assert recovery.died(server, 3.0) is None
+    assert recovery.due["discovery_server"] - recovery.failures[-1].died == 11.0

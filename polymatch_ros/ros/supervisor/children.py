@@ -55,6 +55,7 @@ class Child:
     """A supervised process: last lines of output kept (shown on failure); ended by its PID."""
 
     name: str
+    restart_delay = 0.0  # its restart waits only for the policy's back-off
     argv: list[str]
     env: dict[str, str] | None
     agents: tuple[int, ...]

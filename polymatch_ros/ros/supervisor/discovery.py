@@ -122,6 +122,19 @@ def free_udp_port(host: str = DEFAULT_SERVER_HOST) -> int:
         return int(sock.getsockname()[1])
 
 
+def lease_seconds() -> float:
+    """The participants' lease duration in the shipped profile (``leaseDuration``): how long a
+    participant that vanished without a goodbye is still taken for present."""
+    tree = ElementTree.parse(PROFILE)
+    ns = f"{{{FASTDDS_NAMESPACE}}}"
+    lease = tree.getroot().find(f".//{ns}discovery_config/{ns}leaseDuration")
+    if lease is None:
+        return 20.0  # Fast DDS's own default
+    sec, nanosec = lease.find(f"{ns}sec"), lease.find(f"{ns}nanosec")
+    return float(sec.text if sec is not None and sec.text else 0) + float(
+        nanosec.text if nanosec is not None and nanosec.text else 0) * 1e-9
+
+
 def _fast_discovery_settings() -> str:
     """The discovery_config children of the shipped profile (lease, announcements), as XML."""
     tree = ElementTree.parse(PROFILE)
@@ -251,6 +264,14 @@ class DiscoveryServer:
 
     name = "discovery_server"
     hung_for: float | None = None  # never taken for hung: it only answers discovery
+
+    @property
+    def restart_delay(self) -> float:
+        """A server restarted under its old GUID within its clients' lease is taken by them
+        for the old one, still present: they never announce their endpoints to it again, and
+        a participant that joins later meets nobody.  So it comes back once the lease ran out,
+        when the clients have dropped it and ping its address again."""
+        return lease_seconds() + 1.0
     argv: list[str]
     env: dict[str, str]
     host: str

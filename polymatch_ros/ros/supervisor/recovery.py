@@ -38,6 +38,7 @@ class Process(Protocol):
 
     name: str
     hung_for: float | None  # it hung this long and the runner ended it (None: it died)
+    restart_delay: float    # the least back-off before its restart
 
     @property
     def pid(self) -> int: ...
@@ -146,7 +147,8 @@ class Recovery:
         if len(recent) >= self.policy.most:
             return (f"{child.name} died {len(recent)} times within {self.policy.window:g} s "
                     f"(last: {failure.how()}), not restarted again: {last or 'no output'}")
-        self.due[child.name] = now + self.policy.backoff * 2 ** (len(recent) - 1)
+        backoff = self.policy.backoff * 2 ** (len(recent) - 1)
+        self.due[child.name] = now + max(backoff, child.restart_delay)
         return None
 
     def pending(self, child: Process) -> bool:
