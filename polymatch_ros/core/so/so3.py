@@ -14,7 +14,6 @@ from .base import (
     polar_newton_schulz,
 )
 
-
 #: rows of the flattened (S O_n^T)^T whose differences are the vector of S O_n^T - O_n S^T
 _KERNEL_PLUS, _KERNEL_MINUS = np.array([5, 6, 1]), np.array([7, 2, 3])
 
