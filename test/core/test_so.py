@@ -182,7 +182,7 @@ def _round_off(angles):
 
 
 def _expm_batch(skews):
-    return np.array([expm(w) for w in skews])
+    return expm(skews)                           # scipy's expm of every matrix of the stack
 
 
 def _so3_skews(axes, angles):

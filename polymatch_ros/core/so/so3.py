@@ -170,7 +170,7 @@ class SO3(ComponentAlgebra, RotationGroup):
         return np.ascontiguousarray((weights @ flat.T).T).reshape(3, 3, -1)    # (3, 3, n) SoA
 
     def coupling(self, g: Array, s: MeanField) -> Array:
-        if s.ndim == 3:                          # one field per row: (S_n O_n^T)[:, c] per n
+        if isinstance(s, np.ndarray) and s.ndim == 3:   # one field per row: (S_n O_n^T)[:, c]
             a0, a1, a2 = (np.einsum("ijn,jn->in", s, g[c]) for c in range(3))
             return np.array([a1[2] - a2[1], a2[0] - a0[2], a0[1] - a1[0]])
         # column c of S O_n^T is S (row c of O_n): one product, a[c] = S g[c]
