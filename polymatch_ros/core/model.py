@@ -34,6 +34,7 @@ from its peers' messages.  Both then run the same code.
 
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, TypeGuard
 
 import numpy as np
@@ -86,12 +87,12 @@ class Model:
     def n_agents(self) -> int:
         return sum(g.size for g in self.groups)
 
-    @property
+    @cached_property
     def inter_group(self) -> bool:
         """True when the F-2 inter-group potential is active."""
         return self.kappa_2 != 0.0 and len(self.groups) > 1
 
-    @property
+    @cached_property
     def centroids_exact(self) -> bool:
         """Centroids decouple into linear symmetric consensus per group: solved in closed form.
 

@@ -10,6 +10,7 @@ splitting    Strang splitting damp/kick/drift/kick/damp.  For gamma = 0 it is sy
 
 import math
 from collections.abc import Callable
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -22,8 +23,15 @@ PHI_SERIES_RADIUS = 1.0
 
 
 def phi_functions(z: float) -> tuple[float, float, float, float]:
-    """(e^z, phi_1(z), phi_2(z), phi_3(z)) for real z, accurate for all z <= 0 and small z > 0."""
-    z = float(z)
+    """(e^z, phi_1(z), phi_2(z), phi_3(z)) for real z, accurate for all z <= 0 and small z > 0.
+
+    Kept per z (``_phi_functions``): a run's steps take a handful of distinct h.
+    """
+    return _phi_functions(float(z))
+
+
+@lru_cache(maxsize=64)
+def _phi_functions(z: float) -> tuple[float, float, float, float]:
     if abs(z) < PHI_SERIES_RADIUS:
         phis = []
         for k in (1, 2, 3):

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from .model import Coupling, GroupState, Request, State, System
-from .so.base import recycled, row_blocks, scratch
+from .so.base import RECYCLED_MIN_BYTES, recycled, row_blocks, scratch
 
 RUNNING, FINISHED = "running", "finished"
 
@@ -132,14 +132,15 @@ class Method:
 def lincomb(base: Any, h: float, coefs: Sequence[float], terms: Sequence) -> Any:
     """base + h * sum coefs[j] * terms[j] (skipping zero coefficients); base may be None (zero).
 
-    Float arrays of one shape are summed block of rows by block (``row_blocks``) into one
+    Large float arrays of one shape are summed block of rows by block (``row_blocks``) into one
     result array (``recycled``; ``base`` is never modified): the operations and their order
     are those of out + (h c) t term by term, without a fresh array per term.
     """
     scaled = [(h * c, t) for c, t in zip(coefs, terms) if c != 0.0 and t is not None]
-    if scaled and all(_same_floats(base, t, scaled[0][1].shape) for _, t in scaled):
+    if scaled and getattr(scaled[0][1], "nbytes", 0) >= RECYCLED_MIN_BYTES \
+            and all(_same_floats(base, t, scaled[0][1].shape) for _, t in scaled):
         return _row_block_sum(base, scaled)
-    out = base
+    out = base              # small arrays: the same operations in the same order, term by term
     for hc, t in scaled:
         out = hc * t if out is None else out + hc * t
     return out

@@ -1,9 +1,16 @@
-"""The batched Cayley forms of core.so.cayley against the definition by LAPACK solves."""
+"""The batched Cayley forms of core.so.cayley against the definition by LAPACK solves, and the
+closed-form maps of SO(2) and SO(3) against scipy's matrix exponential."""
+
+import math
 
 import numpy as np
 import pytest
+from core_testlib import defect, rot_matrices, skew_matrices
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.linalg import expm
 
-from polymatch_ros.core.so import SO4, SOn, base, group_for
+from polymatch_ros.core.so import SO3, SO4, SOn, base, group_for
 from polymatch_ros.core.so.cayley import SERIES_LIMIT, cayley_series
 from polymatch_ros.core.so.so4 import cayley4, dcay_inv4, pair_matrices, quaternion_pairs
 from polymatch_ros.core.solver import lincomb
@@ -141,7 +148,10 @@ def test_row_blocks_leave_every_bit_of_the_batched_forms_unchanged(monkeypatch):
     """Cayley retraction, dcay^{-1}, the Lohe kernel and stage sums, whole and in blocks."""
     rng = np.random.default_rng(12)
     grp = SOn(6)
-    w, a, g = _skew(rng, 50, 6, 1e-2), _skew(rng, 50, 6, 1.0), _rotations(rng, 50, 6)
+    # 500 rows: arrays above RECYCLED_MIN_BYTES, which smaller ones skip the blocks below
+    n = 500
+    assert n * 6 * 6 * 8 >= base.RECYCLED_MIN_BYTES
+    w, a, g = _skew(rng, n, 6, 1e-2), _skew(rng, n, 6, 1.0), _rotations(rng, n, 6)
     s = grp.mean_field(g)
 
     def forms():
@@ -153,3 +163,101 @@ def test_row_blocks_leave_every_bit_of_the_batched_forms_unchanged(monkeypatch):
     assert base.row_blocks(g.shape)[0] == 7
     for got, want in zip(forms(), whole):
         assert np.array_equal(got, want)
+
+
+# ---------------------------------------------------------------------------------------------
+# the closed-form maps of SO(2) and SO(3) against scipy's matrix exponential and the solve
+
+#: rotation angles from exactly 0 through the series' thresholds, pi and beyond
+ANGLES = st.one_of(st.sampled_from([0.0, 1e-12, 1e-8, 1e-4, 1e-3, np.pi - 1e-9, np.pi,
+                                    np.pi + 1e-9, 2 * np.pi]),
+                   st.floats(0.0, 1e-3), st.floats(0.0, 4 * np.pi))
+AXES = st.tuples(*[st.floats(-1.0, 1.0)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3)
+CLOSED_FORMS = settings(max_examples=100, deadline=None)   # each example: up to 8 angles
+
+
+def _round_off(angles):
+    """What two evaluations of a map at angle t may differ by: eps-sized terms of size t^2."""
+    return 4e-15 * (1.0 + np.max(np.abs(angles))) ** 2
+
+
+def _expm_batch(skews):
+    return expm(skews)                           # scipy's expm of every matrix of the stack
+
+
+def _so3_skews(axes, angles):
+    w = np.array(axes, dtype=float).T
+    w *= np.asarray(angles) / np.linalg.norm(w, axis=0)
+    return w, skew_matrices(SO3(), w)
+
+
+@CLOSED_FORMS
+@given(st.lists(st.tuples(AXES, ANGLES), min_size=1, max_size=8), st.integers(0, 2 ** 31))
+def test_so3_rodrigues_retraction_equals_scipy_expm_at_every_angle(cases, seed):
+    """exp(W) O in closed form (Rodrigues, series near 0) is scipy's expm(W) O to round-off,
+    near 0 and pi included, and stays in SO(3) (Lemma 2.1)."""
+    grp = SO3("exp")
+    w, skews = _so3_skews([a for a, _ in cases], [t for _, t in cases])
+    o = _rotations(np.random.default_rng(seed), len(cases), 3)
+    got = rot_matrices(grp, grp.retract(w, grp.from_matrices(o)))
+    tol = _round_off([t for _, t in cases])
+    np.testing.assert_allclose(got, _expm_batch(skews) @ o, rtol=0, atol=tol)
+    assert defect(got) <= tol
+
+
+@CLOSED_FORMS
+@given(st.lists(st.tuples(AXES, ANGLES), min_size=1, max_size=8), st.integers(0, 2 ** 31))
+def test_so3_cayley_retraction_equals_the_solve_at_every_angle(cases, seed):
+    """cay(W) O in closed form is (I - W/2)^{-1} (I + W/2) O, and stays in SO(3) (Lemma 2.1)."""
+    grp = SO3("cayley")
+    w, skews = _so3_skews([a for a, _ in cases], [t for _, t in cases])
+    o = _rotations(np.random.default_rng(seed), len(cases), 3)
+    got = rot_matrices(grp, grp.retract(w, grp.from_matrices(o)))
+    tol = _round_off([t for _, t in cases])
+    np.testing.assert_allclose(got, _cayley_by_solve(skews, o), rtol=0, atol=tol)
+    assert defect(got) <= tol
+
+
+@CLOSED_FORMS
+@given(st.lists(st.tuples(AXES, ANGLES), min_size=1, max_size=8), st.lists(AXES, min_size=8,
+                                                                            max_size=8))
+def test_so3_inverse_differentials_equal_their_definitions(cases, slopes):
+    """dexp^{-1}_W(A) = sum_k B_k/k! ad_W^k(A) (Bernoulli numbers, summed to round-off for
+    |w| <= 1) and dcay^{-1}_W(A) = (I - W/2) A (I + W/2), at the same angles as above."""
+    w, skews = _so3_skews([a for a, _ in cases], [t for _, t in cases])
+    a = np.array(slopes[:len(cases)], dtype=float).T
+    hat_a = skew_matrices(SO3(), a)
+    eye = np.eye(3)
+    cay = skew_matrices(SO3(), SO3("cayley").dpsi_inv(w, a))
+    np.testing.assert_allclose(cay, (eye - 0.5 * skews) @ hat_a @ (eye + 0.5 * skews),
+                               rtol=0, atol=_round_off([t for _, t in cases]))
+    small = np.linalg.norm(w, axis=0) <= 1.0
+    if np.any(small):
+        got = skew_matrices(SO3(), SO3("exp").dpsi_inv(w[:, small], a[:, small]))
+        np.testing.assert_allclose(got, _dexp_inv_series(skews[small], hat_a[small]),
+                                   rtol=0, atol=1e-14)
+
+
+def _dexp_inv_series(w, a, terms=40):
+    """sum_k B_k / k! ad_W^k(A) with Bernoulli numbers B_k (B_1 = -1/2), for |W| <= 1."""
+    from scipy.special import bernoulli
+    b = bernoulli(terms)
+    b[1] = -0.5
+    out, term = np.zeros_like(a), a.copy()
+    for k in range(terms):
+        out += b[k] / math.factorial(k) * term
+        term = w @ term - term @ w
+    return out
+
+
+@CLOSED_FORMS
+@given(st.lists(ANGLES, min_size=1, max_size=8), st.lists(st.booleans(), min_size=8,
+                                                          max_size=8), st.integers(0, 2 ** 31))
+def test_so2_matrix_retraction_equals_scipy_expm_at_every_angle(angles, signs, seed):
+    """SOn(2)'s closed form cos(t) O + sin(t) J O is expm(t J) O, and stays in SO(2)."""
+    t = np.array(angles) * np.where(signs[:len(angles)], 1.0, -1.0)
+    skews = t[:, None, None] * np.array([[0.0, -1.0], [1.0, 0.0]])
+    o = _rotations(np.random.default_rng(seed), len(t), 2)
+    got = SOn(2).retract(skews, o)
+    np.testing.assert_allclose(got, _expm_batch(skews) @ o, rtol=0, atol=_round_off(t))
+    assert defect(got) <= 4e-15

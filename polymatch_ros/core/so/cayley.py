@@ -24,7 +24,7 @@ Every row's operations are those of the whole batch, so the results are the same
 
 import numpy as np
 
-from .base import recycled, row_blocks, scratch
+from .base import RECYCLED_MIN_BYTES, recycled, row_blocks, scratch
 
 #: rows with |W|_F^2 / 8 (a bound of |M|_2) above this are solved by LAPACK
 SERIES_LIMIT = 1.0 / 16.0
@@ -39,8 +39,9 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
     (I + M)^{-1} with as many factors as the largest of them needs (module docstring).
     """
     bound = np.einsum("nij,nij->n", w, w) / 8.0
-    far = bound > SERIES_LIMIT
-    if np.any(far):
+    largest = float(np.max(bound, initial=0.0))
+    if largest > SERIES_LIMIT:
+        far = bound > SERIES_LIMIT
         out = np.empty_like(g)
         near = ~far
         eye = np.eye(w.shape[1])
@@ -49,11 +50,15 @@ def cayley_series(w: np.ndarray, g: np.ndarray) -> np.ndarray:
         if np.any(near):
             out[near] = cayley_series(w[near], g[near])
         return out
-    factors, terms, largest = 1, 2, float(np.max(bound, initial=0.0))
+    factors, terms = 1, 2
     while largest ** (2 ** factors) >= SERIES_ROUNDOFF:     # at most 4: largest <= 1/16
         factors += 1
     while largest ** terms >= SERIES_ROUNDOFF and terms < 2 ** factors:
         terms += 1
+    if g.nbytes < RECYCLED_MIN_BYTES:    # a few rows: one block, fresh temporaries
+        out = np.empty_like(g)
+        _series_rows(w, g, out, [np.empty_like(g) for _ in range(3)], factors, terms)
+        return out
     out = recycled(g.shape)
     rows, blocks = row_blocks(g.shape)
     temps = [scratch(f"cayley.{name}", (rows,) + g.shape[1:]) for name in ("half", "m", "spare")]
@@ -85,6 +90,11 @@ def _series_rows(w: np.ndarray, g: np.ndarray, y: np.ndarray, temps: list[np.nda
 
 def dcay_inv_series(w: np.ndarray, a: np.ndarray) -> np.ndarray:
     """dcay^{-1}_W(A) = (I - W/2) A (I + W/2) = B + B W/2, B = A - W/2 A, for (N, d, d) W, A."""
+    if a.nbytes < RECYCLED_MIN_BYTES:    # a few rows: one block
+        half = 0.5 * w
+        b = a - np.matmul(half, a)
+        b += np.matmul(b, half)
+        return b
     out = recycled(a.shape)
     rows, blocks = row_blocks(a.shape)
     half_buf, prod_buf = (scratch(f"dcay.{name}", (rows,) + a.shape[1:])

@@ -14,6 +14,9 @@ from .base import (
     polar_newton_schulz,
 )
 
+#: rows of the flattened (S O_n^T)^T whose differences are the vector of S O_n^T - O_n S^T
+_KERNEL_PLUS, _KERNEL_MINUS = np.array([5, 6, 1]), np.array([7, 2, 3])
+
 
 def _hat3(w):
     """(3, N) vectors -> (3, 3, N) skew matrices (SoA)."""
@@ -21,11 +24,32 @@ def _hat3(w):
     return np.array([[z, -w[2], w[1]], [w[2], z, -w[0]], [-w[1], w[0], z]])
 
 
+#: rows (1, 2, 0) and (2, 0, 1): a vector's components rolled by one and by two
+_ROLL1, _ROLL2 = np.array([1, 2, 0]), np.array([2, 0, 1])
+
+
 def _cross3(a, b):
-    """Cross products of (3, N) vector arrays, componentwise (faster than np.cross here)."""
-    return np.array([a[1] * b[2] - a[2] * b[1],
-                     a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
+    """Cross products a x b of (3, ...) arrays along their first axis, componentwise:
+    (a1 b2 - a2 b1, a2 b0 - a0 b2, a0 b1 - a1 b0) = roll1(a) roll2(b) - roll2(a) roll1(b)."""
+    out = a.take(_ROLL1, axis=0) * b.take(_ROLL2, axis=0)
+    out -= a.take(_ROLL2, axis=0) * b.take(_ROLL1, axis=0)
+    return out
+
+
+def _rodrigues_coefficients(th2):
+    """(sin t / t, (1 - cos t) / t^2) at t^2 = th2, by their series below t = 1e-4.
+
+    (1 - cos t) / t^2 is evaluated as 2 sin^2(t/2) / t^2, which does not cancel for small t.
+    """
+    small = th2 < 1e-8
+    any_small = bool(np.any(small))
+    ths = np.sqrt(np.where(small, 1.0, th2) if any_small else th2)
+    half = np.sin(0.5 * ths) / ths
+    a, b = np.sin(ths) / ths, 2.0 * half * half
+    if any_small:
+        a = np.where(small, 1.0 - th2 / 6.0 + th2 * th2 / 120.0, a)
+        b = np.where(small, 0.5 - th2 / 24.0 + th2 * th2 / 720.0, b)
+    return a, b
 
 
 class SO3(ComponentAlgebra, RotationGroup):
@@ -86,55 +110,55 @@ class SO3(ComponentAlgebra, RotationGroup):
         return a * c
 
     def _compose(self, r, g):
-        return np.einsum("ikn,kjn->ijn", r, g)
+        """r_n g_n for every n: sum over k of r[:, k] g[k], elementwise along the agents."""
+        out = r[:, 0, None] * g[0]
+        out += r[:, 1, None] * g[1]
+        out += r[:, 2, None] * g[2]
+        return out
 
     def retract(self, xi: Array, g: Array) -> Array:
+        """psi(W) O = O + a W O + b W (W O), the columns of W O being w x (column of O).
+
+        Cayley: a = c, b = c/2 with c = 1 / (1 + |w|^2 / 4), i.e. cay(W) = I + c (W + W^2/2);
+        exp (Rodrigues): a = sin t / t, b = (1 - cos t) / t^2 at t = |w|.  Either is a
+        rotation to round-off for every w (Lemma 2.1).
+        """
+        x2 = xi * xi
+        th2 = x2[0] + x2[1] + x2[2]
         if self.retraction == "cayley":
-            th2 = np.sum(xi * xi, axis=0)
-            c = 1.0 / (1.0 + 0.25 * th2)
-            half_c = 0.5 * c
-            x, y, z = xi
-            r = np.empty((3, 3, xi.shape[1]))
-            # I + c W + (c/2)(w w^T - |w|^2 I)
-            diag = 1.0 - half_c * th2
-            r[0, 0] = diag + half_c * x * x
-            r[1, 1] = diag + half_c * y * y
-            r[2, 2] = diag + half_c * z * z
-            xy, xz, yz = half_c * x * y, half_c * x * z, half_c * y * z
-            r[0, 1] = xy - c * z
-            r[1, 0] = xy + c * z
-            r[0, 2] = xz + c * y
-            r[2, 0] = xz - c * y
-            r[1, 2] = yz - c * x
-            r[2, 1] = yz + c * x
-            return self._compose(r, g)
-        th = np.sqrt(np.sum(xi * xi, axis=0))
-        small = th < 1e-4
-        ths = np.where(small, 1.0, th)
-        th2 = th * th
-        a = np.where(small, 1.0 - th2 / 6.0 + th2 * th2 / 120.0, np.sin(ths) / ths)
-        b = np.where(small, 0.5 - th2 / 24.0 + th2 * th2 / 720.0,
-                     (1.0 - np.cos(ths)) / (ths * ths))
-        k = _hat3(xi)
-        k2 = np.einsum("ikn,kjn->ijn", k, k)
-        r = a * k + b * k2
-        r[0, 0] += 1.0
-        r[1, 1] += 1.0
-        r[2, 2] += 1.0
-        return self._compose(r, g)
+            a = 1.0 / (1.0 + 0.25 * th2)
+            b = 0.5 * a
+        else:
+            a, b = _rodrigues_coefficients(th2)
+        w = xi[:, None]                                 # (3, 1, N): one w per column
+        u = _cross3(w, g)                               # W O
+        v = _cross3(w, u)                               # W (W O)
+        out = a * u
+        out += b * v
+        out += g
+        return out
 
     def dpsi_inv(self, xi: Array, a: Array) -> Array:
-        if self.retraction == "cayley":
-            return a - 0.5 * _cross3(xi, a) + 0.25 * np.sum(xi * a, axis=0) * xi
-        th = np.sqrt(np.sum(xi * xi, axis=0))
-        small = th < 1e-3
-        ths = np.where(small, 1.0, th)
-        th2 = th * th
-        # (1 - (t/2) cot(t/2)) / t^2, series 1/12 + t^2/720 + t^4/30240
-        coef = np.where(small, 1.0 / 12.0 + th2 / 720.0 + th2 * th2 / 30240.0,
-                        (1.0 - 0.5 * ths / np.tan(0.5 * ths)) / (ths * ths))
         wxa = _cross3(xi, a)
-        return a - 0.5 * wxa + coef * _cross3(xi, wxa)
+        if self.retraction == "cayley":
+            out = a - 0.5 * wxa
+            xa = xi * a
+            out += (0.25 * (xa[0] + xa[1] + xa[2])) * xi
+            return out
+        x2 = xi * xi
+        th2 = x2[0] + x2[1] + x2[2]
+        small = th2 < 1e-6                        # |w| < 1e-3
+        if np.any(small):
+            ths = np.sqrt(np.where(small, 1.0, th2))
+            coef = np.where(small, 1.0 / 12.0 + th2 / 720.0 + th2 * th2 / 30240.0,
+                            (1.0 - 0.5 * ths / np.tan(0.5 * ths)) / (ths * ths))
+        else:
+            # (1 - (t/2) cot(t/2)) / t^2, series 1/12 + t^2/720 + t^4/30240 below 1e-3
+            ths = np.sqrt(th2)
+            coef = (1.0 - 0.5 * ths / np.tan(0.5 * ths)) / th2
+        out = a - 0.5 * wxa
+        out += coef * _cross3(xi, wxa)
+        return out
 
     def mean_field(self, g: Array, weights: np.ndarray | None = None) -> MeanField:
         flat = g.reshape(9, -1)
@@ -146,12 +170,12 @@ class SO3(ComponentAlgebra, RotationGroup):
         return np.ascontiguousarray((weights @ flat.T).T).reshape(3, 3, -1)    # (3, 3, n) SoA
 
     def coupling(self, g: Array, s: MeanField) -> Array:
-        if np.ndim(s) == 3:                      # one field per row: (S_n O_n^T)[:, c] per n
+        if isinstance(s, np.ndarray) and s.ndim == 3:   # one field per row: (S_n O_n^T)[:, c]
             a0, a1, a2 = (np.einsum("ijn,jn->in", s, g[c]) for c in range(3))
             return np.array([a1[2] - a2[1], a2[0] - a0[2], a0[1] - a1[0]])
-        # column c of S O_n^T is S (row c of O_n): three (3x3)(3xN) BLAS products
-        a0, a1, a2 = s @ g[0], s @ g[1], s @ g[2]
-        return np.array([a1[2] - a2[1], a2[0] - a0[2], a0[1] - a1[0]])
+        # column c of S O_n^T is S (row c of O_n): one product, a[c] = S g[c]
+        a = np.matmul(s, g).reshape(9, -1)       # a[3c + i] = (S O_n^T)[i, c]
+        return a[_KERNEL_PLUS] - a[_KERNEL_MINUS]
 
     def tangent(self, a: Array, g: Array) -> Array:
         return self._compose(_hat3(a), g)

@@ -5,6 +5,7 @@ from typing import Any
 import numpy as np
 
 from .base import (
+    RECYCLED_MIN_BYTES,
     Array,
     MeanField,
     RowsFirstGroup,
@@ -18,6 +19,9 @@ from .base import (
 )
 from .cayley import cayley_series, dcay_inv_series
 from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
+
+#: J G for a (N, 2, 2) batch G is (rows of G reversed) times these signs, J = [[0, -1], [1, 0]]
+_J_SIGNS = np.array([[-1.0], [1.0]])
 
 
 class SOn(RowsFirstGroup):
@@ -74,9 +78,11 @@ class SOn(RowsFirstGroup):
 
     def retract(self, xi: Array, g: Array) -> Array:
         if self.dim == 2:
-            c, s = np.cos(xi[:, 1, 0]), np.sin(xi[:, 1, 0])
-            rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-            return rot @ g
+            # exp(t J) G = cos(t) G + sin(t) J G,  J G = (-row 1 of G, row 0 of G)
+            t = xi[:, 1, 0, None, None]
+            out = np.cos(t) * g
+            out += np.sin(t) * (g[:, ::-1] * _J_SIGNS)
+            return out
         if self.dim == 4:
             out, pair = cayley4_retract(self._so4_parts(xi), self._quaternion_pairs(g))
             self._retracted = (out, pair)
@@ -126,6 +132,10 @@ class SOn(RowsFirstGroup):
 
     def coupling(self, g: Array, s: MeanField) -> Array:
         d = self.dim
+        if g.nbytes < RECYCLED_MIN_BYTES and np.ndim(s) == 2:     # a few rows: one block
+            b = np.matmul(g.reshape(-1, d), np.ascontiguousarray(np.transpose(s)))
+            b = b.reshape(g.shape)
+            return np.swapaxes(b, 1, 2) - b
         out = recycled(g.shape)
         if np.ndim(s) == 3:                      # one field per row
             b = np.matmul(g, np.swapaxes(s, 1, 2), out=scratch("coupling.fields", g.shape))

@@ -27,7 +27,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-import scipy.sparse
 
 from ..model import Coupling, GroupCoupling, GroupState, Model, State, System
 from ..so.base import Array, RotationGroup
@@ -70,6 +69,7 @@ class BatchSystem(System):
         stacked = replace(model, groups=(replace(group, size=self.n * self.ensembles),))
         super().__init__(replace(stacked, rotations=batch_rotations(model.rotations)))
         self.template = model
+        import scipy.sparse  # here: a command refusing its arguments never needs it
         eye = scipy.sparse.identity(self.ensembles, format="csr")
         self.sums = scipy.sparse.kron(eye, np.ones((1, self.n)), format="csr")
         self.means = self.sums / self.n

@@ -18,7 +18,6 @@ per interval against rkmk4's 40 (``polymatch bench sweep``).  Not in the registr
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.integrate import DOP853
 
 from ..adaptive_chart import Chart
 from ..model import Coupling, State, System
@@ -49,5 +48,17 @@ class ChartRK(RKMK):
         return end
 
 
-RKMK8 = ChartRK("rkmk8", DOP853.A[:DOP853.n_stages, :DOP853.n_stages], DOP853.B, 8,
-                "Munthe-Kaas with DOP853's 8th-order tableau on a fixed step (12 stages)")
+_BUILT: dict[str, ChartRK] = {}
+
+
+def __getattr__(name: str) -> ChartRK:
+    """``RKMK8``, built on first use: its tableau comes from scipy.integrate, an import of
+    about half a second that a ``polymatch`` command refusing its arguments never needs."""
+    if name != "RKMK8":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    if name not in _BUILT:
+        from scipy.integrate import DOP853
+        _BUILT[name] = ChartRK(
+            "rkmk8", DOP853.A[:DOP853.n_stages, :DOP853.n_stages], DOP853.B, 8,
+            "Munthe-Kaas with DOP853's 8th-order tableau on a fixed step (12 stages)")
+    return _BUILT[name]

@@ -29,6 +29,7 @@ from ..model import State
 from ..scene import Scene
 from ..simulate import Plan, plan, prepare
 from ..solver import RUNNING
+from . import chart_rk
 from .batch import (
     BatchSystem,
     batch_metrics,
@@ -37,7 +38,6 @@ from .batch import (
     stack_states,
     take_ensembles,
 )
-from .chart_rk import RKMK8
 
 OUTCOMES = ("matched", "antipodal", "twisted", "other equilibrium", "too slow")
 #: an end state is an equilibrium when max_i |W_i| < STILL * kappa / gamma
@@ -46,8 +46,8 @@ STILL = 1e-6
 NO_MEAN_FIELD = 1e-3
 #: max_{i,j} |O_i^T O_j - O_j^T O_i| below this: every pair at consensus or a half-turn apart
 SYMMETRIC = 1e-3
-#: fixed-step methods a batch runs besides the registry's (``chart_rk``)
-BATCH_METHODS = {RKMK8.name: RKMK8}
+#: fixed-step methods a batch runs besides the registry's (``chart_rk``, built on first use)
+BATCH_METHODS = {"rkmk8": "RKMK8"}
 
 
 @dataclass
@@ -109,8 +109,9 @@ def batch_plan(scene: Scene, method: str | None = None, dt: float | None = None)
     if not (step > 0 and math.isfinite(step)):
         raise ParameterError(f"dt must be a positive number, got {step}")
     step = min(step, scene.t_end)
-    check_stability(BATCH_METHODS[method], scene.model, step)
-    return Plan(BATCH_METHODS[method], step, None, "chosen explicitly")
+    meth = getattr(chart_rk, BATCH_METHODS[method])
+    check_stability(meth, scene.model, step)
+    return Plan(meth, step, None, "chosen explicitly")
 
 
 def sample_interval(scene: Scene) -> float:
