@@ -7,6 +7,7 @@
     python -m benchmarks longhorizon  orthogonality defect and energy drift after 10^5 steps
     python -m benchmarks lossy        three namespace hosts: realtime error, lockstep rate vs loss
     python -m benchmarks bridge       simulated robots in the loop: error vs pose noise and lag
+    python -m benchmarks faults       process deaths: a realtime soak with kills, lockstep resumes
     python -m benchmarks all --out DIR [--only A,B]   every family, one report DIR/report.md
 
 Benchmarks *report* figures (markdown tables on stdout; with ``--out DIR``
@@ -58,6 +59,7 @@ FAMILIES = {
     "bridge": "benchmarks.bridge",
     "realtime": "benchmarks.realtime",
     "reductions": "benchmarks.reductions",
+    "faults": "benchmarks.faults",
 }
 
 

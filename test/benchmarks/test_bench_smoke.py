@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 #: the families, in report order (stated here, not read from the package)
 FAMILY_NAMES = ["step", "meanfield", "dop853", "precision", "extremes", "longhorizon",
                 "distributed", "sweep", "graphs", "lossy", "trade", "bridge", "realtime",
-                "reductions"]
+                "reductions", "faults"]
 
 # headers every family must print
 EXPECTED = {
@@ -39,6 +39,9 @@ EXPECTED = {
                     "refused (unstable)", "RK45", "DOP853", "adaptive (ours)"],
     "extremes": ["| extreme", "| expectation", "what happened", "pass/fail", "wall s", "m = 1e-8",
                  "gamma = 0", "kappa = 1e4", "centroids ~1e9", "one agent", "expectations over"],
+    "faults": ["| agents killed", "back after (s) mean / max", "final matching diameter",
+               "runner RSS (MiB) start -> end", "| run", "wall s lost per death",
+               "max vertex deviation"],
     "reductions": ["| reduction", "full / reduced", "angles (Kuramoto) vs 2x2 matrices",
                    "exact flow (Prop. 2.1)", "O(m/gamma) modelling error"],
     "distributed": ["| processes", "bare rounds/s best / median", "agents / bare (medians)",
@@ -53,8 +56,9 @@ EXPECTED = {
 }
 
 # lossy runs ROS ensembles on namespace hosts: even --quick takes about a minute; its tables
-# are tested from records below
-QUICK_FAMILIES = [name for name in FAMILY_NAMES if name != "lossy"]
+# are tested from records below.  faults --quick takes two minutes of killing and restarting
+# processes; what it measures is asserted in test/ros/test_faults.py.
+QUICK_FAMILIES = [name for name in FAMILY_NAMES if name not in ("lossy", "faults")]
 
 
 def test_family_table_is_the_stated_list_in_report_order():

@@ -37,8 +37,14 @@ class Process(Protocol):
     """What the policy needs of a supervised process (``children.Child``)."""
 
     name: str
-    hung_for: float | None  # it hung this long and the runner ended it (None: it died)
-    restart_delay: float    # the least back-off before its restart
+
+    @property
+    def hung_for(self) -> float | None:
+        """It hung this long and the runner ended it (None: it died)."""
+
+    @property
+    def restart_delay(self) -> float:
+        """The least back-off before its restart."""
 
     @property
     def pid(self) -> int: ...
