@@ -99,20 +99,19 @@ def _zombie(pid):
 
 def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     """Lockstep, four processes (round timeout 4 s): one hangs 2 s (SIGSTOP, SIGCONT) and is
-    waited for; one is killed (SIGKILL); one hangs for good and is taken for dead after the
-    round timeout.  The two are restarted, resume from their checkpoints, and the final poses
-    equal the centralised run's to 1e-9."""
+    waited for; then, together, one is killed (SIGKILL) and one hangs for good, taken for dead
+    after the round timeout.  The two are restarted and resume from their checkpoints (one
+    may resume a step before the other: the other's checkpoint brings back the messages it
+    needs), and the final poses equal the centralised run's to 1e-9."""
     run = _run(ros, "--t-end", "2", "--dt", "0.02", "-k", "2", "--round-timeout", "4")
     _until(ros, 0.3, run)
     slow = _process(run, "agents_4_5")
     os.kill(slow, signal.SIGSTOP)
     time.sleep(2)
     os.kill(slow, signal.SIGCONT)
+    victim, hung = _process(run, "agents_2_3"), _process(run, "agents_0_1")
     _until(ros, 0.8, run)
-    victim = _process(run, "agents_2_3")
     os.kill(victim, signal.SIGKILL)
-    _until(ros, 1.2, run)
-    hung = _process(run, "agents_0_1")
     os.kill(hung, signal.SIGSTOP)
     before = _descendants(run.pid)
     rc, out = _finish(ros, run)
@@ -122,9 +121,9 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     assert [(f[0], int(f[1]), f[2]) for f in failures] == [
         ("agents_2_3", victim, "killed by SIGKILL"),
         ("agents_0_1", hung, "hung (stopped) for")], out[-3000:]
-    assert [float(f[3]) >= t for f, t in zip(failures, (0.8, 1.2))] == [True, True]
+    assert all(float(f[3]) >= 0.8 for f in failures), out[-3000:]
     steps = [int(s) for s in re.findall(r"resumed at step (\d+)", out)]
-    assert len(steps) == 2 and 40 <= steps[0] < steps[1] < 100, out[-3000:]
+    assert len(steps) == 2 and all(40 <= s < 100 for s in steps), out[-3000:]
     assert "failures: 2 process death(s), 2 restarted" in out
     assert _gone(before + [int(f[4]) for f in failures])
 

@@ -9,9 +9,12 @@ last checkpoint written is always one the peers can still replay.
 
 The state is written whole, with the mean field cached on it (``State.coupling``): an FSAL
 method (``MethodInfo.rounds < stages``) takes a step's first evaluation from it, and a
-process that evaluated it anew would exchange one round more than its peers.  The files live
-in the runner's private temporary directory and are read by the process that wrote them,
-restarted, and by the runner for the partial result of a run that ended early.
+process that evaluated it anew would exchange one round more than its peers.  With it go the
+stage messages of the rounds this process keeps for resends: when two processes die close
+together, one may resume a step before the other, and then needs the other's messages of
+that step, which only the other had; restored from its checkpoint, they are sent again.
+The files live in the runner's private temporary directory and are read by the process that
+wrote them, restarted, and by the runner for the partial result of a run that ended early.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from ...core.model import State
+    from .stage_links import Kept
 
 #: a slot's header: the payload's length and CRC-32
 HEADER = struct.Struct("<QI")
@@ -38,6 +42,7 @@ class Checkpoint:
     t: float
     state: State
     run_id: int
+    sent: Kept = ()   # lockstep: the stage messages of its last rounds (``stage_links``)
 
 
 class CheckpointFile:
@@ -59,14 +64,15 @@ class CheckpointFile:
     def enabled(self) -> bool:
         return bool(self.path)
 
-    def write(self, step: int, t: float, state: State) -> None:
-        """The state at the start of ``step``, into the slot not holding the last one."""
+    def write(self, step: int, t: float, state: State, sent: Kept = ()) -> None:
+        """The state at the start of ``step`` (and the messages of the rounds before it that
+        this process keeps), into the slot not holding the last one."""
         if not self.path:
             return
         if not self._fds:
             flags = os.O_RDWR | os.O_CREAT
             self._fds = [os.open(f"{self.path}.{slot}", flags, 0o600) for slot in (0, 1)]
-        payload = pickle.dumps(Checkpoint(step, float(t), state, self.run_id),
+        payload = pickle.dumps(Checkpoint(step, float(t), state, self.run_id, sent),
                                protocol=pickle.HIGHEST_PROTOCOL)
         header = HEADER.pack(len(payload), zlib.crc32(payload))
         os.pwrite(self._fds[self.written % 2], header + payload, 0)

@@ -338,7 +338,7 @@ class LockstepAgent(AgentBase):
         prev = float(grid[first - 1]) if first else 0.0
         for k in range(first, len(grid)):
             t_next = grid[k]
-            self.checkpoint.write(k, prev, self.state)
+            self.checkpoint.write(k, prev, self.state, self.exchange.links.snapshot())
             stop = False
 
             def answer(request: Request, stage: int, k: int = k) -> Ensemble:
@@ -380,6 +380,7 @@ class LockstepAgent(AgentBase):
             return 0
         self.state, self.steps, self.resumed_at = found.state, found.step, found.step
         self.exchange.resume_at(found.step)
+        self.exchange.links.restore(found.sent)
         self.log.warning(
             f"resumed at step {found.step} (t = {found.t:.6g}) from this process's checkpoint"
         )

@@ -16,6 +16,7 @@ every row that arrives (``on_stage``), or a drop (``on_drop``).
 
 from __future__ import annotations
 
+import array
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -34,6 +35,8 @@ if TYPE_CHECKING:
     from ...core.so import RotationGroup
     from .exchange import Layout
 
+#: the kept rounds as data: (turn, ((writer key: agent or block, message data), ...)), ...
+Kept = tuple[tuple[int, tuple[tuple[int, bytes], ...]], ...]
 #: the decoded stage of a peer's row, and a dropped message (source, reason)
 OnStage = Callable[[wire.Stage], None]
 OnDrop = Callable[[str, str], None]
@@ -96,6 +99,26 @@ class _Links:
         for _, sent in self.sent:
             for pub, msg in sent:
                 pub.publish(msg)
+
+    def snapshot(self) -> Kept:
+        """The kept rounds' messages as data (``checkpoint``): (turn, [(writer key, bytes)])."""
+        keys = {id(pub): key for key, pub in self.pubs.items()}
+        return tuple((turn, tuple((keys[id(pub)], msg.data.tobytes()) for pub, msg in sent))
+                     for turn, sent in self.sent)
+
+    def restore(self, kept: Kept) -> None:
+        """A restarted process keeps again what it had sent before it died (``snapshot``): a
+        peer that resumes a step earlier needs those rounds, and only this process has them."""
+        from std_msgs.msg import Float64MultiArray
+
+        self.sent.clear()
+        for turn, sent in kept:
+            messages = []
+            for key, data in sent:
+                values = array.array("d")
+                values.frombytes(data)
+                messages.append((self.pubs[key], Float64MultiArray(data=values)))
+            self.sent.append((turn, messages))
 
     def missing_peers(self) -> list[int]:
         return [a for a in self.layout.peers if self.writers[a].get_publisher_count() < 1]
