@@ -208,7 +208,7 @@ def run(args, log):
         log(f"lockstep: uninterrupted, then {kills} kills")
         lk = lockstep(env, path, kills, rng, log, 2.0 if args.quick else 6.0)
     report.table(
-        ["agents killed", "deaths", "restarted", "back after (s) mean / max",
+        ["distinct agents killed", "deaths", "restarted", "back after (s) mean / max",
          "final matching diameter", "runner RSS (MiB) start -> end",
          "largest RSS growth of a never-killed process (MiB)", "exit"],
         _soak_rows(s),

@@ -39,7 +39,7 @@ EXPECTED = {
                     "refused (unstable)", "RK45", "DOP853", "adaptive (ours)"],
     "extremes": ["| extreme", "| expectation", "what happened", "pass/fail", "wall s", "m = 1e-8",
                  "gamma = 0", "kappa = 1e4", "centroids ~1e9", "one agent", "expectations over"],
-    "faults": ["| agents killed", "back after (s) mean / max", "final matching diameter",
+    "faults": ["| distinct agents killed", "back after (s) mean / max", "final matching diameter",
                "runner RSS (MiB) start -> end", "| run", "wall s lost per death",
                "max vertex deviation"],
     "reductions": ["| reduction", "full / reduced", "angles (Kuramoto) vs 2x2 matrices",
