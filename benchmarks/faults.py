@@ -44,34 +44,16 @@ def add_arguments(p):
     p.add_argument("--seed", type=int, default=1, help="which processes die (default 1)")
 
 
-def _descendants(pid):
-    parents = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as fh:
-                    parents[int(entry)] = int(fh.read().rsplit(")", 1)[1].split()[1])
-            except (OSError, ValueError, IndexError):
-                continue
-    found, frontier = [], [pid]
-    while frontier:
-        frontier = [p for p, parent in parents.items() if parent in frontier]
-        found += frontier
-    return found
-
-
 def _nodes(run):
     """{node name: pid} of the run's processes (``-r __node:=NAME``), and the runner's pid."""
+    from .hosts.runs import argv_of, descendants, node_name
+
     out, runner = {}, None
-    for pid in _descendants(run.pid):
-        try:
-            with open(f"/proc/{pid}/cmdline", "rb") as fh:
-                argv = fh.read().split(b"\0")
-        except OSError:
-            continue
-        names = [a[len(b"__node:="):].decode() for a in argv if a.startswith(b"__node:=")]
-        if names:
-            out[names[-1]] = pid
+    for pid in descendants(run.pid):
+        argv = argv_of(pid)
+        name = node_name(argv)
+        if name is not None:
+            out[name] = pid
         elif b"polymatch_ros.cli" in argv and b"timeout" not in argv:
             runner = pid
     return out, runner

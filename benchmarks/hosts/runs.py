@@ -29,6 +29,31 @@ def children(pid):
         return []
 
 
+def descendants(pid):
+    """PIDs below ``pid`` (children, grandchildren, ...), read from /proc."""
+    out, todo = [], [pid]
+    while todo:
+        for child in children(todo.pop()):
+            out.append(child)
+            todo.append(child)
+    return out
+
+
+def argv_of(pid):
+    """A process's command line as a list of bytes ([] once it has gone)."""
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            return fh.read().split(b"\0")
+    except OSError:
+        return []
+
+
+def node_name(argv):
+    """The node name a ROS process was given (``-r __node:=NAME``), or None."""
+    names = [a[len(b"__node:="):].decode() for a in argv if a.startswith(b"__node:=")]
+    return names[-1] if names else None
+
+
 class Processes:
     """The processes one run started; ``close`` ends every one of them."""
 

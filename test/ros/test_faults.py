@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from ros_harness import PY, cli_argv, needs_ros, scene_path
 
+from benchmarks.hosts.runs import argv_of, children, descendants, node_name
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros
@@ -24,6 +25,7 @@ SCENE = "congruent_triangles"
 PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "support",
                      "service_probe.py")
 BOUND = 150  # s: only a hang takes this long
+SERVER_MODULE = b"polymatch_ros.ros.supervisor.discovery_server"
 DEVIATION = re.compile(r"max vertex deviation (\S+)")
 FAILURE = re.compile(r"^  (\S+) \(pid (\d+)\) (killed by \w+|exit code -?\d+|hung \(stopped\) "
                      r"for)[^;]*? (?:at t = (\S+)|"
@@ -31,35 +33,30 @@ FAILURE = re.compile(r"^  (\S+) \(pid (\d+)\) (killed by \w+|exit code -?\d+|hun
                      r"back after \S+ s", re.M)
 
 
-def _descendants(pid):
-    """Every process below ``pid`` (by /proc's parent links)."""
-    parents = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as fh:
-                    parents[int(entry)] = int(fh.read().rsplit(")", 1)[1].split()[1])
-            except (OSError, ValueError, IndexError):
-                continue
-    found, frontier = [], [pid]
-    while frontier:
-        below = [p for p, parent in parents.items() if parent in frontier]
-        found += below
-        frontier = below
-    return found
+def _pid_where(run, wanted, what):
+    """The PID of the first process below ``run`` whose command line ``wanted`` accepts."""
+    for pid in descendants(run.pid):
+        if wanted(argv_of(pid)):
+            return pid
+    raise AssertionError(f"no {what} below pid {run.pid}")
 
 
 def _process(run, node):
     """The PID of the run's process whose node is ``node`` (``-r __node:=<node>``)."""
-    for pid in _descendants(run.pid):
-        try:
-            with open(f"/proc/{pid}/cmdline", "rb") as fh:
-                argv = fh.read().split(b"\0")
-        except OSError:
-            continue
-        if f"__node:={node}".encode() in argv:
-            return pid
-    raise AssertionError(f"no process of node {node} below pid {run.pid}")
+    return _pid_where(run, lambda argv: node_name(argv) == node, f"process of node {node}")
+
+
+def _server(run):
+    """The PID of the run's own discovery server (below its `timeout` wrapper)."""
+    return _pid_where(run, lambda argv: SERVER_MODULE in argv and b"timeout" not in argv,
+                      "discovery server")
+
+
+def _runner(run):
+    """The `polymatch run` process below the harness's `timeout` wrapper."""
+    below = children(run.pid)
+    assert len(below) == 1, below
+    return below[0]
 
 
 def _until(ros, t, run):
@@ -113,7 +110,7 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     _until(ros, 0.8, run)
     os.kill(victim, signal.SIGKILL)
     os.kill(hung, signal.SIGSTOP)
-    before = _descendants(run.pid)
+    before = descendants(run.pid)
     rc, out = _finish(ros, run)
     assert rc == 3 and "did not converge" in out, out[-3000:]  # t_end 2 is before matching
     assert float(DEVIATION.search(out).group(1)) <= 1e-9, out[-3000:]
@@ -153,7 +150,7 @@ def test_on_failure_stop_ends_the_run_at_the_first_death(ros):
     run = _run(ros, "--mode", "realtime", "--rate", "20", "--on-failure", "stop", "-k", "2")
     _until(ros, 1, run)
     victim = _process(run, "agents_4_5")
-    before = _descendants(run.pid)
+    before = descendants(run.pid)
     os.kill(victim, signal.SIGKILL)
     rc, out = _finish(ros, run)
     assert rc == 1, out[-3000:]
@@ -169,7 +166,7 @@ def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_
     extra = ["--mode", "realtime", "--rate", "20"] if mode == "realtime" else ["--dt", "0.02"]
     run = _run(ros, "--t-end", "500", "--save", save, "-k", "4", *extra)
     _until(ros, 0.5, run)
-    before = _descendants(run.pid)
+    before = descendants(run.pid)
     os.kill(_runner(run), signal.SIGTERM)
     rc, out = _finish(ros, run)
     assert rc == 130 and "partial state saved" in out, out[-3000:]
@@ -181,54 +178,3 @@ def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_
     assert np.allclose(rotations @ rotations.transpose(0, 2, 1), np.eye(2), atol=1e-12)
     assert _gone(before)
 
-
-def _runner(run):
-    """The `polymatch run` process below the harness's `timeout` wrapper."""
-    below = [p for p in _descendants(run.pid) if _parent(p) == run.pid]
-    assert len(below) == 1, below
-    return below[0]
-
-
-def _parent(pid):
-    with open(f"/proc/{pid}/stat") as fh:
-        return int(fh.read().rsplit(")", 1)[1].split()[1])
-
-
-def _progress_past(ros, run, t):
-    """Wait until the run's progress line shows simulated time ``t`` or later."""
-    deadline = time.monotonic() + BOUND
-    while time.monotonic() < deadline:
-        shown = re.findall(r"^t = +(\S+) /", ros.output(run), re.M)
-        if shown and float(shown[-1]) >= t:
-            return
-        assert run.poll() is None, ros.output(run)[-3000:]
-        time.sleep(0.2)
-    raise AssertionError(f"no progress to t = {t}: " + ros.output(run)[-3000:])
-
-
-def _server(run):
-    """The PID of the run's own discovery server (below its `timeout` wrapper)."""
-    for pid in _descendants(run.pid):
-        try:
-            with open(f"/proc/{pid}/cmdline", "rb") as fh:
-                argv = fh.read().split(b"\0")
-        except OSError:
-            continue
-        if b"polymatch_ros.ros.supervisor.discovery_server" in argv and b"timeout" not in argv:
-            return pid
-    raise AssertionError(f"no discovery server below pid {run.pid}")
-
-
-def test_a_restarted_discovery_server_is_found_again_by_a_restarted_agent(ros):
-    """``--discovery server``: SIGKILL of the run's discovery server, then of an agent process;
-    the server is restarted on its address, the agent's new process discovers its peers
-    through it, and the run converges."""
-    run = _run(ros, "--mode", "realtime", "--rate", "20", "--time-scale", "2", "--t-end", "300",
-               "-k", "4", "--discovery", "server")
-    _progress_past(ros, run, 2)  # a probe with loopback discovery would not see this run
-    os.kill(_server(run), signal.SIGKILL)
-    _progress_past(ros, run, 6)
-    os.kill(_process(run, "agents_0_3"), signal.SIGKILL)
-    rc, out = _finish(ros, run)
-    assert rc == 0 and "converged" in out, out[-3000:]
-    assert [f[0] for f in FAILURE.findall(out)] == ["discovery_server", "agents_0_3"], out[-3000:]

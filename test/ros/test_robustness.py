@@ -19,6 +19,7 @@ import pytest
 import yaml
 from ros_harness import PY, REPO, _children, cli_argv, needs_ros, node_argv, scene_path
 
+from benchmarks.hosts.runs import descendants
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
 
@@ -171,23 +172,11 @@ def test_colcon_build_and_installed_executables_start(ros, tmp_path):
     assert ros.wait(monitor, 20) == 0, ros.output(monitor)
 
 
-def _descendants(pid):
-    """PIDs below ``pid`` (children, grandchildren), read from /proc."""
-    from ros_harness import _children
-
-    out, todo = [], [pid]
-    while todo:
-        for c in _children(todo.pop()):
-            out.append(c)
-            todo.append(c)
-    return out
-
-
 def _wait_for_rmw(pid, timeout):
     """True once a process below ``pid`` has loaded Fast DDS's RMW library (rclpy.init)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        for child in _descendants(pid):
+        for child in descendants(pid):
             try:
                 with open(f"/proc/{child}/maps") as fh:
                     if "librmw_fastrtps" in fh.read():
@@ -219,7 +208,7 @@ def test_runner_ends_every_process_it_started(ros, how):
     deadline = time.monotonic() + 60
     kids = []
     while time.monotonic() < deadline:
-        kids = [p for p in _descendants(proc.pid) if _alive(p)]
+        kids = [p for p in descendants(proc.pid) if _alive(p)]
         if (
             len(kids) >= 10
             and "rounds/s" in ros.output(proc)

@@ -338,7 +338,8 @@ class LockstepAgent(AgentBase):
         prev = float(grid[first - 1]) if first else 0.0
         for k in range(first, len(grid)):
             t_next = grid[k]
-            self.checkpoint.write(k, prev, self.state, self.exchange.links.snapshot())
+            if self.checkpoint.enabled:  # the kept messages are copied only to be written
+                self.checkpoint.write(k, prev, self.state, self.exchange.links.snapshot())
             stop = False
 
             def answer(request: Request, stage: int, k: int = k) -> Ensemble:

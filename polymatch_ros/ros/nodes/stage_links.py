@@ -79,6 +79,7 @@ class _Links:
         self.keep = max(2, int(keep))
         # (turn, [(publisher, message), ...]) of the last rounds
         self.sent: deque[tuple[int, list[tuple[Publisher, Any]]]] = deque(maxlen=self.keep)
+        self._keys: dict[int, int] | None = None  # id(writer) -> its agent or block
         self.events = quiet_events()
 
     def _turn(self) -> int:
@@ -102,7 +103,9 @@ class _Links:
 
     def snapshot(self) -> Kept:
         """The kept rounds' messages as data (``checkpoint``): (turn, [(writer key, bytes)])."""
-        keys = {id(pub): key for key, pub in self.pubs.items()}
+        if self._keys is None:  # the writers are made once, with the links
+            self._keys = {id(pub): key for key, pub in self.pubs.items()}
+        keys = self._keys
         return tuple((turn, tuple((keys[id(pub)], msg.data.tobytes()) for pub, msg in sent))
                      for turn, sent in self.sent)
 

@@ -264,6 +264,12 @@ class DiscoveryServer:
 
     name = "discovery_server"
     hung_for: float | None = None  # never taken for hung: it only answers discovery
+    argv: list[str]
+    env: dict[str, str]
+    host: str
+    port: int
+    log_path: str
+    process: subprocess.Popen[bytes]
 
     @property
     def restart_delay(self) -> float:
@@ -272,12 +278,6 @@ class DiscoveryServer:
         a participant that joins later meets nobody.  So it comes back once the lease ran out,
         when the clients have dropped it and ping its address again."""
         return lease_seconds() + 1.0
-    argv: list[str]
-    env: dict[str, str]
-    host: str
-    port: int
-    log_path: str
-    process: subprocess.Popen[bytes]
 
     def __init__(self, argv: Sequence[str], env: Mapping[str, str], host: str, port: int,
                  log_path: str) -> None:

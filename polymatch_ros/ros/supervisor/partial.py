@@ -24,7 +24,7 @@ AgentRows = dict[int, tuple[float, wire.Row]]
 
 
 def checkpoint_rows(scene: Scene, agents: Sequence[int], found: Checkpoint) -> AgentRows:
-    """The rows of a process's checkpoint (its local state), by global agent index."""
+    """The poses of a process's checkpoint (its local state), by global agent index."""
     model, grp = scene.model, scene.model.rotations
     out: AgentRows = {}
     for gi, gs in enumerate(found.state.groups):
@@ -33,18 +33,14 @@ def checkpoint_rows(scene: Scene, agents: Sequence[int], found: Checkpoint) -> A
         if gs is None or not local:
             continue
         for r, a in enumerate(local):
-            row = wire.Row(gs.x[r].copy(), grp.take(gs.rot, [r]))
-            if gs.v is not None and gs.w is not None:
-                row.v, row.w = gs.v[r].copy(), grp.algebra_take(gs.w, [r])
-            out[a] = (found.t, row)
+            out[a] = (found.t, wire.Row(gs.x[r].copy(), grp.take(gs.rot, [r])))
     return out
 
 
 def last_state(scene: Scene, finals: Mapping[int, tuple[float, wire.Row]],
                pieces: Sequence[tuple[Sequence[int], Checkpoint | None]]) -> tuple[State, dict]:
-    """(the ensemble's state from every agent's latest row, {agent: its time}); ``finals``
-    the final poses heard (velocities in their rows where known), ``pieces`` each process's
-    agents and checkpoint."""
+    """(the ensemble's poses from every agent's latest row, {agent: its time}); ``finals``
+    the final poses heard, ``pieces`` each process's agents and checkpoint."""
     latest: AgentRows = {}
     for agents, found in pieces:
         if found is not None:
