@@ -178,3 +178,29 @@ def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_
     assert np.allclose(rotations @ rotations.transpose(0, 2, 1), np.eye(2), atol=1e-12)
     assert _gone(before)
 
+
+def _progress_past(ros, run, t):
+    """Wait until the run's progress line shows simulated time ``t`` or later."""
+    deadline = time.monotonic() + BOUND
+    while time.monotonic() < deadline:
+        shown = re.findall(r"^t = +(\S+) /", ros.output(run), re.M)
+        if shown and float(shown[-1]) >= t:
+            return
+        assert run.poll() is None, ros.output(run)[-3000:]
+        time.sleep(0.2)
+    raise AssertionError(f"no progress to t = {t}: " + ros.output(run)[-3000:])
+
+
+def test_a_restarted_discovery_server_is_found_again_by_a_restarted_agent(ros):
+    """``--discovery server``: SIGKILL of the run's discovery server, then of an agent process;
+    the server is restarted on its address, the agent's new process discovers its peers
+    through it, and the run converges."""
+    run = _run(ros, "--mode", "realtime", "--rate", "20", "--time-scale", "2", "--t-end", "300",
+               "-k", "4", "--discovery", "server")
+    _progress_past(ros, run, 2)  # a probe with loopback discovery would not see this run
+    os.kill(_server(run), signal.SIGKILL)
+    _progress_past(ros, run, 6)
+    os.kill(_process(run, "agents_0_3"), signal.SIGKILL)
+    rc, out = _finish(ros, run)
+    assert rc == 0 and "converged" in out, out[-3000:]
+    assert [f[0] for f in FAILURE.findall(out)] == ["discovery_server", "agents_0_3"], out[-3000:]
