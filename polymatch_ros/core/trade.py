@@ -95,6 +95,7 @@ class Row:
     evals: int | None = None
     steps: int | None = None
     predicted: float = 0.0       # seconds estimated before it ran
+    detail: str = ""             # a failure's whole message (``status`` is cut for tables)
 
     @property
     def ok(self) -> bool:
@@ -225,7 +226,8 @@ class _Costs:
     def __init__(self, t_end: float) -> None:
         self.t_end = t_end
         self.per_eval: dict[str, float] = {}
-        self.loosest: dict[str, tuple[float, float]] = {}   # solver -> (tol, wall)
+        self.latest: dict[str, tuple[float, float]] = {}   # solver -> (tol, wall), last run
+
 
     def learn(self, row: Row) -> None:
         s = row.setting
@@ -233,16 +235,15 @@ class _Costs:
             return
         if s.kind == "fixed" and row.evals:
             self.per_eval[s.solver] = row.wall / row.evals
-        elif s.kind != "fixed":
-            self.loosest.setdefault(s.solver, (s.value, row.wall))
-            self.loosest[s.solver] = (s.value, row.wall)     # the tightest so far
+        elif s.kind != "fixed":      # runs go loosest first: the last is the tightest so far
+            self.latest[s.solver] = (s.value, row.wall)
 
     def predict(self, s: Setting) -> float:
         if s.kind == "fixed":
             per_eval = self.per_eval.get(s.solver, max(self.per_eval.values(), default=0.0))
             steps = math.ceil(self.t_end / s.value - 1e-9)
             return METHODS[s.solver].info.stages * steps * per_eval
-        tol, wall = self.loosest.get(s.solver, (s.value, 0.0))
+        tol, wall = self.latest.get(s.solver, (s.value, 0.0))
         return wall * (tol / s.value) ** ADAPTIVE_EXPONENT
 
 
@@ -264,7 +265,8 @@ def _attempt(runs: Runs, row: Row) -> Output | None:
         row.status = "refused (unstable)" + (f": dt < {limit:.3g}" if limit else "")
         return None
     except (PolymatchError, ArithmeticError, ValueError) as exc:
-        row.status = "failed: " + " ".join(str(exc).split())[:80]
+        row.detail = " ".join(str(exc).split())
+        row.status = "failed: " + row.detail[:80]
         return None
     row.status, row.wall, row.evals, row.steps = "ok", out.wall, out.evals, out.steps
     return out
@@ -382,6 +384,41 @@ def _run_grid(grid: _Grid, kept: list[Row], done: int, total: int, estimate: flo
     return []
 
 
+#: a probe (the cheapest run of its kind) may take this share of the budget
+PROBE_SHARE = 0.25
+
+
+def _run_probes(grid: _Grid, probes: list[Row], rows: list[Row]) -> list[Output | None]:
+    """Run each probe (twice: the first pays for imports and caches) within its share of the
+    budget; a kind whose probe overruns is left out; the reference needs the adaptive one."""
+    outputs: list[Output | None] = []
+    deadline = grid.runs.deadline
+    for row in probes:
+        grid.runs.deadline = min(deadline, time.perf_counter() + PROBE_SHARE * grid.budget)
+        try:
+            _attempt(grid.runs, Row(row.setting))
+            outputs.append(_attempt(grid.runs, row))
+            grid.costs.learn(row)
+        except OverBudget:
+            outputs.append(None)
+            row.status = f"stopped: over {PROBE_SHARE * grid.budget:.2g} s"
+            for other in rows:
+                if other.setting.solver == row.setting.solver and other is not row:
+                    other.status = "not run (its cheapest setting overran)"
+        finally:
+            grid.runs.deadline = deadline
+    adaptive = next(r for r in probes if r.setting.kind == "adaptive")
+    if adaptive.status.startswith("stopped"):
+        raise ParameterError(
+            f"the adaptive method at tol {adaptive.setting.value:g} takes longer than "
+            f"{PROBE_SHARE:.0%} of the budget, and the reference is a tighter run of it; raise "
+            "--budget or lower time.t_end (a stiff scene? `polymatch explain SCENE`)")
+    if not adaptive.ok:
+        raise PolymatchError(f"no reference (the adaptive method at tol "
+                             f"{adaptive.setting.value:g} fails): {adaptive.detail}")
+    return outputs
+
+
 def trade(scene: Scene, target: float, budget: float, *, distributed: bool = False,
           steps: Sequence[float] | None = None,
           tolerances: Sequence[float] = DEFAULT_TOLERANCES,
@@ -406,17 +443,8 @@ def trade(scene: Scene, target: float, budget: float, *, distributed: bool = Fal
     grid = _Grid(scene, times, budget, distributed)
     rows = candidates(scene, steps, tolerances)
     probes = _probes(rows)
-    outputs = []
-    try:
-        for row in probes:          # twice: the first pays for imports and caches
-            _attempt(grid.runs, Row(row.setting))
-            outputs.append(_attempt(grid.runs, row))
-            grid.costs.learn(row)
-    except OverBudget:
-        names = ", ".join(f"{r.setting.solver} {r.setting.label}" for r in probes)
-        raise ParameterError(f"budget: {budget:g} s is not enough for the first, cheapest runs "
-                             f"({names}); raise it") from None
-    rest = [r for r in rows if r not in probes]
+    outputs = _run_probes(grid, probes, rows)
+    rest = [r for r in rows if r not in probes and r.status == "not run"]
     for row in rest:
         row.predicted = grid.costs.predict(row.setting)
     ref_cost = grid.predicted_reference()
@@ -431,7 +459,7 @@ def trade(scene: Scene, target: float, budget: float, *, distributed: bool = Fal
     for row in dropped:
         row.status = "not run (budget)"
     say(f"{len(kept) + len(probes)} runs and the reference, about {estimate:.2g} s (budget "
-        f"{budget:g} s)"
+        f"{budget:.0f} s)"
         + ("; " + notes[0] if notes else ""))
     reference = grid.reference_run()
     for row, out in zip(probes, outputs):

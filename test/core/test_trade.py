@@ -107,7 +107,7 @@ def test_table_errors_equal_an_independent_scipy_solve_of_paper_a2(triangles):
     equals its distance from an independent tight solve of (A-2), for fixed, adaptive and
     scipy settings alike; fixed steps have the rounds per step of the registry."""
     scene = load_scene(triangles)
-    result = trade(scene, 1e-6, 5.0, steps=[0.2, 0.1], tolerances=[1e-4, 1e-7])
+    result = trade(scene, 1e-6, 20.0, steps=[0.2, 0.1], tolerances=[1e-4, 1e-7])
     times = np.linspace(0.0, scene.t_end, result.samples)
     oracle = oracle_vertices(scene, times)
     assert result.samples == 21 and result.reference.floor < 1e-9
