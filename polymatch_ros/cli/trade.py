@@ -181,13 +181,13 @@ def cmd_trade(args: argparse.Namespace) -> int:
     out = RunProgress(args.quiet or args.json)
     start = time.monotonic()
     grid_budget, ros_seconds = _budgets(args, scene, out.say)
-    result = trade(scene, args.target_error, grid_budget, distributed=args.over_ros,
-                   notice=out.say, progress=out)
+    result = trade(scene, args.target_error, max(grid_budget - (time.monotonic() - start), 0.1),
+                   distributed=args.over_ros, notice=out.say, progress=out)
     out.done()
     rate = None
-    if args.over_ros:
+    if args.over_ros:      # the time left, or half the estimate (a rate needs a few rounds)
         left = args.budget - (time.monotonic() - start)
-        rate = measure_over_ros(path, scene, result, max(left, ros_seconds), out.say)
+        rate = measure_over_ros(path, scene, result, max(left, 0.5 * ros_seconds), out.say)
     code = 0 if result.choice(over_ros=args.over_ros) is not None else EXIT_NO_CHOICE
     if args.json:
         print(as_json(result, rate, code))
@@ -238,7 +238,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                      f"(default {DEFAULT_TARGET:g})")
     p.add_argument("--budget", type=positive_float, default=DEFAULT_BUDGET, metavar="SECONDS",
                    help=f"wall-clock seconds for the whole measurement (default "
-                        f"{DEFAULT_BUDGET:g}); the grid is trimmed to fit")
+                        f"{DEFAULT_BUDGET:g}); the grid is trimmed to fit (start-up and the "
+                        "figure come on top)")
     p.add_argument("--over-ros", action="store_true",
                    help="also measure the lockstep round rate in a short real run: wall time "
                         "per simulated second over ROS")
