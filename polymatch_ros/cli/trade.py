@@ -213,8 +213,8 @@ def _print_report(result: TradeResult, rate: RoundRate | None, over_ros: bool,
         print("fixed steps as the lockstep agents take them (on a graph: the centroids "
               "integrated with the stages)")
     print(table(result, rate))
-    print(f"measured in {result.elapsed:.1f} s (estimate {result.estimate:.2g} s, budget "
-          f"{result.budget:.0f} s)")
+    print(f"measured in {result.elapsed:.1f} s (estimate {result.estimate:.2g} s, the grid's "
+          f"budget {result.budget:.0f} s)")
     if rate is not None:
         print(f"ROS column: rounds per step / dt / {rate.rounds_per_second:.1f} rounds/s, the "
               f"rate measured with {rate.method} dt {rate.dt:g} ({rate.processes} agent "

@@ -462,6 +462,9 @@ def trade(scene: Scene, target: float, budget: float, *, distributed: bool = Fal
         f"{budget:.0f} s)"
         + ("; " + notes[0] if notes else ""))
     reference = grid.reference_run()
+    if target < 10 * reference.floor:
+        notes.append(f"the target {target:g} is near the reference's floor ({reference.floor:.1e}"
+                     "): errors that small are not resolved")
     for row, out in zip(probes, outputs):
         grid.score(row, out)
     notes += _run_grid(grid, kept, len(probes), len(kept) + len(probes), estimate, progress)
