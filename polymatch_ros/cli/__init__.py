@@ -39,6 +39,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "polymatch_ros.cli.run",                 # run
     "polymatch_ros.cli.ros_tools",           # echo, set
     "polymatch_ros.cli.sweep",               # sweep
+    "polymatch_ros.cli.trade",               # trade
 )
 
 #: single ROS nodes: ``polymatch NAME ARGS`` = ``ros2 run polymatch_ros NAME ARGS``
