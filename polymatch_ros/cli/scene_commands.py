@@ -55,7 +55,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
         print(certificate_line(scene))
         return 0
-    print(certificate_line(scene), flush=True)
     progress = Progress(scene.t_end, args.quiet)
     traj = simulate(scene, args.integrator, args.dt, args.tolerance, samples=samples,
                     keep_states=bool(save or figure), progress=progress,
@@ -80,6 +79,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         print(f"snapshots saved to {figure}")
     code, msg = convergence_verdict(scene, traj.metrics[-1].diameter, traj.converged_at,
                                     traj.stationarity, metrics=traj.metrics[-1])
+    print(certificate_line(scene))      # of the initial state, beside the observed verdict
     print(msg)
     return code
 

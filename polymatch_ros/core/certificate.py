@@ -163,7 +163,8 @@ def centroid_rate(model: Model) -> float:
     m, g, k = model.mass, model.gamma, model.kappa
     disc = g * g - 4.0 * m * k
     if disc >= 0:
-        return 2.0 * k / (g + math.sqrt(disc))       # (g - sqrt(disc)) / (2m), no cancellation
+        root = g + math.sqrt(disc)
+        return 2.0 * k / root if root > 0 else 0.0  # (g - sqrt(disc)) / (2m), no cancellation
     return g / (2.0 * m)
 
 
@@ -246,6 +247,7 @@ def _half_circle(model: Model, g: Group, gs: GroupState, c: float, d_x: float,
         _, b = g.graph.symmetric_pair()
         lams = g.graph.laplacian_modes[0]
         lam = float(np.min(lams[lams > 0], initial=np.inf))   # connected: one zero mode
+        lam = 1.0 if not math.isfinite(lam) else lam          # one agent: nothing to contract
     energy_o = _spread(lifted[:, None], b)
     energy_x = 0.0 if g.graph is None else _spread(gs.x, b)
     sinc = math.sin(arc) / arc if arc > 0 else 1.0
@@ -276,7 +278,7 @@ def _time_below(bound: Bound, tolerance: float) -> float | None:
     """The least tau >= 0 with bound(tau) <= tolerance (bounds are non-increasing); None: never."""
     if float(bound(0.0)) <= tolerance:
         return 0.0
-    if bound.rate <= 0:
+    if not bound.rate > 0 or not math.isfinite(1.0 / bound.rate):
         return None
     hi = 1.0 / bound.rate
     while float(bound(hi)) > tolerance:
