@@ -192,6 +192,8 @@ def test_keeper_grants_once_and_never_withdraws():
     far = load_scene(_scene_data(3, 4, 1, 1.0, 1.0, "uniform"))
     model = scene.model
     keeper = CertificateKeeper(scene.tolerance)
+    assert keeper.refuse(0.0, "realtime") and not keeper.refuse(0.5, "realtime")
+    assert keeper.current.reason == "realtime" and not keeper.granted
     assert keeper.observe(model, far.initial, 5.0) and not keeper.granted
     assert not keeper.observe(model, far.initial, 5.0)           # the same refusal: no news
     start = State(2.0, scene.initial.groups)
