@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 import yaml
-from ros_harness import cli_argv, needs_ros
+from ros_harness import cli_argv, needs_ros, node_argv
 
 from polymatch_ros.core import load_scene, simulate
 from polymatch_ros.core.certificate import certify
@@ -35,9 +35,11 @@ def test_monitor_grants_certificate_mid_run_and_a_late_echo_gets_it_thm_4_2(ros,
     scene = load_scene(str(path))
     assert not certify(scene.model, scene.initial, scene.tolerance).certified
     ros.monitor(str(path), timeout=120)
-    agents = [ros.agent(str(path), i, timeout=90, pose_subscribers=1) for i in range(N)]
-    for a in agents:
-        assert ros.wait(a, 100) == 0, ros.output(a)[-2000:]
+    # one process hosts the three agents (as `polymatch run -k 3` does): fewer starts
+    agents = ros.start(node_argv("nodes.agent", str(path), agents=list(range(N)),
+                                 agents_per_process=N, pose_subscribers=1)
+                       + ["-r", f"__node:=agents_0_{N - 1}"], 90, "agents")
+    assert ros.wait(agents, 100) == 0, ros.output(agents)[-2000:]
     # the run is over, the monitor still serves its latched certificate to a late reader
     echo = ros.start(cli_argv("echo", "/polymatch/certificate", "--count", 1, "--timeout", 30),
                      timeout=40)
