@@ -10,6 +10,9 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
   diameter/centroid   std_msgs/Float64  max_{i,j} |xbar_i - xbar_j| (max over groups)
   diameter/rotation   std_msgs/Float64  max_{i,j} |O_i - O_j|_F (max over groups)
   status              std_msgs/String   its run record (JSON, ``wire.RunRecord``), latched
+  certificate         diagnostic_msgs/DiagnosticStatus  whether matching is guaranteed and by
+                                        when (``core.certificate``), latched; granted once, in
+                                        lockstep, and never withdrawn
   /diagnostics        diagnostic_msgs/DiagnosticArray: per-group diameters, energy,
                       orthogonality defect, agents heard, dropped messages
   markers             visualization_msgs/MarkerArray: each polytope's edges (LINE_LIST),
@@ -34,12 +37,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ...core.certificate import CertificateKeeper
 from ...core.metrics import ensemble_metrics
 from ...core.model import GroupState, State
 from .. import wire
 from .control import EnsembleControl
 from .exchange import DropCounter, LeanReaders, received_at
-from .monitor_output import diagnostics, markers
+from .monitor_output import certificate_status, diagnostics, markers
 from .params import MONITOR, declare
 from .process import NodeApp, ros_main
 
@@ -83,7 +87,9 @@ class MonitorNode(NodeApp):
         # (t, metrics, agents heard) of the last report
         self.last: tuple[float, EnsembleMetrics, int] | None = None
         self.reports = 0
+        self.certificate = CertificateKeeper(self.scene.tolerance)
         self._wire_up()
+        self.cert_pub = wire.publisher(node, "certificate")
         rate = params["report_rate"] if self.lockstep else params["rate"]
         self.report_period = 1.0 / rate
         self.report_due: Callable[[], None] = (
@@ -250,8 +256,30 @@ class MonitorNode(NodeApp):
         if self.diag_pub.get_subscription_count():
             self.diag_pub.publish(diagnostics(self, t, met, keep, len(rows)))
         self.status_pub.publish(String(data=self.record().to_json()))
+        self._certify(t, rows, velocities, met.diameter)
         if self.marker_pub is not None and self.marker_pub.get_subscription_count():
             self.marker_pub.publish(markers(self, {a: (r.x, r.rot) for a, r in rows.items()}))
+
+    def _certify(
+        self, t: float, rows: Mapping[int, wire.Row], velocities: Mapping[int, Velocity],
+        diameter: float,
+    ) -> None:
+        """Publish the certificate when it is news (``CertificateKeeper.observe``): evaluated on
+        the state of every agent at one step (lockstep) until granted, then kept; a realtime
+        state mixes poses of different ticks coupled through delays, which no theorem covers."""
+        keeper = self.certificate
+        if not self.lockstep:
+            news = keeper.refuse(t, "realtime: the agents couple through delayed poses, which "
+                                    "the theorems do not cover (lockstep runs are certified)")
+        elif len(rows) < self.n and not keeper.granted:
+            news = keeper.refuse(t, f"{len(rows)}/{self.n} agents heard")
+        elif keeper.granted:
+            news = keeper.observe(self.model, State(t, ()), diameter)
+        else:
+            model, state, _ = self._state_from(rows, velocities)
+            news = keeper.observe(model, State(t, state.groups), diameter)
+        if news:
+            self.cert_pub.publish(certificate_status(self, keeper))
 
     def record(self) -> wire.RunRecord:
         t, met, heard = self.last if self.last is not None else (0.0, None, 0)
