@@ -10,7 +10,7 @@
     polymatch echo TOPIC         print a topic (stand-in for `ros2 topic echo`)
     polymatch set NAME VALUE     set a parameter on every agent of a running ensemble
     polymatch sweep [SCENE]      many random ensembles in batches: which initial states match
-    polymatch record TOPICS -o F record topics of a running ensemble to an MCAP file
+    polymatch record TOPIC... -o FILE   record topics of a running ensemble (MCAP)
     polymatch plot FILE          diameters against time and snapshots from a recording
 
 Errors are one line on stderr and a non-zero exit code: 2 for bad input

@@ -96,6 +96,8 @@ def recorded_topics(lists: dict[str, list[str]]) -> list[RecordedTopic]:
             raise ParameterError(f"parameter 'topics': {name!r} is not absolute")
         if qos and qos not in QOS:
             raise ParameterError(f"parameter 'qos': unknown profile {qos!r}")
+        if type_:
+            message_class(type_)  # an unknown type is an error before the file is opened
         out.append(RecordedTopic(name, type_, qos))
     return out
 

@@ -27,15 +27,20 @@ if TYPE_CHECKING:
 RECORDER_GRACE_SECONDS = 10.0
 
 
-def recorder_argv(plan: RunPlan) -> list[str]:
-    """The recorder's command line for ``plan`` (``plan.outputs.record`` set)."""
+def recorder_argv(plan: RunPlan, directory: str) -> list[str]:
+    """The recorder's command line for ``plan`` (``plan.outputs.record`` set); its topic lists
+    go in a parameter file in ``directory`` (thousands of agents exceed what one command-line
+    argument may hold)."""
+    import yaml
+
     assert plan.outputs.record is not None  # only called with --record
     topics = run_topics(plan.hosts.ensemble, plan.n_agents, plan.scene.model.dim,
                         plan.scene.model.order, plan.hosts.monitor)
-
-    def listed(values: list[str]) -> str:
-        return "[" + ",".join(values) + "]"
-
+    lists = {"topics": [t.name for t in topics], "types": [t.type for t in topics],
+             "qos": [t.qos for t in topics]}
+    params = os.path.join(directory, "recorder_params.yaml")
+    with open(params, "w", encoding="utf-8") as fh:
+        yaml.safe_dump({"/**": {"ros__parameters": lists}}, fh)
     return [
         sys.executable, "-m", "polymatch_ros.ros.nodes.recorder", "--ros-args",
         "-r", f"__ns:={wire.namespace(plan.hosts.ensemble)}", "-r", "__node:=recorder",
@@ -43,19 +48,18 @@ def recorder_argv(plan: RunPlan) -> list[str]:
         "-p", f"scene_file:={os.path.abspath(plan.scene_path)}",
         "-p", f"t_end:={plan.scene.t_end!r}",
         "-p", f"mode:={plan.mode}",
-        "-p", f"topics:={listed([t.name for t in topics])}",
-        "-p", f"types:={listed([t.type for t in topics])}",
-        "-p", f"qos:={listed([t.qos for t in topics])}",
+        "--params-file", params,
     ]
 
 
-def start_recorder(plan: RunPlan, env: dict[str, str],
-                   envs: DiscoveryEnvironments | None) -> list[Child]:
+def start_recorder(plan: RunPlan, env: dict[str, str], envs: DiscoveryEnvironments | None,
+                   directory: str) -> list[Child]:
     """[the recorder child], started ([] without --record); with a discovery server
-    (``envs``) a super client, as the monitor, so that it sees every topic."""
+    (``envs``) a super client, as the monitor, so that it sees every topic; ``directory``: the
+    run's private one."""
     if plan.outputs.record is None:
         return []
-    child = Child("recorder", recorder_argv(plan),
+    child = Child("recorder", recorder_argv(plan, directory),
                   env if envs is None else envs.for_role("super_client", env))
     child.stop_grace = RECORDER_GRACE_SECONDS
     return [child]

@@ -344,7 +344,7 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
             watcher.host_ensemble_services(plan.mode)
         if plan.bridge is not None:
             others = bridge_run.robots(plan, context.env)
-        others += start_recorder(plan, context.env, context.envs)
+        others += start_recorder(plan, context.env, context.envs, context.directory)
         monitor, children = _start(context)
         supervision = Supervision(plan, watcher, children, monitor, progress, server)
         code, message = supervision.watch(interrupted, start)
