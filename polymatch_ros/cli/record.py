@@ -15,9 +15,13 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from typing import TYPE_CHECKING
 
 from ..console import format_table, positive_float, writable_output
 from ..core.errors import ParameterError
+
+if TYPE_CHECKING:
+    from ..ros.wire.recording_read import Recording, Series
 
 #: rows of the diameter table when no --at times are given
 TABLE_ROWS = 8
@@ -85,13 +89,10 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
-def _describe(rec: object, series: object, at: list[float] | None) -> str:
+def _describe(rec: Recording, series: Series, at: list[float] | None) -> str:
     """The recording's topics and its diameters at ``at`` (else TABLE_ROWS times)."""
     import numpy as np
 
-    from ..ros.wire.recording_read import Recording, Series
-
-    assert isinstance(rec, Recording) and isinstance(series, Series)
     scene = f"scene {rec.scene.name}" if rec.scene is not None else "no scene attached"
     lines = [f"{rec.path}: {sum(t.messages for t in rec.topics)} messages over "
              f"{rec.duration:.1f} s of wall-clock time, {scene}", ""]
