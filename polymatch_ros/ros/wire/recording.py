@@ -130,7 +130,7 @@ def run_topics(ensemble: str, n_agents: int, dim: int, order: int,
            for a in range(n_agents) for key in keys]
     shared = ["status", "diagnostics"]
     if monitor:
-        shared += ["diameter", "diameter_centroid", "diameter_rotation", "markers"]
+        shared += ["diameter", "diameter_centroid", "diameter_rotation", "markers", "certificate"]
     out += [RecordedTopic(full_name(ensemble, key), type_name(message_type(TOPICS[key].kind)),
                           TOPICS[key].qos) for key in shared]
     return out
