@@ -11,7 +11,9 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
   diameter/rotation   std_msgs/Float64  max_{i,j} |O_i - O_j|_F (max over groups)
   status              std_msgs/String   its run record (JSON, ``wire.RunRecord``), latched
   /diagnostics        diagnostic_msgs/DiagnosticArray: per-group diameters, energy,
-                      orthogonality defect, agents heard, dropped messages
+                      orthogonality defect, agents heard, dropped messages; per proximity
+                      graph its components among the agents heard and since when
+                      (``component_statuses``)
   markers             visualization_msgs/MarkerArray: each polytope's edges (LINE_LIST),
                       one colour per group, lifetime = peer_timeout so silent agents fade
   start, stop, reset  std_srvs/Trigger  the ensemble's services (``control``), broadcast
@@ -36,6 +38,7 @@ import numpy as np
 
 from ...core.metrics import ensemble_metrics
 from ...core.model import GroupState, State
+from ...core.proximity import ComponentTracker
 from .. import wire
 from .control import EnsembleControl
 from .exchange import DropCounter, LeanReaders, received_at
@@ -83,6 +86,7 @@ class MonitorNode(NodeApp):
         # (t, metrics, agents heard) of the last report
         self.last: tuple[float, EnsembleMetrics, int] | None = None
         self.reports = 0
+        self.components = ComponentTracker()  # proximity graphs: who hears whom, since when
         self._wire_up()
         rate = params["report_rate"] if self.lockstep else params["rate"]
         self.report_period = 1.0 / rate
@@ -239,6 +243,7 @@ class MonitorNode(NodeApp):
         from std_msgs.msg import Float64, String
 
         met, keep = self._evaluate(t, rows, velocities)
+        statuses = component_statuses(self, t, rows)
         self.reports += 1
         for key, value in (
             ("diameter", met.diameter),
@@ -248,7 +253,9 @@ class MonitorNode(NodeApp):
             self.pub[key].publish(Float64(data=float(value)))
         # diagnostics and markers are volatile: built only for readers that are there
         if self.diag_pub.get_subscription_count():
-            self.diag_pub.publish(diagnostics(self, t, met, keep, len(rows)))
+            arr = diagnostics(self, t, met, keep, len(rows))
+            arr.status.extend(statuses)
+            self.diag_pub.publish(arr)
         self.status_pub.publish(String(data=self.record().to_json()))
         if self.marker_pub is not None and self.marker_pub.get_subscription_count():
             self.marker_pub.publish(markers(self, {a: (r.x, r.rot) for a, r in rows.items()}))
@@ -294,6 +301,33 @@ class MonitorNode(NodeApp):
         rec = self.record()
         rec.finished = True
         return rec
+
+
+def component_statuses(mon: MonitorNode, t: float, rows: Mapping[int, wire.Row]) -> list[Any]:
+    """One DiagnosticStatus per proximity-graph group: the components of its graph among the
+    agents heard (WARN when more than one), since when (``core.proximity.ComponentTracker``)."""
+    radios = [g for g in mon.model.groups if g.graph is not None and g.graph.dynamic]
+    if not radios:
+        return []
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    out = []
+    for g in radios:
+        assert g.graph is not None  # a proximity graph
+        agents = [a for a in g.indices if a in rows]
+        if not agents:
+            continue
+        x = np.array([rows[a].x for a in agents])
+        now = mon.components.update(t, g.name, g.graph.radius, agents, x)
+        values: dict[str, Any] = {"components": len(now.parts), "since": now.since,
+                                  "radius": g.graph.radius}
+        values.update({f"component {c}": " ".join(map(str, p)) for c, p in enumerate(now.parts)})
+        out.append(DiagnosticStatus(
+            name=f"polymatch/{mon.node.get_namespace().strip('/')}/components/{g.name}",
+            hardware_id=g.name, message=now.describe(),
+            level=DiagnosticStatus.WARN if now.split else DiagnosticStatus.OK,
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
+    return out
 
 
 def make_monitor(argv: list[str] | None = None) -> MonitorNode:
