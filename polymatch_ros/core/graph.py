@@ -185,7 +185,8 @@ class Graph:
 
         Exact up to ``DENSE_SPECTRUM_LIMIT`` agents, Gershgorin's bound 2 max_i L_ii beyond.
         A proximity graph linearises at consensus, where every pair is at distance 0 with weight
-        1: the complete graph's rate (1, or max s_k/s_i's mean over min with F-1 weights).
+        1: the complete graph's rate (1; mean s / min s with F-1 weights, as for the complete
+        graph in ``stability.test_matrices``).
         """
         if self.dynamic:
             return 1.0 if scales is None else float(np.mean(scales) / np.min(scales))
