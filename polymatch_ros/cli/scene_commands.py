@@ -78,7 +78,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         snapshot_figure(traj, figure)
         print(f"snapshots saved to {figure}")
     code, msg = convergence_verdict(scene, traj.metrics[-1].diameter, traj.converged_at,
-                                    traj.stationarity, metrics=traj.metrics[-1])
+                                    traj.stationarity, metrics=traj.metrics[-1],
+                                    components=traj.components)
     print(certificate_line(scene))      # of the initial state, beside the observed verdict
     print(msg)
     return code
