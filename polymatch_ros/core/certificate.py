@@ -209,6 +209,9 @@ def _group_bound(model: Model, g: Group, gs: GroupState) -> Bound | str:
     graph = g.graph
     if graph is not None and graph.directed:
         return "directed graph: no result is cited for it"
+    if graph is not None and graph.dynamic:
+        return ("proximity graph: its edges change with the state, and switching-graph "
+                "consensus needs the union graph connected over time, which no bound here checks")
     if graph is not None and int(graph.components.max(initial=0)) > 0:
         return "disconnected graph: its components need not match"
     grp = model.rotations

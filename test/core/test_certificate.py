@@ -174,6 +174,9 @@ def test_not_certified_with_the_reason_prop_2_1_prop_2_2():
     apart = _scene_data(2, 4, 1, 1.0, 1.0, {"within": 0.1})
     apart["graph"] = {"edges": [[0, 1], [2, 3]], "allow_disconnected": True}
     assert line(apart).reason == "disconnected graph: its components need not match"
+    radio = _scene_data(2, 4, 1, 1.0, 1.0, {"within": 0.1})
+    radio["graph"] = {"radius": 50.0}
+    assert line(radio).reason.startswith("proximity graph: its edges change with the state")
     mixed = _scene_data(2, 3, 1, 1.0, 1.0, {"within": 0.1})
     mixed["model"].update(kappa_2=1.0, L=2.0)
     mixed["groups"].append(dict(mixed["groups"][0], name="h"))
