@@ -40,6 +40,7 @@ TYPES = {
     "/polymatch/diameter/centroid": "std_msgs/msg/Float64",
     "/polymatch/diameter/rotation": "std_msgs/msg/Float64",
     "/polymatch/markers": "visualization_msgs/msg/MarkerArray",
+    "/polymatch/certificate": "diagnostic_msgs/msg/DiagnosticStatus",
     "/polymatch/status": "std_msgs/msg/String",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
