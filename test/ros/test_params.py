@@ -401,7 +401,9 @@ def test_parameters_read_back_what_the_nodes_use_and_a_runtime_set_is_used(ros):
                        f"diagnostic {real} gamma 2", f"diagnostic {real} kappa 1",
                        f"set {real} kappa 3.0", f"get {real} kappa", f"diagnostic {real} kappa 3",
                        f"set {real} mass 0.0", f"set {real} t_end 5.0", f"set {lock} kappa 3.0",
-                       f"get {real} mass t_end", f"get {lock} kappa"], timeout=80, name="probe")
+                       f"get {real} mass t_end", f"get {lock} kappa",
+                       f"describe {lock} kappa dt agents", f"describe {real} kappa mass t_end"],
+                      timeout=80, name="probe")
     assert ros.wait(probe, 85) == 0, ros.output(probe)
     text = ros.output(probe)
     got = [json.loads(m) for m in re.findall(r"^PARAMS \S+ (.*)$", text, re.M)]
@@ -417,3 +419,12 @@ def test_parameters_read_back_what_the_nodes_use_and_a_runtime_set_is_used(ros):
     assert [s[:3] for s in sets] == [(real, "kappa", "True"), (real, "mass", "False"),
                                      (real, "t_end", "False"), (lock, "kappa", "False")], text
     assert "read-only" in sets[2][3] and "read-only" in sets[3][3], text
+    described = [json.loads(m) for m in re.findall(r"^DESCRIBE \S+ (.*)$", text, re.M)]
+    assert described == [
+        {"kappa": {"read_only": True, "range": [0.0, 1e6]},  # lockstep: the scene's model
+         "dt": {"read_only": True, "range": [1e-12, 1e6]},
+         "agents": {"read_only": True, "range": None}},
+        {"kappa": {"read_only": False, "range": [0.0, 1e6]},  # realtime: set while running
+         "mass": {"read_only": False, "range": [1e-12, 1e6]},
+         "t_end": {"read_only": True, "range": [1e-12, 1e12]}},
+    ], text

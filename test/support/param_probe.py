@@ -8,6 +8,8 @@ Actions (each word-separated inside one argument):
   get NODE [NAME ...]         prints ``PARAMS NODE <json {name: value}>``: the named parameters,
                               or every declared one (ListParameters) when no name is given; a
                               name the node does not declare is absent
+  describe NODE NAME ...      prints ``DESCRIBE NODE <json {name: {read_only, range}}>`` (range:
+                              [from, to] of its floating-point or integer range, or null)
   set NODE NAME VALUE         VALUE is a Python literal (``2.0``, ``'x'``); prints
                               ``SET NODE NAME <successful> <reason>``
   diagnostic NODE KEY VALUE   waits until NODE's status on /diagnostics reports KEY = VALUE;
@@ -22,7 +24,12 @@ import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
+from rcl_interfaces.srv import (
+    DescribeParameters,
+    GetParameters,
+    ListParameters,
+    SetParameters,
+)
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 
@@ -59,6 +66,15 @@ class Probe:
                   for n, v in values.items() if v is not None}
         print(f"PARAMS {node} {json.dumps(values, sort_keys=True)}", flush=True)
 
+    def describe(self, node, *names):
+        answer = self.call(DescribeParameters, node, DescribeParameters.Request(names=list(names)))
+        out = {}
+        for d in answer.descriptors:
+            ranges = list(d.floating_point_range) + list(d.integer_range)
+            out[d.name] = {"read_only": d.read_only,
+                           "range": [ranges[0].from_value, ranges[0].to_value] if ranges else None}
+        print(f"DESCRIBE {node} {json.dumps(out, sort_keys=True)}", flush=True)
+
     def set(self, node, name, text):
         param = Parameter(name, value=ast.literal_eval(text)).to_parameter_msg()
         result = self.call(SetParameters, node, SetParameters.Request(parameters=[param]))
@@ -75,7 +91,7 @@ class Probe:
 
 
 _SERVICE = {ListParameters: "list_parameters", GetParameters: "get_parameters",
-            SetParameters: "set_parameters"}
+            SetParameters: "set_parameters", DescribeParameters: "describe_parameters"}
 
 
 def fail(text):
