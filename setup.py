@@ -8,15 +8,16 @@ from setuptools import find_packages, setup
 
 package_name = "polymatch_ros"
 
-# The node executables `ros2 run polymatch_ros agent|monitor|robot` finds in lib/polymatch_ros
-# (setup.cfg's script_dir): colcon's ament_python build runs setup.py's own commands (egg_info,
-# build, install or develop).  pip builds a wheel (PEP 517: dist_info, bdist_wheel,
-# editable_wheel), whose scripts land on the user's PATH: there only `polymatch` goes, and the
-# nodes are `polymatch agent|monitor|robot`.
+# The node executables `ros2 run polymatch_ros agent|monitor|robot|recorder` finds in
+# lib/polymatch_ros (setup.cfg's script_dir): colcon's ament_python build runs setup.py's own
+# commands (egg_info, build, install or develop).  pip builds a wheel (PEP 517: dist_info,
+# bdist_wheel, editable_wheel), whose scripts land on the user's PATH: there only `polymatch`
+# goes, and the nodes are `polymatch agent|monitor|robot` (the recorder: `polymatch record`).
 NODE_SCRIPTS = [
     "agent = polymatch_ros.ros.nodes.agent:main",
     "monitor = polymatch_ros.ros.nodes.monitor:main",
     "robot = polymatch_ros.ros.nodes.robot:main",
+    "recorder = polymatch_ros.ros.nodes.recorder:main",
 ]
 BUILDING_A_WHEEL = bool({"dist_info", "bdist_wheel", "editable_wheel"} & set(sys.argv))
 
@@ -33,7 +34,7 @@ setup(
          glob("config/extremes/*.yaml")),
         (os.path.join("share", package_name, "config", "params"), glob("config/params/*.yaml")),
     ],
-    install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
+    install_requires=["setuptools", "numpy", "scipy", "pyyaml", "mcap", "mcap-ros2-support"],
     extras_require={"plot": ["matplotlib"], "test": ["pytest"]},
     zip_safe=True,
     maintainer="polymatch maintainers",

@@ -88,8 +88,10 @@ def format_table(rows: Sequence[Sequence[Any]], header: Sequence[Any]) -> str:
 class Progress:
     """One updating line on a terminal, a line every few seconds otherwise."""
 
-    def __init__(self, t_end: float, quiet: bool = False, stream: TextIO = sys.stderr) -> None:
+    def __init__(self, t_end: float, quiet: bool = False, stream: TextIO | None = None) -> None:
         import time  # noqa: PLC0415
+        # sys.stderr as it is now, not as it was when this module was first imported
+        stream = sys.stderr if stream is None else stream
         self.t_end, self.quiet, self.stream = t_end, quiet, stream
         self.tty = stream.isatty()
         self._time = time.monotonic

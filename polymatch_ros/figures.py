@@ -73,17 +73,30 @@ def snapshot_figure(
     if not picks:
         raise PolymatchError(
             "no stored states at the snapshot times; simulate with those sample times")
-    dim = scene.dim
     fig = plt.figure(figsize=(3.2 * len(picks), 3.4))
+    _draw_snapshots(fig, scene, picks, (1, len(picks)))
+    title = f"{scene.name}: {scene.description}" if scene.description else scene.name
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _draw_snapshots(fig: Any, scene: Scene, picks: Sequence[tuple[float, State, float | None]],
+                    grid: tuple[int, int]) -> None:
+    """One axis per (t, state, diameter) in the first row of a ``grid`` (rows, columns) of
+    ``fig``: every polytope's edges, vertex 0 marked (the correspondence), common limits."""
+    dim = scene.dim
     all_pts = np.concatenate([np.concatenate(s).reshape(-1, dim)
                               for _, st, _ in picks for s in polytope_segments(scene, st) if s])
     lo, hi = all_pts.min(axis=0), all_pts.max(axis=0)
     centre, half = (lo + hi) / 2, max(np.max(hi - lo) / 2, 1e-9) * 1.05
     for k, (t, st, diam) in enumerate(picks):
         if dim == 2:
-            ax = fig.add_subplot(1, len(picks), k + 1)
+            ax = fig.add_subplot(*grid, k + 1)
         else:
-            ax = fig.add_subplot(1, len(picks), k + 1, projection="3d")
+            ax = fig.add_subplot(*grid, k + 1, projection="3d")
         groups = zip(polytope_segments(scene, st), first_vertices(scene, st))
         for gi, (segs, first) in enumerate(groups):
             colour = COLOURS[gi % len(COLOURS)]
@@ -100,8 +113,36 @@ def snapshot_figure(
             title += f"\nmatching diameter {diam:.2e}"
         ax.set_title(title, fontsize=9)
         ax.tick_params(labelsize=7)
-    title = f"{scene.name}: {scene.description}" if scene.description else scene.name
-    fig.suptitle(title, fontsize=10)
+
+
+def recording_figure(t: np.ndarray, curves: Sequence[tuple[str, np.ndarray]], path: FigurePath,
+                     scene: Scene | None = None,
+                     snapshots: Sequence[tuple[float, State, float | None]] = (),
+                     title: str = "", note: str = "") -> FigurePath:
+    """A recorded run: its snapshots (if any, with the scene) above its diameters against
+    simulated time ``t`` (``curves``: (label, values), log scale; ``note`` under the plot's
+    title)."""
+    plt = _pyplot()
+    columns = max(1, len(snapshots))
+    rows = 2 if snapshots and scene is not None else 1
+    fig = plt.figure(figsize=(max(6.4, 3.2 * columns), 3.4 * rows))
+    if rows == 2:
+        assert scene is not None  # snapshots are drawn with the scene only
+        _draw_snapshots(fig, scene, snapshots, (2, columns))
+    ax = fig.add_subplot(rows, 1, rows)
+    for k, (label, values) in enumerate(curves):
+        ax.semilogy(t, np.maximum(values, 1e-300), ("-", "--", ":", "-.")[k % 4], lw=1.2,
+                    label=label)
+    for when, _, _ in snapshots:
+        ax.axvline(when, color="grey", lw=0.6, alpha=0.6)
+    ax.set_xlabel("simulated time t")
+    ax.set_ylabel("diameter")
+    ax.legend(fontsize=7)
+    if note:
+        ax.set_title(note, fontsize=9)
+    ax.tick_params(labelsize=7)
+    if title:
+        fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

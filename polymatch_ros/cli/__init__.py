@@ -10,6 +10,8 @@
     polymatch echo TOPIC         print a topic (stand-in for `ros2 topic echo`)
     polymatch set NAME VALUE     set a parameter on every agent of a running ensemble
     polymatch sweep [SCENE]      many random ensembles in batches: which initial states match
+    polymatch record TOPIC... -o FILE   record topics of a running ensemble (MCAP)
+    polymatch plot FILE          diameters against time and snapshots from a recording
 
 Errors are one line on stderr and a non-zero exit code: 2 for bad input
 (scene, parameters, command line), 3 for a run that did not converge although
@@ -39,6 +41,8 @@ COMMAND_MODULES: tuple[str, ...] = (
     "polymatch_ros.cli.run",                 # run
     "polymatch_ros.cli.ros_tools",           # echo, set
     "polymatch_ros.cli.sweep",               # sweep
+    "polymatch_ros.cli.trade",               # trade
+    "polymatch_ros.cli.record",              # record, plot
 )
 
 #: single ROS nodes: ``polymatch NAME ARGS`` = ``ros2 run polymatch_ros NAME ARGS``

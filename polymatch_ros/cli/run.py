@@ -73,6 +73,7 @@ def build_plan(args: argparse.Namespace) -> RunPlan:
         quiet=args.quiet,
         verbose=args.verbose,
         compare=args.compare,
+        record=writable_output(args.record, ".mcap") if args.record else None,
     )
     hosts = _hosts(args, scene, bridge is not None)
     on_failure = RestartPolicy(restart=args.on_failure == "restart")
@@ -233,3 +234,6 @@ def _add_ensemble_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--save", metavar="NPZ", help="save the final poses received from the agents (npz)"
     )
+    p.add_argument("--record", metavar="MCAP",
+                   help="record the run's topics (poses, twists, diameters, diagnostics, markers, "
+                   "status) to an MCAP file (`polymatch plot` draws it; `ros2 bag` reads it)")

@@ -25,11 +25,12 @@ from ..console import (
     tolerance_arg,
     writable_output,
 )
+from ..core.certificate import certify
 from ..core.errors import PolymatchError
 from ..core.limits import Limits
 from ..core.model import GroupState
 from ..core.preflight import check_run
-from ..core.scene import load_scene, shipped_config_dirs
+from ..core.scene import Scene, load_scene, shipped_config_dirs
 from ..core.simulate import Trajectory, convergence_verdict
 
 
@@ -52,6 +53,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
               limits=_limits(args))
     if args.explain:
         print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
+        print(certificate_line(scene))
         return 0
     progress = Progress(scene.t_end, args.quiet)
     traj = simulate(scene, args.integrator, args.dt, args.tolerance, samples=samples,
@@ -76,7 +78,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         snapshot_figure(traj, figure)
         print(f"snapshots saved to {figure}")
     code, msg = convergence_verdict(scene, traj.metrics[-1].diameter, traj.converged_at,
-                                    traj.stationarity, metrics=traj.metrics[-1])
+                                    traj.stationarity, metrics=traj.metrics[-1],
+                                    components=traj.components)
+    print(certificate_line(scene))      # of the initial state, beside the observed verdict
     print(msg)
     return code
 
@@ -111,7 +115,13 @@ def cmd_explain(args: argparse.Namespace) -> int:
               limits=_limits(args))
     print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance,
                             distributed=args.distributed)))
+    print(certificate_line(scene))
     return 0
+
+
+def certificate_line(scene: Scene) -> str:
+    """The certificate of the scene's initial state (``core.certificate``), at t = 0."""
+    return certify(scene.model, scene.initial, scene.tolerance).line()
 
 
 def cmd_integrators(args: argparse.Namespace) -> int:

@@ -16,10 +16,12 @@ terms cancel), which is why the complete graph keeps the mean field and carries 
 Graph specifications (a scene's ``graph`` key, overridable per group as ``groups[i].graph``):
 ``complete`` | ``{ring: k}`` (k neighbours on each side) | ``{k_nearest: k}`` (undirected
 union of each agent's k nearest by initial centroid distance) | ``{random: {p: P, seed: S}}``
-(Erdos-Renyi) | ``{edges: [[i, k], ...], weights: [...], directed: false}``.  Any mapping may
-add ``normalise: degree`` (kappa/deg_i instead of kappa/N_g; default ``size``) and
-``allow_disconnected: true`` (accept a graph ``check_connected`` refuses; the metrics then
-report each component's diameter).
+(Erdos-Renyi) | ``{edges: [[i, k], ...], weights: [...], directed: false}`` |
+``{radius: R, cutoff: smooth}`` (a proximity graph: a_ik(x) = w(|xbar_i - xbar_k| / R), recomputed
+at every evaluation, ``core.proximity``; ``cutoff: hard`` for w = 1 inside R).  Any mapping may
+add ``normalise: degree`` (kappa/deg_i instead of kappa/N_g; default ``size``; not with a
+radius) and ``allow_disconnected: true`` (accept a graph ``check_connected`` refuses, for a
+radius at the initial centroids; the metrics then report each component's diameter).
 """
 
 from __future__ import annotations
@@ -34,10 +36,12 @@ import numpy as np
 if TYPE_CHECKING:  # scipy is imported where it is used: a complete-graph scene never needs it
     from scipy import sparse
 
+from . import proximity
 from .checks import Map, number
 from .errors import SceneError
+from .limits import MAX_LENGTH, MIN_SIZE
 
-KINDS = ("complete", "ring", "k_nearest", "random", "edges")
+KINDS = ("complete", "ring", "k_nearest", "random", "edges", "radius")
 NORMALISATIONS = ("size", "degree")
 #: above this many agents the coupling rate is Gershgorin's bound, not the exact spectrum
 DENSE_SPECTRUM_LIMIT = 1000
@@ -45,10 +49,13 @@ DENSE_SPECTRUM_LIMIT = 1000
 
 @dataclass(frozen=True, eq=False)
 class LocalWeights:
-    """A graph's weights for some rows: p (centroid sums), p diag(s) (F-1 field), row sums."""
+    """A graph's weights for some rows: p (centroid sums), p diag(s) (F-1 field), row sums.
 
-    p: sparse.csr_matrix
-    rot: sparse.csr_matrix
+    Sparse, except a small proximity graph's (``proximity.SMALL``), which are dense arrays.
+    """
+
+    p: sparse.csr_matrix | np.ndarray
+    rot: sparse.csr_matrix | np.ndarray
     row_sums: np.ndarray
 
 
@@ -62,22 +69,32 @@ class Graph:
     directed: bool = False
     normalise: str = "size"            # "degree": kappa/deg_i instead of kappa/N_g
     allow_disconnected: bool = False
+    radius: float = 0.0                # a proximity graph's range R (kind "radius")
+    cutoff: str = "smooth"             # its weight: the C-infinity bump, or "hard" (1 inside R)
 
     @property
     def complete(self) -> bool:
-        return self.weights is None
+        return self.kind == "complete"
+
+    @property
+    def dynamic(self) -> bool:
+        """True when the weights depend on the state (a proximity graph, ``weights_at``)."""
+        return self.kind == "radius"
 
     def matrix(self) -> sparse.csr_matrix:
         """The weights a_ik as a sparse matrix (the complete graph's: ones off the diagonal)."""
         from scipy import sparse
 
+        if self.dynamic:
+            raise TypeError("a proximity graph's weights depend on the centroids: weights_at(x)")
         if self.weights is not None:
             return self.weights
         full = np.ones((self.size, self.size)) - np.eye(self.size)
         return sparse.csr_matrix(full)
 
     def in_neighbours(self, i: int) -> np.ndarray:
-        """The agents (indices in the group) whose state agent ``i`` needs."""
+        """The agents (indices in the group) whose state agent ``i`` needs (on a proximity
+        graph every other agent: any of them may come into range)."""
         if self.weights is None:
             return np.delete(np.arange(self.size), i)
         row = self.weights.getrow(i)
@@ -108,6 +125,12 @@ class Graph:
         """One phrase for ``polymatch explain``: the graph and its cost per evaluation."""
         if self.complete:
             return "complete (mean field S = sum_k O_k: O(N d^3) per evaluation, no matrix)"
+        if self.dynamic:
+            weight = ("C-infinity bump exp(1 - 1/(1 - (r/R)^2))" if self.cutoff == "smooth"
+                      else "hard cut-off (1 inside R: fixed-step methods drop to order 1)")
+            return (f"proximity, radius R = {self.radius:g}, weight {weight}, kappa/N_g; "
+                    f"the pairs in range found by a KD-tree at every evaluation "
+                    f"(O(N log N + |E| d^2 + N d^3))")
         kind = ("directed " if self.directed else "") + self.kind
         norm = "kappa/deg_i" if self.normalise == "degree" else "kappa/N_g"
         return (f"{kind}, |E| = {self.edge_count} weights, mean degree "
@@ -133,6 +156,9 @@ class Graph:
     @cached_property
     def components(self) -> np.ndarray:
         """Component label of every agent (weakly connected components for directed graphs)."""
+        if self.dynamic:
+            raise TypeError("a proximity graph's components depend on the centroids: "
+                            "components_at(x)")
         if self.complete:
             return np.zeros(self.size, dtype=int)
         from scipy.sparse import csgraph
@@ -158,7 +184,12 @@ class Graph:
         """max |lambda| of ``laplacian(scales)``: the graph's stiffness factor (1 for complete).
 
         Exact up to ``DENSE_SPECTRUM_LIMIT`` agents, Gershgorin's bound 2 max_i L_ii beyond.
+        A proximity graph linearises at consensus, where every pair is at distance 0 with weight
+        1: the complete graph's rate (1; mean s / min s with F-1 weights, as for the complete
+        graph in ``stability.test_matrices``).
         """
+        if self.dynamic:
+            return 1.0 if scales is None else float(np.mean(scales) / np.min(scales))
         key = None if scales is None else np.asarray(scales, dtype=float).tobytes()
         cache = self.__dict__.setdefault("_rates", {})       # frozen: cached like a property
         if key not in cache:
@@ -180,6 +211,25 @@ class Graph:
             p = p[np.asarray(rows, dtype=int)]
         rot = p if scales is None else sparse.csr_matrix(p @ sparse.diags(scales))
         return LocalWeights(p, rot, np.asarray(p.sum(axis=1)).ravel())
+
+    def weights_at(self, x: np.ndarray, index: np.ndarray | None = None,
+                   rows: Sequence[int] | np.ndarray | None = None,
+                   scales: np.ndarray | None = None) -> LocalWeights:
+        """A proximity graph's weights at centroids ``x`` (the group's rows ``index``; None:
+        all), for its rows ``rows`` (None: every row of x) against every row of x."""
+        present = np.arange(len(x)) if index is None else np.asarray(index)
+        at = None
+        if rows is not None:
+            at = np.searchsorted(present, np.asarray(rows, dtype=int))
+            if np.any(at >= len(present)) or np.any(present[np.minimum(at, len(present) - 1)]
+                                                   != np.asarray(rows)):
+                raise ValueError("the ensemble lacks some of the rows to weigh")
+        scale = None if scales is None else np.asarray(scales)[present]
+        return LocalWeights(*proximity.weight_matrix(x, self.radius, self.cutoff, at, scale))
+
+    def components_at(self, x: np.ndarray) -> np.ndarray:
+        """Component labels at centroids ``x`` (a proximity graph's now; otherwise fixed)."""
+        return proximity.components(x, self.radius) if self.dynamic else self.components
 
     def symmetric_pair(self) -> tuple[np.ndarray, np.ndarray]:
         """(K, b) with K symmetric, b > 0 and L = diag(b)^{-1} K (undirected graphs only).
@@ -218,7 +268,8 @@ def build_graph(spec: Any, path: str, size: int, centroids: np.ndarray | None = 
         raise SceneError(f"{path}: unknown graph {spec!r} (expected complete or a mapping "
                          f"with one of "
                          f"{', '.join(KINDS[1:])})")
-    m = Map(spec, path, KINDS[1:] + ("weights", "directed", "normalise", "allow_disconnected"))
+    m = Map(spec, path, KINDS[1:] + ("weights", "directed", "normalise", "allow_disconnected",
+                                      "cutoff"))
     options = _options(m)
     kinds = [k for k in KINDS[1:] if k in spec]
     if len(kinds) != 1:
@@ -226,6 +277,10 @@ def build_graph(spec: Any, path: str, size: int, centroids: np.ndarray | None = 
     kind = kinds[0]
     if kind != "edges" and any(k in spec for k in ("weights", "directed")):
         raise SceneError(f"{path}: weights and directed go with edges")
+    if kind != "radius" and "cutoff" in spec:
+        raise SceneError(f"{m.at('cutoff')}: a cut-off goes with radius")
+    if kind == "radius":
+        return _radius(m, size, options)
     if kind == "ring":
         adjacency = _ring(number(spec["ring"], m.at("ring"), minimum=1, integer=True), size)
     elif kind == "k_nearest":
@@ -248,12 +303,24 @@ def _options(m: Map) -> dict:
     return {"normalise": normalise, "allow_disconnected": allow}
 
 
+def _radius(m: Map, size: int, options: dict) -> Graph:
+    """A proximity graph ``{radius: R, cutoff: smooth | hard}`` (``core.proximity``)."""
+    radius = m.number("radius", minimum=MIN_SIZE, maximum=MAX_LENGTH)
+    cutoff = m.raw("cutoff", "smooth")
+    if cutoff not in proximity.CUTOFFS:
+        raise SceneError(f"{m.at('cutoff')}: expected smooth or hard, got {cutoff!r}")
+    if options["normalise"] != "size":
+        raise SceneError(f"{m.at('normalise')}: a proximity graph normalises by size: kappa/deg_i "
+                         f"would jump to kappa when an agent's last neighbour leaves range")
+    return Graph("radius", size, None, radius=float(radius), cutoff=cutoff, **options)
+
+
 def group_graphs(scene_spec: object, group_specs: list, sizes: list[int],
                  centroids: list[np.ndarray]) -> list[Graph | None]:
     """Each group's validated graph: its own ``graph`` key or the scene's; None = complete.
 
-    A graph on which a group cannot match as one is refused (``check_connected``) unless
-    it says ``allow_disconnected: true``.
+    A graph on which a group cannot match as one is refused (``check_connected``; a proximity
+    graph at the initial centroids) unless it says ``allow_disconnected: true``.
     """
     out = []
     for gi, (raw, size, x) in enumerate(zip(group_specs, sizes, centroids)):
@@ -261,7 +328,7 @@ def group_graphs(scene_spec: object, group_specs: list, sizes: list[int],
         path = f"groups[{gi}].graph" if own else "graph"
         graph = build_graph(raw["graph"] if own else scene_spec, path, size, x)
         if not graph.allow_disconnected:
-            check_connected(graph, path if own else f"graph (groups[{gi}])")
+            check_connected(graph, path if own else f"graph (groups[{gi}])", x)
         out.append(None if graph.complete else graph)
     return out
 
@@ -335,16 +402,29 @@ def _edges(m: Map, size: int) -> Graph:
     return Graph("edges", size, sparse.csr_matrix(a), directed)
 
 
-def check_connected(graph: Graph, path: str) -> None:
+def check_connected(graph: Graph, path: str, centroids: np.ndarray | None = None) -> None:
     """Refuse a graph on which the group cannot match as one.
 
     Undirected: one connected component.  Directed: some agent must reach all others
     along the flow of information (k -> i where a_ik > 0): exactly one strongly connected
-    component of the information flow has no incoming edge.
+    component of the information flow has no incoming edge.  Proximity: one component at
+    the initial ``centroids`` (it may still split later: ``core.proximity``).
     """
     if graph.complete or graph.size <= 1:
         return
     from scipy.sparse import csgraph
+
+    if graph.dynamic:
+        if centroids is None:
+            raise SceneError(f"{path}: a proximity graph needs the agents' initial centroids")
+        labels = graph.components_at(centroids)
+        count = int(labels.max(initial=0)) + 1
+        if count > 1:
+            raise SceneError(f"{path}: the proximity graph (radius {graph.radius:g}) is "
+                             f"disconnected at the start: components {_components(labels, count)}"
+                             f"; agents farther apart than the radius never hear each other "
+                             f"(allow_disconnected: true runs it anyway)")
+        return
 
     flow = graph.matrix().T.tocsr()                   # k -> i when i hears k
     if not graph.directed:

@@ -179,9 +179,10 @@ def group_metrics(model: Model, gi: int, gs: GroupState) -> GroupMetrics:
 
 
 def component_diameters(model: Model, gi: int, gs: GroupState) -> tuple[float, ...] | None:
-    """Matching diameter of each component of group gi's graph (None: one component)."""
+    """Matching diameter of each component of group gi's graph (None: one component); a
+    proximity graph's components at this state's centroids."""
     g = model.groups[gi]
-    labels = None if g.graph is None else g.graph.components
+    labels = None if g.graph is None else g.graph.components_at(gs.x)
     if labels is None or labels.max(initial=0) == 0:
         return None
     grp = model.rotations

@@ -20,6 +20,9 @@ On a communication graph (``Group.graph``, ``core.graph``) every sum over k beco
 sum_k a_ik (...): S_i = sum_k a_ik s_k O_k is one field per agent (one sparse product
 A @ O, O(|E| d^2)) and the centroid force kappa/N sum_k a_ik (xbar_k - xbar_i).  With
 a_ik = 1 for every pair this is the paper's model; the complete graph keeps the mean field.
+On a proximity graph (``core.proximity``) a_ik = w(|xbar_i - xbar_k| / R) is weighed anew at
+every evaluation from the centroids of the ensemble it is given (``Graph.weights_at``), for
+the first- and the second-order model alike: the weights enter only these two sums.
 
 ``lohe_torque`` is the one assembly of the rotation coupling (A-1)/(A-2)/(F-1).
 Centroids never couple to rotations, so centroid and rotation parts are
@@ -96,9 +99,11 @@ class Model:
     def centroids_exact(self) -> bool:
         """Centroids decouple into linear symmetric consensus per group: solved in closed form.
 
-        Directed graphs (non-symmetric Laplacian) integrate them with the method's stages.
+        Directed graphs (non-symmetric Laplacian) integrate them with the method's stages, and
+        so do proximity graphs (weights that depend on the centroids: a nonlinear consensus).
         """
-        directed = any(g.graph is not None and g.graph.directed for g in self.groups)
+        directed = any(g.graph is not None and (g.graph.directed or g.graph.dynamic)
+                       for g in self.groups)
         return not self.inter_group and self.centroids == "exact" and not directed
 
     def group_of(self, agent: int) -> tuple[int, int]:
@@ -164,6 +169,7 @@ class GroupCoupling:
     group_x: np.ndarray | None = None
     group_v: np.ndarray | None = None
     index: np.ndarray | None = None
+    row_sums: np.ndarray | None = None     # sum_k p_ik per local row (graphs)
 
 
 @dataclass(slots=True)
@@ -200,8 +206,10 @@ class System:
         self.model = model
         self.group = model.rotations
         self.rows = tuple(None for _ in model.groups) if rows is None else tuple(rows)
-        self.graph_weights = tuple(None if g.graph is None else g.graph.local_weights(r, g.scales)
-                                   for g, r in zip(model.groups, self.rows))
+        # fixed graphs' weights once; a proximity graph's at every evaluation (``_couple_graph``)
+        self.graph_weights = tuple(
+            None if g.graph is None or g.graph.dynamic else g.graph.local_weights(r, g.scales)
+            for g, r in zip(model.groups, self.rows))
         self.flows = tuple(
             GraphCentroidFlow(model.mass, model.gamma, model.kappa, g.graph, r)
             if g.graph is not None and model.centroids_exact
@@ -235,7 +243,8 @@ class System:
         centroids) come from the in-neighbours only; the exact centroid flow of an
         undirected graph is a global linear map, so at a step's first stage it reads the
         whole group (``model.centroids: integrated`` keeps every exchange between
-        in-neighbours).
+        in-neighbours).  On a proximity graph every other row, for every field: any agent
+        may come into range.
         """
         g, m = self.model.groups[gi], self.model
         everyone = np.delete(np.arange(g.size), row)
@@ -284,12 +293,21 @@ class System:
         return Coupling(tuple(out), centroids)
 
     def _couple_graph(self, gi: int, e: Any, need_means: bool) -> GroupCoupling:
-        """Per-row fields S_i = sum_k a_ik s_k O_k (one sparse product) and centroid sums."""
-        w = self.graph_weights[gi]
-        assert w is not None, "a graph group has weights"
+        """Per-row fields S_i = sum_k a_ik s_k O_k (one sparse product) and centroid sums.
+
+        A proximity graph's weights come from the ensemble's centroids ``e.x`` (``weights_at``).
+        """
+        g = self.model.groups[gi]
         idx = getattr(e, "index", None)
-        p, rot = (w.p, w.rot) if idx is None else (w.p[:, idx], w.rot[:, idx])
-        out = GroupCoupling(self.group.neighbour_fields(e.rot, rot), self.model.groups[gi].size)
+        fixed = self.graph_weights[gi]
+        if g.graph is not None and g.graph.dynamic:
+            w = g.graph.weights_at(e.x, idx, self.rows[gi], g.scales)
+            p, rot = w.p, w.rot
+        else:
+            assert fixed is not None, "a graph group has weights"
+            w = fixed
+            p, rot = (w.p, w.rot) if idx is None else (w.p[:, idx], w.rot[:, idx])
+        out = GroupCoupling(self.group.neighbour_fields(e.rot, rot), g.size, row_sums=w.row_sums)
         if not self.model.centroids_exact:
             out.neighbour_x = p @ e.x
         elif need_means:
@@ -317,9 +335,8 @@ class System:
         c = coupling.groups[gi]
         assert c is not None, f"no coupling for group {gi}"
         if c.neighbour_x is not None:
-            w = self.graph_weights[gi]
-            assert w is not None, "a graph group has weights"
-            force = (m.kappa / c.n) * (c.neighbour_x - w.row_sums[:, None] * x)
+            assert c.row_sums is not None, "a graph's coupling carries its row sums"
+            force = (m.kappa / c.n) * (c.neighbour_x - c.row_sums[:, None] * x)
         else:
             assert c.mean_x is not None, "the coupling carries the centroid mean"
             force = m.kappa * (c.mean_x - x)

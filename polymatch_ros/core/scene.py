@@ -35,6 +35,7 @@ from .limits import (
     check_rates,
 )
 from .model import Model, State, validate_model
+from .proximity import BYTES_PER_WEIGHT
 from .scene_groups import GroupContext, build_group
 from .so import group_for
 from .yamlfile import parse_yaml, read_scene_file
@@ -237,7 +238,13 @@ def _groups(top, dim, params, seed, budget):
     # communication graphs: core.graph parses and validates the scene's and each group's `graph`
     for gi, (raw, g) in enumerate(zip(raw_groups, groups)):
         spec = raw.get("graph") if isinstance(raw, dict) else None
-        if (spec if spec is not None else top.raw("graph")) not in (None, "complete"):
+        spec = spec if spec is not None else top.raw("graph")
+        if isinstance(spec, dict) and "radius" in spec:
+            # a proximity graph holds only the pairs in range, but a team that closes up has
+            # every pair in range: N (N - 1) weights (pairs, distances, weights, sparse rows)
+            budget.charge(f"groups[{gi}].graph", BYTES_PER_WEIGHT * float(g.size) ** 2,
+                          f"up to {g.size} x {g.size} proximity weights, every pair in range")
+        elif spec not in (None, "complete"):
             # adjacency, Laplacian and its eigenmodes are dense N x N (a few copies)
             budget.charge(f"groups[{gi}].graph", 4.0 * FLOAT * float(g.size) ** 2,
                           f"a {g.size} x {g.size} graph Laplacian and its eigenmodes")

@@ -17,10 +17,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from . import proximity
 from .errors import PolymatchError, StabilityError
 from .integrators import check_stability, get_method, max_stable_dt
 from .metrics import EnsembleMetrics, ensemble_metrics, stationarity
 from .model import Group, GroupState, Model, State, System
+from .proximity import Components, ComponentTracker
 from .so import group_for
 from .solver import RUNNING, Method, drive, step_grid
 
@@ -29,7 +31,8 @@ if TYPE_CHECKING:
     from .scene import Scene
 
 __all__ = ["EXIT_NOT_CONVERGED", "Plan", "Trajectory", "convergence_verdict", "drive", "explain",
-           "plan", "prepare", "recommend", "simulate", "step_grid", "with_representation"]
+           "group_components", "plan", "prepare", "recommend", "simulate", "step_grid",
+           "with_representation"]
 
 EXIT_NOT_CONVERGED = 3
 
@@ -143,6 +146,10 @@ class Trajectory:
     final: State | None = None
     converged_at: float | None = None
     stationarity: float | None = None
+    #: per proximity-graph group, its components at the last sample and since when they held
+    components: tuple[Components, ...] = ()
+    #: every change of a proximity graph's components over the samples (the first included)
+    component_history: list[Components] = field(default_factory=list)
 
     @property
     def diameters(self) -> np.ndarray:
@@ -161,6 +168,9 @@ class _Recorder:
         self.progress, self.stop_when_converged = progress, stop_when_converged
         self.below = None           # time from which the diameter has stayed under tolerance
         self.last = None
+        self.tracker = ComponentTracker()
+        self.proximity = any(g.graph is not None and g.graph.dynamic
+                             for g in traj.scene.model.groups)
 
     def record(self, st: State) -> bool:
         traj, scene = self.traj, self.traj.scene
@@ -178,6 +188,9 @@ class _Recorder:
                 self.progress(st.t, met.diameter)
         if self.keep_states:
             traj.states.append(st)
+        if self.proximity:          # who hears whom at this sample (a KD-tree, O(N log N))
+            traj.components = group_components(scene.model, st, self.tracker)
+            traj.component_history = self.tracker.history
         return self.stop_when_converged and self.below is not None
 
 
@@ -279,6 +292,9 @@ def _centroid_line(m: Model, distributed: bool) -> str:
                 "per step)")
     if m.centroids_exact:
         return "centroids: exact linear flow of Proposition 2.1 (no inter-group potential)"
+    if any(g.graph is not None and g.graph.dynamic for g in m.groups):
+        return ("centroids: integrated with the method's stages (a proximity graph: weights "
+                "that depend on the centroids make their consensus nonlinear)")
     if m.centroids == "exact":
         return ("centroids: integrated with the method's stages (a directed graph: "
                 "its Laplacian is not symmetric; stages keep the exchange between "
@@ -292,29 +308,59 @@ def _graph_line(g: Group) -> str:
     if g.graph is None:
         return "complete (the paper's mean field S = sum_k O_k: O(N d^3) per evaluation)"
     text = g.graph.describe()
+    if g.graph.dynamic:
+        return text
     if g.graph.allow_disconnected and g.graph.components.max(initial=0) > 0:
         text += (f"; {int(g.graph.components.max()) + 1} components (allow_disconnected): "
                  "the metrics report each one's diameter")
     return text
 
 
+def group_components(model: Model, state: State,
+                     tracker: ComponentTracker | None = None) -> tuple[Components, ...]:
+    """The components of every proximity-graph group of a whole ensemble's ``state`` (since
+    when: from ``tracker``, which has seen the earlier states; without one, ``since`` is None)."""
+    out = []
+    for g, gs in zip(model.groups, state.all_groups()):
+        if g.graph is None or not g.graph.dynamic:
+            continue
+        agents = np.arange(g.start, g.start + g.size)
+        if tracker is not None:
+            out.append(tracker.update(state.t, g.name, g.graph.radius, agents, gs.x))
+        else:
+            parts = proximity.parts_of(agents, proximity.components(gs.x, g.graph.radius))
+            out.append(Components(g.name, g.graph.radius, parts, None, float(state.t)))
+    return tuple(out)
+
+
 def convergence_verdict(scene: Scene, diameter: float, converged_at: float | None,
                         stationarity: float | None = None,
-                        metrics: EnsembleMetrics | None = None) -> tuple[int, str]:
+                        metrics: EnsembleMetrics | None = None,
+                        components: Sequence[Components] = ()) -> tuple[int, str]:
     """(exit code, message) for the end of a run.
 
-    ``metrics`` (the last sample's) adds the per-component diameters of disconnected graphs.
+    ``metrics`` (the last sample's) adds the per-component diameters of disconnected graphs;
+    ``components`` names the agents of each split proximity graph and since when it is split.
     """
     if converged_at is not None:
         return 0, f"converged: matching diameter < {scene.tolerance:g} from t = {converged_at:g}"
     msg = (f"did not converge: matching diameter {diameter:.3e} >= tolerance "
            f"{scene.tolerance:g} at t_end")
-    components = None if metrics is None else metrics.component_diameters
-    for g, diameters in zip(scene.model.groups, components or ()):
+    splits = {c.group: c for c in components if c.split}
+    parts_diameters = None if metrics is None else metrics.component_diameters
+    for g, diameters in zip(scene.model.groups, parts_diameters or ()):
         if diameters is not None:
             parts = ", ".join(f"{d:.3e}" for d in diameters)
-            msg += f"; group {g.name!r} is disconnected, component diameters [{parts}]"
-    if stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
+            if g.name in splits:
+                msg += f"; {splits[g.name].describe()}, component diameters [{parts}]"
+                del splits[g.name]
+            else:
+                msg += f"; group {g.name!r} is disconnected, component diameters [{parts}]"
+    msg += "".join(f"; {c.describe()}" for c in splits.values())
+    if any(c.split for c in components):
+        msg += ("; consensus on a proximity graph needs the union of its graphs over time to "
+                "stay connected (Jadbabaie, Lin & Morse 2003; Moreau 2005)")
+    elif stationarity is not None and stationarity < 1e-9 * max(1.0, scene.model.kappa):
         graphs = any(g.graph is not None for g in scene.model.groups)
         msg += ("; the rotations sit at an equilibrium that is not consensus "
                 f"(|W| = {stationarity:.1e}),"

@@ -15,7 +15,9 @@ PACKAGE = ROOT / "polymatch_ros"
 
 # Python distributions by their rosdep keys; every other import is a ROS package of that name.
 ROSDEP_KEYS = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml",
-               "matplotlib": "python3-matplotlib"}
+               "matplotlib": "python3-matplotlib",
+               # rosdep's pip key mcap-ros2-support installs both mcap_ros2 and mcap
+               "mcap": "mcap-ros2-support", "mcap_ros2": "mcap-ros2-support"}
 
 
 def imported_top_level_names():

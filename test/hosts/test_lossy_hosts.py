@@ -15,13 +15,23 @@ root namespace must match no DDS packet (the kernel's count).
 import sys
 import time
 
-import numpy as np
 import pytest
-from exactness import received_vertices
-from host_runs import check_lockstep_on_hosts, run_on_hosts, three_hosts
+from host_runs import (
+    AGENTS,
+    PEER_TIMEOUT,
+    REALTIME_SCENE,
+    TIME_SCALE,
+    check_lockstep_on_hosts,
+    realtime_argvs,
+    run_on_hosts,
+    saved_diameter,
+    status_records,
+    three_hosts,
+    wait_for_record,
+)
 from ros_harness import needs_ros
 
-from benchmarks.hosts.runs import host_argv, lockstep_argvs, scene_with
+from benchmarks.hosts.runs import lockstep_argvs, scene_with
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.ros.supervisor import discovery
 from polymatch_ros.ros.wire import run_records
@@ -30,16 +40,9 @@ pytestmark = needs_ros
 
 LOCKSTEP_SCENE = "mixed_triangles_tetrahedra"   # (F-2) triangles and tetrahedra, 12 of each
 LOCKSTEP_AGENTS = 24                            # 8/8/8 over the hosts
-REALTIME_SCENE = "congruent_triangles"          # first order (A-2), 12 agents: 4/4/4
-AGENTS = 12
 LOSS = 10                     # percent of what host 1 receives
 LOSSY_HOST = 1
 DOWN_HOST, DOWN_SECONDS = 0, 5.0
-# realtime: 20 steps per wall-clock second hold 12 agents, the monitor and an echo on 2 loaded
-# cores (test_ros_realtime.py); time scale 3 gives h = 0.15, under which the centralised run of
-# this scene reaches its tolerance at t ~ 19
-RATE, TIME_SCALE, T_END = 20.0, 3.0, 120.0
-PEER_TIMEOUT = 1.0            # s: agents and the monitor drop a peer silent this long
 
 
 @pytest.fixture
@@ -58,24 +61,6 @@ def lossy(net, index):
         return net.dropped(index)
 
     return count
-
-
-def _realtime_argvs(scene_file, out, *options):
-    """Realtime on three hosts, 4 agents (one process) each; the lead (host 2) saves."""
-    return [host_argv(scene_file, f"{4 * i}-{4 * i + 3}", i == 2, "--mode", "realtime",
-                      "--rate", RATE, "--time-scale", TIME_SCALE, "--t-end", T_END, "-k", 4,
-                      "--peer-timeout", PEER_TIMEOUT, "--records", f"{out}.h{i}.jsonl",
-                      *options, *(["--save", out] if i == 2 else []))
-            for i in range(3)]
-
-
-def saved_diameter(scene_file, out):
-    """The matching diameter of the final poses the lead host saved: max over groups, agents
-    i, j and vertices a of |x^i_a - x^j_a| (the groups are congruent)."""
-    _, vertices = received_vertices(load_scene(scene_file), out)
-    # vertices[g][a, i] is vertex a of agent i
-    return max(float(np.linalg.norm(v[:, :, None] - v[:, None, :], axis=-1).max())
-               for v in vertices)
 
 
 def _check_converged(scene_file, started, out):
@@ -103,7 +88,7 @@ def test_realtime_converges_under_loss_and_delay(net, tmp_path):
     started = time.monotonic()
     scene_file = scene_with(tmp_path, REALTIME_SCENE, AGENTS)
     out = tmp_path / "final.npz"
-    argvs = _realtime_argvs(scene_file, out, "--delay", 0.05)
+    argvs = realtime_argvs(scene_file, out, "--delay", 0.05)
     started_procs, _, root, dropped = run_on_hosts(net, tmp_path, argvs, lossy(net, LOSSY_HOST))
     _check_converged(scene_file, started_procs, out)
     _check_clock_offsets(out)
@@ -128,24 +113,6 @@ def _check_clock_offsets(out):
         assert worst < 0.5, f"{rec.name()}: clock offsets {rec.clock_offsets}"
 
 
-def _status_records(procs, echo):
-    """The monitor's run records among those ``polymatch echo`` of the status topic printed so
-    far (the agents publish theirs there too)."""
-    lines = procs.output(echo).splitlines()
-    records = run_records(line.partition("data: ")[2] for line in lines
-                          if line.startswith("data: "))
-    return [r for r in records if r.role == "monitor"]
-
-
-def _wait_for_record(procs, echo, holds, seconds):
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline and echo.poll() is None:
-        if any(holds(r) for r in _status_records(procs, echo)):
-            return True
-        time.sleep(0.1)
-    return False
-
-
 def link_down_while_running(net):
     """``during``: once the monitor hears all agents, host DOWN_HOST's link goes down for
     DOWN_SECONDS; returns the monitor's records (heard before, in the outage once the monitor's
@@ -156,19 +123,19 @@ def link_down_while_running(net):
         echo = procs.start([sys.executable, "-m", "polymatch_ros.cli", "echo",
                             "/polymatch/status", "--timeout", "150"], echo_env, 160, "echo",
                            prefix=net.prefix(2))
-        running = _wait_for_record(procs, echo, lambda r: r.agents_heard == AGENTS
+        running = wait_for_record(procs, echo, lambda r: r.agents_heard == AGENTS
                                    and r.t >= 2.0 * TIME_SCALE, 90)
         assert running, procs.output(echo)[-2000:]
         net.link_down(DOWN_HOST)
         down = time.monotonic()
         time.sleep(PEER_TIMEOUT + 1.0)
-        timed_out = len(_status_records(procs, echo))    # the monitor has dropped host 0
+        timed_out = len(status_records(procs, echo))    # the monitor has dropped host 0
         time.sleep(max(0.0, down + DOWN_SECONDS - time.monotonic()))
-        back = len(_status_records(procs, echo))
+        back = len(status_records(procs, echo))
         net.link_up(DOWN_HOST)
         for proc in started:
             proc.wait(timeout=150)
-        records = _status_records(procs, echo)
+        records = status_records(procs, echo)
         return records[:timed_out], records[timed_out:back], records[back:]
 
     return outage
@@ -179,7 +146,7 @@ def test_realtime_link_down_then_rejoin(net, tmp_path):
     scene_file = scene_with(tmp_path, REALTIME_SCENE, AGENTS)
     out = tmp_path / "final.npz"
     procs, _, root, (before, outage, after) = run_on_hosts(
-        net, tmp_path, _realtime_argvs(scene_file, out), link_down_while_running(net))
+        net, tmp_path, realtime_argvs(scene_file, out), link_down_while_running(net))
     others = AGENTS - AGENTS // 3
     assert any(r.agents_heard == AGENTS for r in before)
     assert len(outage) >= 5, f"{len(outage)} monitor reports in {DOWN_SECONDS:g} s"

@@ -252,7 +252,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.state = self._state_at(t, own)
         super().publish_state()
         request = SimpleNamespace(stage=self.state, fields=("rot", "x"))
-        ensemble = self.peers.ensemble(request, self.peers.active())  # type: ignore[arg-type]
+        heard = self.peers.in_range(self.peers.active(), self.state)  # a radio: peers in range
+        ensemble = self.peers.ensemble(request, heard)  # type: ignore[arg-type]
         twist = self._command(gi, row, ensemble, own)
         if not twist.finite:
             self._hold("non-finite command", brake=True)
@@ -298,6 +299,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
         note, extra = super().diagnostic_note()
         extra["commands"] = self.commands
         extra["holding"] = self.holding or "no"
+        if self.peers.in_range_count is not None:
+            extra["peers_in_range"] = self.peers.in_range_count
         return (f"robot held: {self.holding}; " if self.holding else note), extra
 
     # -- running ---------------------------------------------------------------------------------

@@ -10,8 +10,13 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
   diameter/centroid   std_msgs/Float64  max_{i,j} |xbar_i - xbar_j| (max over groups)
   diameter/rotation   std_msgs/Float64  max_{i,j} |O_i - O_j|_F (max over groups)
   status              std_msgs/String   its run record (JSON, ``wire.RunRecord``), latched
+  certificate         diagnostic_msgs/DiagnosticStatus  whether matching is guaranteed and by
+                                        when (``core.certificate``), latched; granted once, in
+                                        lockstep, and never withdrawn
   /diagnostics        diagnostic_msgs/DiagnosticArray: per-group diameters, energy,
-                      orthogonality defect, agents heard, dropped messages
+                      orthogonality defect, agents heard, dropped messages; per proximity
+                      graph its components among the agents heard and since when
+                      (``component_statuses``)
   markers             visualization_msgs/MarkerArray: each polytope's edges (LINE_LIST),
                       one colour per group, lifetime = peer_timeout so silent agents fade
   start, stop, reset  std_srvs/Trigger  the ensemble's services (``control``), broadcast
@@ -34,12 +39,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ...core.certificate import CertificateKeeper
 from ...core.metrics import ensemble_metrics
 from ...core.model import GroupState, State
+from ...core.proximity import ComponentTracker
 from .. import wire
 from .control import EnsembleControl
 from .exchange import DropCounter, LeanReaders, received_at
-from .monitor_output import diagnostics, markers
+from .monitor_output import certificate_status, diagnostics, markers
 from .params import MONITOR, declare, resolve_monitor
 from .process import NodeApp, ros_main
 
@@ -83,7 +90,10 @@ class MonitorNode(NodeApp):
         # (t, metrics, agents heard) of the last report
         self.last: tuple[float, EnsembleMetrics, int] | None = None
         self.reports = 0
+        self.certificate = CertificateKeeper(self.scene.tolerance)
+        self.components = ComponentTracker()  # proximity graphs: who hears whom, since when
         self._wire_up()
+        self.cert_pub = wire.publisher(node, "certificate")
         rate = params["report_rate"] if self.lockstep else params["rate"]
         self.report_period = 1.0 / rate
         self.report_due: Callable[[], None] = (
@@ -239,6 +249,7 @@ class MonitorNode(NodeApp):
         from std_msgs.msg import Float64, String
 
         met, keep = self._evaluate(t, rows, velocities)
+        statuses = component_statuses(self, t, rows)
         self.reports += 1
         for key, value in (
             ("diameter", met.diameter),
@@ -248,10 +259,34 @@ class MonitorNode(NodeApp):
             self.pub[key].publish(Float64(data=float(value)))
         # diagnostics and markers are volatile: built only for readers that are there
         if self.diag_pub.get_subscription_count():
-            self.diag_pub.publish(diagnostics(self, t, met, keep, len(rows)))
+            arr = diagnostics(self, t, met, keep, len(rows))
+            arr.status.extend(statuses)
+            self.diag_pub.publish(arr)
         self.status_pub.publish(String(data=self.record().to_json()))
+        self._certify(t, rows, velocities, met.diameter)
         if self.marker_pub is not None and self.marker_pub.get_subscription_count():
             self.marker_pub.publish(markers(self, {a: (r.x, r.rot) for a, r in rows.items()}))
+
+    def _certify(
+        self, t: float, rows: Mapping[int, wire.Row], velocities: Mapping[int, Velocity],
+        diameter: float,
+    ) -> None:
+        """Publish the certificate when it is news (``CertificateKeeper.observe``): evaluated on
+        the state of every agent at one step (lockstep) until granted, then kept; a realtime
+        state mixes poses of different ticks coupled through delays, which no theorem covers."""
+        keeper = self.certificate
+        if not self.lockstep:
+            news = keeper.refuse(t, "realtime: the agents couple through delayed poses, which "
+                                    "the theorems do not cover (lockstep runs are certified)")
+        elif len(rows) < self.n and not keeper.granted:
+            news = keeper.refuse(t, f"{len(rows)}/{self.n} agents heard")
+        elif keeper.granted:
+            news = keeper.observe(self.model, State(t, ()), diameter)
+        else:
+            model, state, _ = self._state_from(rows, velocities)
+            news = keeper.observe(model, State(t, state.groups), diameter)
+        if news:
+            self.cert_pub.publish(certificate_status(self, keeper))
 
     def record(self) -> wire.RunRecord:
         t, met, heard = self.last if self.last is not None else (0.0, None, 0)
@@ -294,6 +329,33 @@ class MonitorNode(NodeApp):
         rec = self.record()
         rec.finished = True
         return rec
+
+
+def component_statuses(mon: MonitorNode, t: float, rows: Mapping[int, wire.Row]) -> list[Any]:
+    """One DiagnosticStatus per proximity-graph group: the components of its graph among the
+    agents heard (WARN when more than one), since when (``core.proximity.ComponentTracker``)."""
+    radios = [g for g in mon.model.groups if g.graph is not None and g.graph.dynamic]
+    if not radios:
+        return []
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    out = []
+    for g in radios:
+        assert g.graph is not None  # a proximity graph
+        agents = [a for a in g.indices if a in rows]
+        if not agents:
+            continue
+        x = np.array([rows[a].x for a in agents])
+        now = mon.components.update(t, g.name, g.graph.radius, agents, x)
+        values: dict[str, Any] = {"components": len(now.parts), "since": now.since,
+                                  "radius": g.graph.radius}
+        values.update({f"component {c}": " ".join(map(str, p)) for c, p in enumerate(now.parts)})
+        out.append(DiagnosticStatus(
+            name=f"polymatch/{mon.node.get_namespace().strip('/')}/components/{g.name}",
+            hardware_id=g.name, message=now.describe(),
+            level=DiagnosticStatus.WARN if now.split else DiagnosticStatus.OK,
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
+    return out
 
 
 def make_monitor(argv: list[str] | None = None) -> MonitorNode:

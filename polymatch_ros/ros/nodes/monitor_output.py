@@ -1,4 +1,5 @@
-"""What the monitor publishes besides the headline diameters: diagnostics and RViz markers."""
+"""What the monitor publishes besides the headline diameters: diagnostics, the certificate and
+RViz markers."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 if TYPE_CHECKING:
     from rclpy.node import Node
 
+    from ...core.certificate import CertificateKeeper
     from ...core.metrics import EnsembleMetrics
     from ...core.model import Group, Model
     from ...core.scene import Scene
@@ -85,6 +87,38 @@ def diagnostics(
         statuses.append(st)
     arr.status = statuses
     return arr
+
+
+def certificate_status(mon: MonitorView, keeper: CertificateKeeper) -> Any:
+    """DiagnosticStatus of the run's certificate (``core.certificate``; the format is in
+    docs/guide/ros-interface.md): level OK = granted, WARN = not (yet) certified, ERROR = granted
+    and then breached by an observed diameter (the run left the model's flow); message = the
+    one-line wording; values = the certificate's fields."""
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    cert = keeper.current
+    assert cert is not None, "a certificate is published once evaluated"
+    name = mon.node.get_fully_qualified_name()
+    st = DiagnosticStatus(name=f"polymatch{name}/certificate", hardware_id=name)
+    st.level = DiagnosticStatus.OK if cert.certified else DiagnosticStatus.WARN
+    st.message = cert.line()
+    values: dict[str, str] = {
+        "certified": "true" if cert.certified else "false",
+        "guaranteed_time": "" if cert.time is None else repr(cert.time),
+        "tolerance": repr(cert.tolerance),
+        "issued_at": repr(cert.t0),
+        "theorem": cert.theorem,
+        "reason": cert.reason,
+        "centroid_rate": "" if cert.centroid_rate is None else repr(cert.centroid_rate),
+    }
+    if keeper.breach is not None:
+        t, seen, bound = keeper.breach
+        st.level = DiagnosticStatus.ERROR
+        st.message += (f"; BREACHED at t = {t:.6g}: observed diameter {seen:.3e} > bound "
+                       f"{bound:.3e} (the run is not the model's flow)")
+        values.update(breach_t=repr(t), breach_observed=repr(seen), breach_bound=repr(bound))
+    st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+    return st
 
 
 def _marker(mon: MonitorView, g: Group, a: int, colour: tuple[float, float, float],

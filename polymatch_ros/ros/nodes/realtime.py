@@ -2,6 +2,8 @@
 
 Peers that fall silent longer than ``peer_timeout`` are dropped from the sums of
 (A-1)/(A-2) and re-admitted when they speak again (Theorem 4.2 under delays and churn).
+On a proximity graph (``graph: {radius: R}``) an agent couples only to the peers within R of
+one of its process's agents in the latest poses (``PeerTable.in_range``), as a radio would.
 Each peer's clock offset is estimated from its pose stamps (clock_offset.py) and published in
 the diagnostics.
 
@@ -22,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ...core import proximity
 from ...core.model import System
 from ...core.simulate import drive
 from ...core.solver import Method
@@ -36,7 +39,7 @@ if TYPE_CHECKING:
     from rclpy.executors import Executor
     from rclpy.node import Node
 
-    from ...core.model import Request
+    from ...core.model import Request, State
     from .exchange import DropCounter, Layout
 
 #: per group the arrays the core asks for (``wire.assemble``), None for groups not needed
@@ -67,6 +70,7 @@ class PeerTable:
         self.frame_id, self.timeout, self.t_max = frame_id, timeout, t_max
         self.latest: dict[int, SimpleNamespace] = {}  # agent -> (t, x, rot, v, heard)
         self.silent: set[int] = set()
+        self.in_range_count: int | None = None  # proximity graphs: peers heard at the last tick
         dim = self.model.dim
         self.readers = LeanReaders(node, "_peers")
         # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
@@ -173,6 +177,26 @@ class PeerTable:
             alive.append(a)
         return alive
 
+    def in_range(self, alive: list[int], state: State) -> list[int]:
+        """The peers a radio hears: on a proximity graph those of ``alive`` within R of one of
+        this process's agents (``state``) in their latest poses; every other peer as it is."""
+        model, keep = self.model, set(alive)
+        radio = False
+        for gi, g in enumerate(model.groups):
+            gs = state.groups[gi]
+            if g.graph is None or not g.graph.dynamic or gs is None:
+                continue
+            radio = True
+            peers = [a for a in alive if self.layout.owner[a][0] == gi]
+            if peers:
+                xs = np.array([self.latest[a].x for a in peers])
+                near = proximity.in_range(gs.x, xs, g.graph.radius)
+                keep -= {a for a, n in zip(peers, near) if not n}
+        out = [a for a in alive if a in keep]
+        if radio:
+            self.in_range_count = len(out)
+        return out
+
     def ensemble(self, request: Request, alive: Iterable[int]) -> Ensemble:
         """Frozen peers + the local stage rows, per needed group, ``index`` = the rows present."""
         model = self.model
@@ -229,7 +253,11 @@ class RealtimeAgent(RuntimeParams, AgentBase):
                 f"agent {agent}: clock offset {offset:+.3f} s is past "
                 f"{self.clock.threshold:g} s (estimated from its pose stamps)"
             )
-        return {f"clock_offset_s: agent {a}": v for a, v in sorted(self.clock.offsets().items())}
+        out: dict[str, Any] = {f"clock_offset_s: agent {a}": v
+                               for a, v in sorted(self.clock.offsets().items())}
+        if self.peers.in_range_count is not None:
+            out["peers_in_range"] = self.peers.in_range_count
+        return out
 
     def step_size(self, p: dict[str, Any]) -> float:
         return p["time_scale"] / p["rate"]
@@ -291,7 +319,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             step = min(h, self.scene.t_end - t)  # the last tick ends the run at t_end exactly
             if self._held(t + step):
                 continue
-            alive = self.peers.active()
+            alive = self.peers.in_range(self.peers.active(), self.state)
 
             def answer(request: Request, stage: int, alive: list[int] = alive) -> Ensemble:
                 return self.peers.ensemble(request, alive)

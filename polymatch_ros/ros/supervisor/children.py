@@ -56,6 +56,7 @@ class Child:
 
     name: str
     restart_delay = 0.0  # its restart waits only for the policy's back-off
+    stop_grace = 3.0  # SIGINT to SIGTERM when it is stopped (``stop``)
     argv: list[str]
     env: dict[str, str] | None
     agents: tuple[int, ...]
@@ -116,8 +117,10 @@ class Child:
     def poll(self) -> int | None:
         return self.proc.poll()
 
-    def stop(self, grace: float = 3.0) -> int | None:
-        """SIGINT, then SIGTERM, then SIGKILL — each to this child's PID only."""
+    def stop(self, grace: float | None = None) -> int | None:
+        """SIGINT, then SIGTERM (after ``grace``, default ``stop_grace`` s), then SIGKILL — each
+        to this child's PID only."""
+        grace = self.stop_grace if grace is None else grace
         for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
             if self.proc.poll() is not None:
                 break
@@ -244,7 +247,7 @@ def fewest_agents_per_process(n_agents: int, own: int) -> int:
 
 def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> int:
     """-k as given (checked against the participant limit), else 1 if it fits, else the fewest."""
-    own = 1 + (1 if packing.monitor else 0)  # the runner's node, the monitor
+    own = 1 + int(packing.monitor) + int(packing.recorder)  # the runner, monitor, recorder
     need = fewest_agents_per_process(n_agents, own)
     if packing.requested is None:
         if localhost and need > 1:

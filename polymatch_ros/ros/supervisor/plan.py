@@ -55,6 +55,7 @@ class Outputs:
     quiet: bool            # no progress, no first line
     verbose: bool          # every agent's final line
     compare: bool          # lockstep: compare with the centralised simulation
+    record: str | None = None  # MCAP file of the run's topics (checked writable, suffix appended)
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,7 @@ class Packing:
     requested: int | None      # -k; None: 1, or the fewest that fit LOCALHOST discovery
     monitor: bool              # the monitor is one more participant on this host
     quiet: bool = False        # no note on stderr when the agents are packed
+    recorder: bool = False     # --record: the recorder is one more
 
 
 @dataclass(frozen=True)
@@ -112,4 +114,5 @@ class RunPlan:
     @property
     def packing(self) -> Packing:
         """What decides this host's agents per process."""
-        return Packing(self.hosts.agents_per_process, self.hosts.monitor, self.outputs.quiet)
+        return Packing(self.hosts.agents_per_process, self.hosts.monitor, self.outputs.quiet,
+                       self.outputs.record is not None)

@@ -49,6 +49,7 @@ from .discovery import (
 )
 from .environment import reserved_domain_id, ros_environment
 from .plan import RunPlan
+from .recording import report_recording, start_recorder
 from .summary import RunOutcome, report, verdict
 from .watcher import Watcher
 
@@ -123,6 +124,7 @@ def _node_names(context: RunContext, runner: str) -> list[str]:
     """The node names this host's run will take: its runner, monitor and agent processes."""
     plan = context.plan
     names = [runner] + (["monitor"] if plan.hosts.monitor else [])
+    names += ["recorder"] if plan.outputs.record is not None else []
     return names + [_process_name(a)
                     for a in partition(plan.hosts.agents, context.agents_per_process)]
 
@@ -200,7 +202,8 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
         "-p",
         f"agents_per_process:={k}",
         "-p",
-        f"pose_subscribers:={1 if plan.hosts.monitor else 0}",
+        # the monitor and the recorder (--record) read every pose
+        f"pose_subscribers:={int(plan.hosts.monitor) + int(plan.outputs.record is not None)}",
         "-p",
         "autostart:=false",  # the runner drives the lifecycle (``lifecycle_driver``)
         "-p",
@@ -251,7 +254,7 @@ def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
     """(monitor or None, agent children): the processes of this host, started.
 
     ``context.envs`` (DiscoveryEnvironments, None for LOCALHOST) gives the agents the client
-    and the monitor the super-client environment.
+    and the monitor (and the recorder) the super-client environment.
     """
     plan, env, envs = context.plan, context.env, context.envs
     agent_env = env if envs is None else envs.for_role("client", env)
@@ -319,7 +322,7 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
     _announce(context)
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     children: list[Child] = []
-    robots: list[Child] = []
+    others: list[Child] = []  # bridge mode's robots; the recorder (--record), ended last
     monitor: Child | None = None
     watcher: Watcher | None = None
     supervision: Supervision | None = None
@@ -340,7 +343,8 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
         if plan.hosts.lead and not plan.hosts.monitor:
             watcher.host_ensemble_services(plan.mode)
         if plan.bridge is not None:
-            robots = bridge_run.robots(plan, context.env)
+            others = bridge_run.robots(plan, context.env)
+        others += start_recorder(plan, context.env, context.envs, context.directory)
         monitor, children = _start(context)
         supervision = Supervision(plan, watcher, children, monitor, progress, server)
         code, message = supervision.watch(interrupted, start)
@@ -348,7 +352,7 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
         code, message = exc.exit_code, str(exc)
     finally:
         stop_all(children, monitor, watcher)
-        stop_all(robots, None, None)
+        stop_all(others, None, None)
         for s, h in old.items():
             signal.signal(s, h)
     try:
@@ -359,6 +363,7 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
         final = watcher.final_state() if watcher is not None else None
         if code == 0 and plan.hosts.lead and watcher is not None and final is not None:
             code = verdict(plan.scene, final, watcher.stop_requested_at)
+        code = report_recording(others, code, plan.outputs.quiet)
     finally:
         sys.stdout.flush()
         sys.stderr.flush()

@@ -14,7 +14,7 @@ from ...console import SUMMARY_HEADER, Progress, format_table, summary_rows
 from ...core.metrics import ensemble_metrics
 from ...core.model import GroupState, Model, State
 from ...core.scene import Scene
-from ...core.simulate import convergence_verdict, prepare, simulate
+from ...core.simulate import convergence_verdict, group_components, prepare, simulate
 from ..wire import RunRecord
 from .plan import RunPlan
 
@@ -177,7 +177,8 @@ def verdict(scene: Scene, final: State, stop_requested_at: float | None = None) 
     (``EXIT_STOPPED_BY_REQUEST``), not that it "did not converge at t_end"."""
     met = ensemble_metrics(scene.model, final)
     converged_at = final.t if met.diameter < scene.tolerance else None
-    code, msg = convergence_verdict(scene, met.diameter, converged_at)
+    code, msg = convergence_verdict(scene, met.diameter, converged_at, metrics=met,
+                                    components=group_components(scene.model, final))
     if code != 0 and stop_requested_at is not None:
         print(f"stopped by request at t = {final.t:g} (the ensemble's stop service, called at "
               f"t = {stop_requested_at:g}): matching diameter {met.diameter:.3e}, tolerance "

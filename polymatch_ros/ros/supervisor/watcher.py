@@ -93,7 +93,11 @@ class Watcher:
             return
         if rec.role == "monitor":
             self.monitor = rec
-        elif rec.agents not in self.agents or rec.t >= self.agents[rec.agents].t:
+            return
+        old = self.agents.get(rec.agents)
+        # a process's steps never fall: fewer is a new process of these agents (restarted, or
+        # a host's run started again), whose record replaces the dead one's
+        if old is None or rec.t >= old.t or rec.steps < old.steps:
             self.agents[rec.agents] = rec
 
     def _pose(self, agent: int) -> Callable[[Any], None]:

@@ -49,6 +49,8 @@ TOPICS = {
     "diameter": Topic("diameter", "float64", "latched"),
     "diameter_centroid": Topic("diameter/centroid", "float64", "latched"),
     "diameter_rotation": Topic("diameter/rotation", "float64", "latched"),
+    # whether matching is guaranteed, and by when (core.certificate): granted once, latched
+    "certificate": Topic("certificate", "diagnostic_status", "latched"),
     "markers": Topic("markers", "markers", "markers"),
     "diagnostics": Topic("/diagnostics", "diagnostics", "diagnostics"),
 }
@@ -76,6 +78,10 @@ def message_type(kind: str, dim: int | None = None) -> type:
         from visualization_msgs.msg import MarkerArray
 
         return MarkerArray
+    if kind == "diagnostic_status":
+        from diagnostic_msgs.msg import DiagnosticStatus
+
+        return DiagnosticStatus
     if kind == "diagnostics":
         from diagnostic_msgs.msg import DiagnosticArray
 

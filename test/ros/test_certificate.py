@@ -1,0 +1,61 @@
+"""The monitor's certificate topic: granted once the state enters Theorem 4.2's region, latched."""
+
+import re
+
+import numpy as np
+import pytest
+import yaml
+from ros_harness import cli_argv, needs_ros, node_argv
+
+from polymatch_ros.core import load_scene, simulate
+from polymatch_ros.core.certificate import certify
+from polymatch_ros.core.model import State
+
+pytestmark = needs_ros
+
+# 3-D, three tetrahedra with Haar-uniform rotations: D0 = 2.53 >= 1 at t = 0 (not certified),
+# below 1 from t = 1.6 on (the centralised run): the monitor grants the certificate mid-run
+SCENE = {"name": "certificate_run", "dimension": 3, "seed": 6,
+         "model": {"order": 1, "kappa": 1.0, "gamma": 1.0},
+         "integrator": {"method": "rkmk4", "dt": 0.1}, "time": {"t_end": 2.0},
+         "groups": [{"name": "g", "shape": "tetrahedron", "count": 3,
+                     "centroids": {"box": [-1.0, 1.0]}, "rotations": "uniform"}]}
+N = 3
+
+
+def _values(text):
+    """{key: value} of the last DiagnosticStatus `polymatch echo` printed."""
+    block = text[text.rindex("level:"):]
+    return dict(re.findall(r"- key: (\S+)\n\s+value: ?(.*)", block))
+
+
+def test_monitor_grants_certificate_mid_run_and_a_late_echo_gets_it_thm_4_2(ros, tmp_path):
+    path = tmp_path / "certificate_run.yaml"
+    path.write_text(yaml.safe_dump(SCENE))
+    scene = load_scene(str(path))
+    assert not certify(scene.model, scene.initial, scene.tolerance).certified
+    ros.monitor(str(path), timeout=120)
+    # one process hosts the three agents (as `polymatch run -k 3` does): fewer starts
+    agents = ros.start(node_argv("nodes.agent", str(path), agents=list(range(N)),
+                                 agents_per_process=N, pose_subscribers=1)
+                       + ["-r", f"__node:=agents_0_{N - 1}"], 90, "agents")
+    assert ros.wait(agents, 100) == 0, ros.output(agents)[-2000:]
+    # the run is over, the monitor still serves its latched certificate to a late reader
+    echo = ros.start(cli_argv("echo", "/polymatch/certificate", "--count", 1, "--timeout", 30),
+                     timeout=40)
+    assert ros.wait(echo, 45) == 0, ros.output(echo)
+    text = ros.output(echo)
+    assert re.search(r"^level: (\[0\]|0)$", text, re.M), text          # OK: granted
+    values = _values(text)
+    assert values["certified"] == "true" and values["theorem"].startswith("Thm 4.2"), values
+    issued, guaranteed = float(values["issued_at"]), float(values["guaranteed_time"])
+    assert 1.5 <= issued <= 2.0, values              # granted once D_O < 1, not at t = 0
+    # the same certificate from the centralised run's state at that time
+    traj = simulate(scene, samples=[issued])
+    at = [k for k, t in enumerate(traj.times) if abs(t - issued) < 1e-9]
+    assert len(at) == 1, (traj.times, issued)                  # a step the run reported
+    want = certify(scene.model, State(issued, traj.states[at[0]].groups), scene.tolerance)
+    assert guaranteed == pytest.approx(want.time, rel=1e-6)
+    m = re.search(r"^message: (.*)$", text, re.M)
+    assert m and m.group(1) == want.line(), text
+    assert np.isfinite(guaranteed) and guaranteed > issued
