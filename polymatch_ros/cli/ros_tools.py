@@ -45,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--timeout", type=float, help="give up after this many seconds (exit 1)")
     p.set_defaults(func=cmd_echo)
 
-    p = sub.add_parser("set", help="set a runtime parameter (kappa, gamma, rate, limits) on "
+    p = sub.add_parser("set", help="set a runtime parameter (kappa, gamma, mass, rate, limits) on "
                                    "every agent of a running ensemble")
     p.add_argument("name", help=f"one of {', '.join(RUNTIME)}")
     p.add_argument("value", help="the new value (checked against the parameter's range)")

@@ -299,7 +299,7 @@ def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
     for a in range(2):
         argv = [PY, "-m", "polymatch_ros.ros.nodes.agent", "--ros-args",
                 "--params-file", PARAMS_FILE, "-p", f"scene:={scene}", "-p", f"agent:={a}",
-                "-p", "start_time:=0.0", "-r", f"measured_pose:=robot_{a}/measured_pose",
+                "-p", "start:=now", "-r", f"measured_pose:=robot_{a}/measured_pose",
                 "-r", f"cmd_vel:=robot_{a}/cmd_vel", "-r", f"__node:=agent_{a}"]
         agents.append(ros.start(argv, timeout=100, name=f"agent {a}"))
     echo = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/polymatch/robot_0/cmd_vel",

@@ -1,15 +1,35 @@
-"""Bad ROS parameters are one line and exit code 2: every parameter of the agent and the monitor,
-with a wrong type and out of its range, checked in-process (``params.check`` runs before the
-nodes create any topic); the real processes are covered in test_ros_robustness.py."""
+"""ROS parameters: bad ones are one line and exit code 2 (every parameter of the agent and the
+monitor, with a wrong type and out of its range, checked in-process: ``params.check`` runs
+before the nodes create any topic; the real processes are covered in test_robustness.py), and
+the declared ones hold what the node uses: the scene's gains, integrator, step and end time
+unless given, read back through the rcl_interfaces services as `ros2 param get` does, and a
+value set while running reads back and is used."""
+
+import json
+import os
+import re
+import time
+from types import SimpleNamespace
 
 import pytest
+from ros_harness import CONFIG, PY, needs_ros, node_argv, scene_path
 
-from polymatch_ros.core.errors import ParameterError
-from polymatch_ros.ros.nodes.params import AGENT, MONITOR, check
+from polymatch_ros.core.errors import ParameterError, PolymatchError
+from polymatch_ros.core.scene import load_scene
+from polymatch_ros.ros.nodes.params import (
+    AGENT,
+    MONITOR,
+    check,
+    check_gains,
+    resolve_agent,
+    resolve_monitor,
+)
+from polymatch_ros.ros.nodes.robot import ROBOT, resolve_robot
 
 AGENT_NAMES = [
     "scene", "agent", "agents", "agents_per_process", "mode", "autostart", "integrator", "dt",
-    "t_end", "rate", "kappa", "gamma", "time_scale", "start_time", "peer_timeout", "delay",
+    "t_end", "rate", "kappa", "gamma", "mass", "time_scale", "start", "start_time",
+    "peer_timeout", "delay",
     "clock_offset_warn", "hold_final", "round_timeout", "stall_timeout", "peers_restart",
     "checkpoint", "discovery_timeout",
     "pose_subscribers", "frame_id", "max_linear_speed", "max_angular_speed", "max_linear_accel",
@@ -31,7 +51,8 @@ TYPE_CASES = [
     ("agent", "dt", True, NUMBER), ("agent", "dt", float("nan"), NUMBER),
     ("agent", "t_end", "abc", NUMBER), ("agent", "t_end", float("inf"), NUMBER),
     ("agent", "rate", "abc", NUMBER), ("agent", "kappa", "abc", NUMBER),
-    ("agent", "gamma", "abc", NUMBER), ("agent", "time_scale", "abc", NUMBER),
+    ("agent", "gamma", "abc", NUMBER), ("agent", "mass", "abc", NUMBER),
+    ("agent", "time_scale", "abc", NUMBER), ("agent", "start", 1.5, STRING),
     ("agent", "start_time", "abc", NUMBER), ("agent", "peer_timeout", "abc", NUMBER),
     ("agent", "delay", "abc", NUMBER), ("agent", "clock_offset_warn", "abc", NUMBER),
     ("agent", "hold_final", "abc", NUMBER), ("agent", "round_timeout", "abc", NUMBER),
@@ -52,13 +73,14 @@ TYPE_CASES = [
 RANGE_CASES = [
     ("agent", "agent", 0, 1_000_000, -1, 1_000_001, "[0, 1e+06]"),
     ("agent", "agents_per_process", 1, 1_000_000, 0, 1_000_001, "[1, 1e+06]"),
-    ("agent", "dt", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
-    ("agent", "t_end", 0.0, 1e12, -1e-9, 1.000001e12, "[0, 1e+12]"),
+    ("agent", "dt", 1e-12, 1e6, 0.0, 1.000001e6, "[1e-12, 1e+06]"),
+    ("agent", "t_end", 1e-12, 1e12, 0.0, 1.000001e12, "[1e-12, 1e+12]"),
     ("agent", "rate", 0.01, 1e5, 0.0099, 100000.1, "[0.01, 100000]"),
     ("agent", "kappa", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("agent", "gamma", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
+    ("agent", "mass", 1e-12, 1e6, 0.0, 1.000001e6, "[1e-12, 1e+06]"),
     ("agent", "time_scale", 1e-6, 1e6, 9.9e-7, 1.000001e6, "[1e-06, 1e+06]"),
-    ("agent", "start_time", -1.0, 1e12, -1.001, 1.000001e12, "[-1, 1e+12]"),
+    ("agent", "start_time", 0.0, 1e12, -1e-9, 1.000001e12, "[0, 1e+12]"),
     ("agent", "peer_timeout", 0.001, 1e6, 0.00099, 1.000001e6, "[0.001, 1e+06]"),
     ("agent", "delay", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("agent", "clock_offset_warn", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
@@ -76,11 +98,12 @@ RANGE_CASES = [
     ("monitor", "rate", 0.01, 1e4, 0.0099, 10000.01, "[0.01, 10000]"),
     ("monitor", "report_rate", 0.01, 1e4, 0.0099, 10000.01, "[0.01, 10000]"),
     ("monitor", "peer_timeout", 0.001, 1e6, 0.00099, 1.000001e6, "[0.001, 1e+06]"),
-    ("monitor", "t_end", 0.0, 1e12, -1e-9, 1.000001e12, "[0, 1e+12]"),
+    ("monitor", "t_end", 1e-12, 1e12, 0.0, 1.000001e12, "[1e-12, 1e+12]"),
 ]
 # (spec, parameter, the allowed values)
 CHOICE_CASES = [
     ("agent", "mode", ("lockstep", "realtime", "bridge")),
+    ("agent", "start", ("now", "control", "at")),
     ("agent", "pose_type", ("pose", "odometry")),
     ("agent", "cmd_type", ("twist", "twist_stamped")),
     ("agent", "command_frame", ("world", "body")),
@@ -171,3 +194,237 @@ def test_polymatch_set_waits_for_every_agent_the_run_records_name():
     # the record survives its JSON line (the status topic carries it so)
     again = RunRecord.from_json(records["agents_4_7"].to_json())
     assert (again.n_agents, again.node) == (8, "/polymatch/agents_4_7")
+
+
+# -- the declared values are the values in use -------------------------------------------------
+
+# what each shipped scene file sets (read off the file: model, integrator, time); stiff_mass asks
+# for `auto`, and its comment names the method that picks: etd2
+SCENE_FILES = {
+    "congruent_triangles": dict(kappa=1.0, gamma=1.0, mass=None, integrator="rkmk4", dt=0.05,
+                                t_end=30.0),
+    "congruent_triangles_second_order": dict(kappa=1.0, gamma=1.0, mass=0.5, integrator="rkmk4",
+                                             dt=0.05, t_end=50.0),
+    "similar_triangles": dict(kappa=1.0, gamma=1.0, mass=0.2, integrator="rkmk4", dt=0.05,
+                              t_end=40.0),
+    "extremes/stiff_mass": dict(kappa=1.5, gamma=2.0, mass=1e-8, integrator="etd2", dt=0.02,
+                                t_end=30.0),
+}
+# every parameter a lockstep agent on congruent_triangles declares, with its value (no
+# placeholder: no 0 for "the scene's", no '' for "none"); rclpy adds use_sim_time and
+# start_type_description_service
+LOCKSTEP_TABLE = {
+    "scene": os.path.join(CONFIG, "congruent_triangles.yaml"), "agent": 0, "agents": [0],
+    "agents_per_process": 1, "mode": "lockstep", "autostart": True, "integrator": "rkmk4",
+    "dt": 0.05, "t_end": 30.0, "rate": 50.0, "kappa": 1.0, "gamma": 1.0, "time_scale": 1.0,
+    "peer_timeout": 1.0, "delay": 0.0, "clock_offset_warn": 0.1, "hold_final": 0.0,
+    "round_timeout": 10.0, "stall_timeout": 300.0, "peers_restart": False,
+    "discovery_timeout": 120.0, "pose_subscribers": 0, "frame_id": "world",
+    "max_linear_speed": 1e6, "max_angular_speed": 1e6, "max_linear_accel": 1e6,
+    "max_angular_accel": 1e6, "pose_timeout": 0.5, "pose_type": "pose", "cmd_type": "twist",
+    "command_frame": "world", "run_id": 0,
+}
+# a realtime agent on congruent_triangles_second_order given gamma:=2.0 and rate:=5.0: no dt (it
+# steps time_scale/rate), the scene's mass, how it starts (start_time: once it started)
+REALTIME_TABLE = dict(
+    {k: v for k, v in LOCKSTEP_TABLE.items() if k != "dt"},
+    scene=os.path.join(CONFIG, "congruent_triangles_second_order.yaml"), mode="realtime",
+    t_end=50.0, gamma=2.0, mass=0.5, rate=5.0, discovery_timeout=30.0, start="now",
+)
+RCLPY_OWN = {"use_sim_time": False, "start_type_description_service": True}
+
+
+def _agent_values(**given):
+    return resolve_agent(check(AGENT, given))
+
+
+def _declared(values):
+    """What a node declares of its resolved values: None is not declared."""
+    return {k: v for k, v in values.items() if v is not None}
+
+
+@pytest.mark.parametrize("scene", sorted(SCENE_FILES))
+@pytest.mark.parametrize("mode", ["lockstep", "realtime", "bridge"])
+def test_agent_parameters_hold_the_scene_values_in_every_mode(scene, mode):
+    values = _agent_values(scene=scene, mode=mode)
+    want = dict(SCENE_FILES[scene], dt=SCENE_FILES[scene]["dt"] if mode == "lockstep" else None)
+    assert {k: values[k] for k in want} == want
+    assert values["scene"] == os.path.join(CONFIG, scene + ".yaml")
+
+
+def test_every_parameter_of_a_lockstep_agent_is_the_value_it_uses():
+    values = _agent_values(scene="congruent_triangles", discovery_timeout=120.0)
+    assert _declared(values) == LOCKSTEP_TABLE
+
+
+def test_every_parameter_of_a_realtime_agent_is_the_value_it_uses_or_was_given():
+    values = _agent_values(scene="congruent_triangles_second_order", mode="realtime", gamma=2.0,
+                           rate=5.0)
+    assert _declared(values) == REALTIME_TABLE
+
+
+# (scene, mode, given, the values then in use)
+OVERRIDES = [
+    ("congruent_triangles_second_order", "realtime",
+     dict(kappa=2.5, gamma=0.5, mass=0.25, integrator="lie_heun", t_end=7.0, rate=20.0),
+     dict(kappa=2.5, gamma=0.5, mass=0.25, integrator="lie_heun", t_end=7.0, rate=20.0,
+          dt=None)),
+    ("congruent_triangles_second_order", "realtime", dict(gamma=0.0),  # (A-1) undamped
+     dict(kappa=1.0, gamma=0.0, mass=0.5)),
+    ("congruent_triangles", "lockstep", dict(integrator="lie_heun", dt=0.01, t_end=2.0),
+     dict(kappa=1.0, gamma=1.0, mass=None, integrator="lie_heun", dt=0.01, t_end=2.0)),
+    ("congruent_triangles", "lockstep", dict(t_end=2.0, dt=5.0), dict(dt=2.0)),  # one step
+    ("congruent_triangles", "bridge", dict(kappa=0.5, rate=10.0),
+     dict(kappa=0.5, gamma=1.0, rate=10.0, dt=None)),
+    ("congruent_triangles", "realtime", dict(), dict(start="now", start_time=None)),
+    ("congruent_triangles", "realtime", dict(start_time=1.7e9),
+     dict(start="at", start_time=1.7e9)),
+    ("congruent_triangles", "bridge", dict(start="control"),
+     dict(start="control", start_time=None)),
+    ("congruent_triangles", "lockstep", dict(agents=[4, 5]), dict(agent=4, agents=[4, 5])),
+    ("congruent_triangles", "lockstep", dict(agent=3), dict(agent=3, agents=[3])),
+    ("congruent_triangles", "lockstep", dict(agent=4, agents=[4, 5]),
+     dict(agent=4, agents=[4, 5])),
+]
+
+
+@pytest.mark.filterwarnings("ignore:dt = 5 is larger than t_end")
+@pytest.mark.parametrize("scene,mode,given,want", OVERRIDES)
+def test_a_given_parameter_is_the_value_in_use(scene, mode, given, want):
+    values = _agent_values(scene=scene, mode=mode, **given)
+    assert {k: values[k] for k in want} == want
+
+
+# (scene, given, the words of the one-line error)
+SECOND = "congruent_triangles_second_order"
+REFUSED = [
+    ("congruent_triangles", dict(kappa=2.0),
+     "parameter 'kappa': realtime and bridge only (lockstep runs the scene's model"),
+    ("congruent_triangles", dict(start="now"), "parameter 'start': realtime and bridge only"),
+    ("congruent_triangles", dict(mode="realtime", dt=0.01), "parameter 'dt': lockstep only"),
+    ("congruent_triangles", dict(mode="realtime", mass=1.0),
+     "parameter 'mass': the scene's model is first order (A-2)"),
+    ("congruent_triangles", dict(mode="realtime", gamma=0.0),
+     "parameter 'gamma': the first-order model (A-2) needs gamma > 0, got 0"),
+    (SECOND, dict(mode="bridge", gamma=0.0, pose_type="odometry"),
+     "parameter 'gamma': mode bridge: a second-order scene needs gamma > 0"),
+    ("congruent_triangles", dict(mode="realtime", start="at"),
+     "parameter 'start': at needs 'start_time'"),
+    ("congruent_triangles", dict(mode="realtime", start="control", start_time=5.0),
+     "parameter 'start_time': a time of t = 0 with start control"),
+    ("congruent_triangles", dict(agent=3, agents=[4, 5]),
+     "parameters 'agent', 'agents': agent 3 is not the first of agents [4, 5]"),
+    ("congruent_triangles", dict(t_end=0.0),
+     "parameter 't_end': 0 is out of range [1e-12, 1e+12]"),
+    ("congruent_triangles", dict(dt=0.0), "parameter 'dt': 0 is out of range [1e-12, 1e+06]"),
+    (SECOND, dict(mode="realtime", mass=0.0),
+     "parameter 'mass': 0 is out of range [1e-12, 1e+06]"),
+]
+
+
+@pytest.mark.parametrize("scene,given,words", REFUSED)
+def test_a_parameter_the_mode_or_model_cannot_take_is_one_line(scene, given, words):
+    with pytest.raises(PolymatchError) as info:
+        _agent_values(scene=scene, **given)
+    text = str(info.value)
+    assert info.value.exit_code == 2 and len(text.splitlines()) == 1, text
+    assert words in text, text
+
+
+def test_monitor_and_robot_parameters_are_the_values_they_use():
+    monitor = resolve_monitor(check(MONITOR, {"scene": "congruent_triangles"}))
+    assert (monitor["scene"], monitor["t_end"]) == (scene_path("congruent_triangles"), 30.0)
+    monitor = resolve_monitor(check(MONITOR, {"scene": "congruent_triangles", "t_end": 4.0}))
+    assert monitor["t_end"] == 4.0
+    robot = resolve_robot(check(ROBOT, {"scene": "congruent_triangles", "agent": 3}))
+    assert (robot["seed"], robot["pose_log"]) == (1003, None)  # no file: not declared
+    robot = resolve_robot(check(ROBOT, {"scene": "congruent_triangles", "agent": 3, "seed": 0}))
+    assert robot["seed"] == 0  # a seed like any other
+
+
+def test_the_gains_are_checked_against_the_model_of_eqs_a1_a2():
+    first = load_scene(scene_path("congruent_triangles")).model
+    second = load_scene(scene_path(SECOND)).model
+    assert check_gains(first, "realtime", {"kappa": 2.0, "mass": None}).kappa == 2.0
+    assert check_gains(second, "realtime", {"gamma": 0.0}).gamma == 0.0  # (A-1) undamped
+    for model, mode, given, words in [
+        (first, "realtime", {"gamma": 0.0}, "needs gamma > 0"),
+        (first, "bridge", {"mass": 1.0}, "first order (A-2)"),
+        (second, "bridge", {"gamma": 0.0}, "mode bridge"),
+    ]:
+        with pytest.raises(ParameterError, match=re.escape(words)):
+            check_gains(model, mode, given)
+
+
+@needs_ros
+def test_a_runtime_gain_is_checked_against_the_model_then_applied_at_the_next_tick():
+    """The set callback of a realtime agent: gamma 0 would divide (A-2) by zero and is refused
+    with the reason; 0.5 is accepted and the next tick's model uses it."""
+    from polymatch_ros.ros.nodes.realtime import RealtimeAgent
+
+    agent = object.__new__(RealtimeAgent)  # the callback and the tick alone, without a node
+    scene = load_scene(scene_path("congruent_triangles"))
+    agent.node = SimpleNamespace(has_parameter=lambda name: True)
+    agent.scene, agent.model, agent.state = scene, scene.model, SimpleNamespace(t=1.0)
+    agent.params, agent.pending = _agent_values(scene="congruent_triangles", mode="realtime"), {}
+    agent.log = SimpleNamespace(warning=lambda text: None, info=lambda text: None)
+    agent.rebuild_system = lambda: None
+    refused = agent._on_set([SimpleNamespace(name="gamma", value=0.0)])
+    assert not refused.successful and "needs gamma > 0, got 0" in refused.reason
+    assert agent.pending == {} and not agent.apply_runtime()
+    assert agent._on_set([SimpleNamespace(name="gamma", value=0.5)]).successful
+    assert agent.model.gamma == 1.0 and agent.apply_runtime()
+    assert (agent.model.gamma, agent.params["gamma"], agent.model.kappa) == (0.5, 0.5, 1.0)
+
+
+PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "support",
+                     "param_probe.py")
+
+
+@needs_ros
+def test_parameters_read_back_what_the_nodes_use_and_a_runtime_set_is_used(ros):
+    """`ros2 param get` through GetParameters: a lockstep agent's every parameter is the value it
+    uses (the scene's kappa, gamma, integrator, dt, t_end); a realtime agent's shows the
+    overrides (gamma, rate) beside the scene's (kappa, mass); the monitor's t_end; a kappa set
+    while running reads back and is the gain in use (the agent's diagnostics); read-only ones
+    and values out of range are refused."""
+    before = time.time()
+    ros.start(node_argv("nodes.agent", "congruent_triangles", agent=0, discovery_timeout=120.0)
+              + ["-r", "__node:=agent_0"], timeout=90, name="lockstep agent")
+    ros.start(node_argv("nodes.agent", SECOND, agent=0, mode="realtime", gamma=2.0, rate=5.0)
+              + ["-r", "__ns:=/second", "-r", "__node:=agent_0"], timeout=90,
+              name="realtime agent")
+    ros.start(node_argv("nodes.monitor", "congruent_triangles", t_end=12.5)
+              + ["-r", "__node:=monitor"], timeout=90, name="monitor")
+    lock, real = "/polymatch/agent_0", "/second/agent_0"
+    probe = ros.start([PY, PROBE, f"get {lock}", f"get {real}", "get /polymatch/monitor",
+                       f"diagnostic {real} gamma 2", f"diagnostic {real} kappa 1",
+                       f"set {real} kappa 3.0", f"get {real} kappa", f"diagnostic {real} kappa 3",
+                       f"set {real} mass 0.0", f"set {real} t_end 5.0", f"set {lock} kappa 3.0",
+                       f"get {real} mass t_end", f"get {lock} kappa",
+                       f"describe {lock} kappa dt agents", f"describe {real} kappa mass t_end"],
+                      timeout=80, name="probe")
+    assert ros.wait(probe, 85) == 0, ros.output(probe)
+    text = ros.output(probe)
+    got = [json.loads(m) for m in re.findall(r"^PARAMS \S+ (.*)$", text, re.M)]
+    assert got[0] == dict(LOCKSTEP_TABLE, **RCLPY_OWN), text
+    start_time = got[1].pop("start_time")
+    assert got[1] == dict(REALTIME_TABLE, **RCLPY_OWN), text
+    assert before < start_time < time.time(), text  # declared once t = 0 was fixed
+    assert got[2] == dict(scene=scene_path("congruent_triangles"), mode="lockstep", rate=10.0,
+                          report_rate=20.0, peer_timeout=1.0, frame_id="world", markers=True,
+                          t_end=12.5, **RCLPY_OWN), text
+    assert got[3:] == [{"kappa": 3.0}, {"mass": 0.5, "t_end": 50.0}, {"kappa": 1.0}], text
+    sets = re.findall(r"^SET (\S+) (\S+) (True|False) ?(.*)$", text, re.M)
+    assert [s[:3] for s in sets] == [(real, "kappa", "True"), (real, "mass", "False"),
+                                     (real, "t_end", "False"), (lock, "kappa", "False")], text
+    assert "read-only" in sets[2][3] and "read-only" in sets[3][3], text
+    described = [json.loads(m) for m in re.findall(r"^DESCRIBE \S+ (.*)$", text, re.M)]
+    assert described == [
+        {"kappa": {"read_only": True, "range": [0.0, 1e6]},  # lockstep: the scene's model
+         "dt": {"read_only": True, "range": [1e-12, 1e6]},
+         "agents": {"read_only": True, "range": None}},
+        {"kappa": {"read_only": False, "range": [0.0, 1e6]},  # realtime: set while running
+         "mass": {"read_only": False, "range": [1e-12, 1e6]},
+         "t_end": {"read_only": True, "range": [1e-12, 1e12]}},
+    ], text

@@ -143,7 +143,7 @@ def test_lifecycle_agent_walks_every_transition_and_steps_only_when_active(ros):
     """A managed agent (autostart off) through lifecycle_msgs ChangeState: unconfigured it has
     no pose topic; configured it has one but is silent; cleanup removes it; active it moves;
     deactivated it holds its pose on the clock; activated again it moves; shutdown ends it."""
-    realtime = dict(mode="realtime", start_time=0.0, rate=20.0, t_end=1000.0, timeout=BOUND)
+    realtime = dict(mode="realtime", start="now", rate=20.0, t_end=1000.0, timeout=BOUND)
     managed = ros.agent(SCENE, 0, autostart=False, **realtime)
     ros.agent(SCENE, 1, **realtime)  # a peer, so that agent 0 has something to match
     node, topic = "/polymatch/agent_0", "/polymatch/agent_0/pose"
@@ -181,7 +181,7 @@ def test_polymatch_set_changes_a_runtime_gain_on_every_agent_in_one_command(ros,
     with open(scene_path(SCENE), encoding="utf-8") as fh:
         two.write_text(fh.read().replace("count: 8", "count: 2"), encoding="utf-8")
     assert load_scene(two).model.n_agents == 2
-    realtime = dict(mode="realtime", start_time=0.0, rate=20.0, t_end=1000.0, timeout=BOUND)
+    realtime = dict(mode="realtime", start="now", rate=20.0, t_end=1000.0, timeout=BOUND)
     agents = [ros.agent(str(two), i, **realtime) for i in range(2)]
     _probe(ros, "pose 0", "pose 1")  # both active and publishing
     setter = ros.start(cli_argv("set", "kappa", "1.5", "--timeout", "30"), timeout=60,

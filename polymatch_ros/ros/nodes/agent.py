@@ -13,9 +13,8 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING
 
-from ...core.errors import ParameterError
 from .. import wire
-from .params import AGENT, RUNTIME, declare
+from .params import AGENT, RUNTIME, check, given_values, pin, resolve_agent
 from .process import ros_main
 
 if TYPE_CHECKING:
@@ -40,19 +39,16 @@ def agent_class(mode: str) -> type[AgentBase]:
 
 def make_agent(argv: list[str] | None = None) -> ManagedAgent:
     """The managed agent of the mode the parameters ask for (checked before any topic is
-    created); its lifecycle node configures and activates itself unless ``autostart`` is off."""
+    created); its lifecycle node configures and activates itself unless ``autostart`` is off.
+
+    Its parameters hold what it uses (``params.resolve_agent``: the scene's gains, integrator,
+    step and end time unless given); in realtime and bridge modes ``RUNTIME`` may be set."""
     from .managed import ManagedAgent, lifecycle_node
 
     node = lifecycle_node("agent", wire.namespace(wire.DEFAULT_ENSEMBLE))
-    mode = declare(node, [p for p in AGENT if p.name == "mode"])["mode"]
-    rest = [p for p in AGENT if p.name != "mode"]
-    params = dict(declare(node, rest, RUNTIME if mode != "lockstep" else ()), mode=mode)
-    if mode == "lockstep" and (params["kappa"] or params["gamma"]):
-        raise ParameterError(
-            "parameters 'kappa', 'gamma': realtime and bridge only (lockstep runs the "
-            "scene's model, to equal the centralised simulation)"
-        )
-    cls = agent_class(mode)
+    params = resolve_agent(check(AGENT, given_values(node, AGENT)))
+    pin(node, AGENT, params, RUNTIME if params["mode"] != "lockstep" else ())
+    cls = agent_class(params["mode"])
     return ManagedAgent(node, lambda n, ex: cls(n, params, ex), params["autostart"])
 
 

@@ -75,15 +75,15 @@ class AgentBase(NodeApp):
     def _configure(self, p: dict[str, Any]) -> None:
         from ...core.scene import load_scene, resolve_scene_path
 
-        scene = load_scene(resolve_scene_path(p["scene"]), {"time.t_end": p["t_end"] or None})
-        local = p["agents"] or [p["agent"]]
+        scene = load_scene(resolve_scene_path(p["scene"]), {"time.t_end": p["t_end"]})
+        local = p["agents"]
         bad = [a for a in local if not 0 <= a < scene.model.n_agents]
         if bad:
             raise ParameterError(
                 f"parameter 'agents': agent {bad[0]} is not in the scene "
                 f"(0..{scene.model.n_agents - 1})"
             )
-        self.plan = plan(scene, p["integrator"] or None, self.step_size(p), distributed=True)
+        self.plan = plan(scene, p["integrator"], self.step_size(p), distributed=True)
         self.scene = scene = prepare(scene, self.plan, distributed=True)
         self.model = scene.model
         self.grp = self.model.rotations
@@ -93,7 +93,7 @@ class AgentBase(NodeApp):
         self.drops = DropCounter(self.log)
         # the state at each step's start: a restarted process resumes from it, and the runner
         # saves it when the run ends early (``checkpoint``)
-        self.checkpoint = CheckpointFile(p["checkpoint"], p["run_id"])
+        self.checkpoint = CheckpointFile(p["checkpoint"] or "", p["run_id"])
         self.control = AgentControl(self.mode, self.on_pause)
         self.rounds = self.steps = self.late_ticks = 0
         self.round_time = 0.0  # wall seconds of the timed rounds (all but ``untimed_rounds``)

@@ -288,7 +288,7 @@ class LockstepAgent(AgentBase):
         return self.paused
 
     def step_size(self, p: dict[str, Any]) -> float | None:
-        return p["dt"] or None
+        return p["dt"]
 
     def time_split(self) -> dict[str, float]:
         ex, timed = self.exchange, self.rounds - self.untimed_rounds

@@ -3,9 +3,10 @@
     ros2 run polymatch_ros agent --ros-args -p scene:=... -p agent:=3 -p autostart:=false
     ros2 lifecycle set /polymatch/agent_3 configure      # and activate, deactivate, ...
 
-- configure: loads and checks the scene and the parameters, and builds the mode's agent (its
-  publishers, subscriptions and services); a bad scene fails the transition, with the reason
-  logged.
+- configure: builds the mode's agent (its publishers, subscriptions and services) from the
+  scene and the parameters, which the process resolved at its start (a scene file that cannot
+  be read is a bad parameter there); what the agent refuses (an agent not in the scene, a
+  scene the mode cannot run) fails the transition, with the reason logged.
 - activate: the agent starts (lockstep: rounds once every peer is matched; realtime and
   bridge: on the ensemble's start); activated again after a deactivate, it resumes.
 - deactivate: the agent pauses (``control.AgentControl``; bridge: one zero command at once).

@@ -47,7 +47,7 @@ from .. import wire
 from .control import EnsembleControl
 from .exchange import DropCounter, LeanReaders, received_at
 from .monitor_output import certificate_status, diagnostics, markers
-from .params import MONITOR, declare
+from .params import MONITOR, declare, resolve_monitor
 from .process import NodeApp, ros_main
 
 if TYPE_CHECKING:
@@ -362,7 +362,7 @@ def make_monitor(argv: list[str] | None = None) -> MonitorNode:
     from rclpy.node import Node
 
     node = Node("monitor", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE))
-    return MonitorNode(node, declare(node, MONITOR))
+    return MonitorNode(node, declare(node, MONITOR, resolve=resolve_monitor))
 
 
 def main(args: list[str] | None = None) -> int:

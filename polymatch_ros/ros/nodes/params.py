@@ -1,34 +1,53 @@
-"""ROS parameters of the agent and the monitor: declared with descriptors and ranges, checked.
+"""ROS parameters of the agent and the monitor: declared with descriptors and ranges, checked,
+and each holding the value the node uses.
 
-``check`` is pure (no ROS): the nodes call it on the declared values before they create
-any publisher or subscription, and the tests call it directly.  A bad value is a
+A node declares its parameters in two steps (``declare``): first provisionally, to read what
+was given (``-p``, ``--params-file``); then, once it has resolved what was not given (the
+scene's gains, step, integrator and end time; the agents it hosts; ...), each with that
+effective value and its final descriptor (type, range, read-only unless changeable while
+running).  So ``ros2 param get`` answers what the node does, never a placeholder; a parameter
+that does not apply (``dt`` outside lockstep, ``mass`` of a first-order model, an optional file
+not given) is not declared at all.
+
+``check`` is pure (no ROS): the nodes call it on the given values before they create any
+publisher or subscription, and the tests call it directly.  A bad value is a
 ``ParameterError`` (one line, exit code 2).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Mapping, Sequence
-from dataclasses import dataclass
+import os
+from collections.abc import Callable, Collection, Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ParameterError
+from ...core.limits import MIN_T_END
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
+    from ...core.model import Model
+
 MODES = ("lockstep", "realtime", "bridge")
 MONITOR_MODES = ("lockstep", "realtime")
+#: how a realtime or bridge agent fixes its t = 0: when it starts, on the ensemble's 'start'
+#: (control topic, ``/polymatch/start``), or at the given ``start_time``
+STARTS = ("now", "control", "at")
 #: changeable while running (``ros2 param set``) in realtime and bridge modes, applied at the
 #: next tick; every other parameter, and all of them in lockstep, are read-only
-RUNTIME = ("kappa", "gamma", "rate", "max_linear_speed", "max_angular_speed", "max_linear_accel",
-           "max_angular_accel")
+RUNTIME = ("kappa", "gamma", "mass", "rate", "max_linear_speed", "max_angular_speed",
+           "max_linear_accel", "max_angular_accel")
+#: the model's gains: the scene's unless given (realtime, bridge); lockstep runs the scene's
+GAINS = ("kappa", "gamma", "mass")
 
 
 @dataclass(frozen=True)
 class Param:
-    """A parameter: default (its type: str, bool, int, float; None = integer array),
-    description, (min, max) bounds or None, allowed string values or None."""
+    """A parameter: its default - a value (str, bool, int, float), or only its type (str, int,
+    float, list = integer array) where the node resolves it (the scene's value, a derived one)
+    or it is optional -, description, (min, max) bounds or None, allowed strings or None."""
 
     name: str
     default: object
@@ -36,16 +55,28 @@ class Param:
     bounds: tuple[float, float] | None = None
     choices: tuple[str, ...] | None = None
 
+    @property
+    def kind(self) -> type:
+        """The parameter's type: bool, int, float, str or list (of integers)."""
+        return self.default if isinstance(self.default, type) else type(self.default)
+
+    @property
+    def fixed(self) -> bool:
+        """True when the default is a value (not resolved by the node)."""
+        return not isinstance(self.default, type)
+
 
 AGENT = (
-    Param("scene", "", "scene file (YAML) or shipped scene name; required"),
+    Param("scene", str, "scene file (YAML) or shipped scene name; required; shown as the file "
+          "read"),
     Param(
         "agent",
-        0,
-        "index of the agent this process hosts (0-based over all groups)",
+        int,
+        "index of the agent this process hosts (0-based over all groups; the first of 'agents' "
+        "when it hosts several; default 0)",
         (0, 1_000_000),
     ),
-    Param("agents", None, "indices of the agents this process hosts (overrides 'agent')"),
+    Param("agents", list, "indices of the agents this process hosts (default: ['agent'])"),
     Param(
         "agents_per_process",
         1,
@@ -55,20 +86,35 @@ AGENT = (
     Param("mode", "lockstep", "lockstep | realtime | bridge", choices=MODES),
     Param("autostart", True, "configure and activate the (lifecycle) agent by itself; false: "
           "wait for the lifecycle transitions (`ros2 lifecycle set`)"),
-    Param("integrator", "", "integrator name ('' = the scene's, see `polymatch integrators`)"),
-    Param("dt", 0.0, "lockstep step size (0 = the scene's)", (0.0, 1e6)),
-    Param("t_end", 0.0, "end time (0 = the scene's)", (0.0, 1e12)),
+    Param("integrator", str, "integrator (see `polymatch integrators`): the scene's unless "
+          "given, by its resolved name (the scene's `auto` names the method it picks)"),
+    Param("dt", float, "lockstep only: step size, the scene's unless given (realtime steps "
+          "time_scale/rate, bridge 1/rate)", (MIN_T_END, 1e6)),
+    Param("t_end", float, "end time: the scene's unless given", (MIN_T_END, 1e12)),
     Param("rate", 50.0, "realtime: steps, bridge: commands per wall-clock second",
           (0.01, 100000.0)),
-    Param("kappa", 0.0, "realtime, bridge: coupling strength (0 = the scene's)", (0.0, 1e6)),
-    Param("gamma", 0.0, "realtime, bridge: damping (0 = the scene's)", (0.0, 1e6)),
+    Param("kappa", float, "coupling strength kappa of (A-1)/(A-2): the scene's unless given "
+          "(realtime, bridge; lockstep runs the scene's model)", (0.0, 1e6)),
+    Param("gamma", float, "damping gamma of (A-1)/(A-2): the scene's unless given (realtime, "
+          "bridge; the first-order model and bridged second-order robots need gamma > 0)",
+          (0.0, 1e6)),
+    Param("mass", float, "second-order model only: mass m of (A-1), the scene's unless given "
+          "(realtime, bridge)", (1e-12, 1e6)),
     Param("time_scale", 1.0, "realtime: simulated seconds per wall-clock second", (1e-6, 1e6)),
     Param(
+        "start",
+        str,
+        "realtime, bridge: t = 0 when this agent starts (now), at the epoch of 'start "
+        "<epoch>' on the control topic (control), or at 'start_time' (at; the default when "
+        "start_time is given, else now)",
+        choices=STARTS,
+    ),
+    Param(
         "start_time",
-        0.0,
-        "realtime: wall-clock time (s since the epoch) of t = 0; 0 = when this "
-        "agent starts; -1 = wait for 'start <epoch>' on the control topic",
-        (-1.0, 1e12),
+        float,
+        "realtime, bridge: wall-clock time (s since the epoch) of t = 0; given with start at, "
+        "else declared once t = 0 is fixed",
+        (0.0, 1e12),
     ),
     Param(
         "peer_timeout",
@@ -119,9 +165,9 @@ AGENT = (
     ),
     Param(
         "checkpoint",
-        "",
+        str,
         "lockstep: file of this process's state at the start of each step, and where a "
-        "restarted process resumes from ('' = none)",
+        "restarted process resumes from (declared when given)",
     ),
     Param("discovery_timeout", 30.0, "seconds to wait until every peer is matched", (0.0, 1e6)),
     Param(
@@ -168,7 +214,8 @@ AGENT = (
 )
 
 MONITOR = (
-    Param("scene", "", "scene file (YAML) or shipped scene name; required"),
+    Param("scene", str, "scene file (YAML) or shipped scene name; required; shown as the file "
+          "read"),
     Param(
         "mode",
         "lockstep",
@@ -193,34 +240,26 @@ MONITOR = (
     ),
     Param("frame_id", "world", "expected frame_id of poses and frame of the markers"),
     Param("markers", True, "publish visualization_msgs/MarkerArray"),
-    Param(
-        "t_end", 0.0, "end time (0 = the scene's); poses stamped later are refused", (0.0, 1e12)
-    ),
+    Param("t_end", float, "end time: the scene's unless given; poses stamped later are refused",
+          (MIN_T_END, 1e12)),
 )
 
 
-def _kind(value: object) -> str:
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, int):
-        return "an integer"
-    if isinstance(value, float):
-        return "a number"
-    if isinstance(value, str):
-        return "a string"
-    return "a list of integers"
+def _kind(kind: type) -> str:
+    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}.get(
+        kind, "a list of integers")
 
 
 def _typed(p: Param, value: Any) -> Any:
     """``value`` as the parameter's type (an integer is a number), or ParameterError."""
-    d = p.default
+    kind = p.kind
     if value is None:
         return None
-    if isinstance(d, bool) or isinstance(d, str):
-        ok = isinstance(value, type(d))
-    elif isinstance(d, int):
+    if kind in (bool, str):
+        ok = isinstance(value, kind)
+    elif kind is int:
         ok = isinstance(value, int) and not isinstance(value, bool)
-    elif isinstance(d, float):
+    elif kind is float:
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         value = float(value) if ok else value
         ok = ok and math.isfinite(value)
@@ -229,7 +268,7 @@ def _typed(p: Param, value: Any) -> Any:
             isinstance(v, int) and not isinstance(v, bool) for v in value
         )
     if not ok:
-        raise ParameterError(f"parameter {p.name!r}: expected {_kind(d)}, got {value!r}")
+        raise ParameterError(f"parameter {p.name!r}: expected {_kind(kind)}, got {value!r}")
     return value
 
 
@@ -241,7 +280,7 @@ def check_value(p: Param, value: Any) -> Any:
             f"parameter {p.name!r}: {value:g} is out of range "
             f"[{p.bounds[0]:g}, {p.bounds[1]:g}]"
         )
-    if p.choices is not None and value not in p.choices:
+    if p.choices is not None and value is not None and value not in p.choices:
         raise ParameterError(
             f"parameter {p.name!r}: expected {' or '.join(p.choices)}, got {value!r}"
         )
@@ -251,26 +290,46 @@ def check_value(p: Param, value: Any) -> Any:
 
 
 def check(spec: Sequence[Param], values: Mapping[str, Any]) -> dict[str, Any]:
-    """Check {name: raw value} against ``spec`` (types, ranges, choices); the typed values."""
+    """Check the given {name: raw value} against ``spec`` (types, ranges, choices): the typed
+    values, a fixed default where none was given, None where the node resolves the value."""
     out = {}
     for p in spec:
-        out[p.name] = check_value(p, values.get(p.name, p.default))
+        out[p.name] = check_value(p, values.get(p.name, p.default if p.fixed else None))
     if "scene" in out and not out["scene"]:
         raise ParameterError("parameter 'scene' is required (a scene file)")
     return out
 
 
-def _descriptor(p: Param, runtime: bool = False) -> Any:
-    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+def check_gains(model: Model, mode: str, values: Mapping[str, Any]) -> Model:
+    """``model`` with the given gains ({kappa, gamma, mass}: each the model's when absent or
+    None), or ParameterError: (A-2) divides by gamma, (A-1) by m, and a bridged second-order
+    robot comes to rest only with damping."""
+    gains = {k: values[k] for k in GAINS if values.get(k) is not None}
+    if "mass" in gains and model.order == 1:
+        raise ParameterError("parameter 'mass': the scene's model is first order (A-2), "
+                             "without a mass; mass is a parameter of the second-order model (A-1)")
+    model = replace(model, **gains)
+    if model.order == 1 and not model.gamma > 0:
+        raise ParameterError(f"parameter 'gamma': the first-order model (A-2) needs gamma > 0, "
+                             f"got {model.gamma:g}")
+    if model.order == 2 and mode == "bridge" and not model.gamma > 0:
+        raise ParameterError("parameter 'gamma': mode bridge: a second-order scene needs gamma "
+                             "> 0 (without damping (A-1) never brings a robot to rest)")
+    return model
 
-    # dynamic typing: `check` gives the one-line error for a wrong type (and takes `t_end:=2`
-    # for a float); the ranges are there for `ros2 param describe`
-    desc = ParameterDescriptor(
-        description=p.text, read_only=not runtime, dynamic_typing=p.default is not None
-    )
+
+def _descriptor(p: Param, runtime: bool = False, provisional: bool = False) -> Any:
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+    from rclpy.parameter import Parameter
+
+    if provisional:  # any type, no range: ``check`` gives the one-line error of a bad value
+        return ParameterDescriptor(description=p.text, dynamic_typing=True)
+    kind = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER, float: Parameter.Type.DOUBLE,
+            str: Parameter.Type.STRING}.get(p.kind, Parameter.Type.INTEGER_ARRAY)
+    desc = ParameterDescriptor(description=p.text, read_only=not runtime, type=kind.value)
     if p.choices:
         desc.additional_constraints = "one of: " + ", ".join(p.choices)
-    if p.bounds is not None and isinstance(p.default, float):
+    if p.bounds is not None and p.kind is float:
         desc.floating_point_range = [
             FloatingPointRange(
                 from_value=float(p.bounds[0]), to_value=float(p.bounds[1]), step=0.0
@@ -283,33 +342,132 @@ def _descriptor(p: Param, runtime: bool = False) -> Any:
     return desc
 
 
-def declare(
-    node: Node, spec: Sequence[Param], runtime: Collection[str] = ()
-) -> dict[str, Any]:
-    """Declare ``spec`` on ``node`` (descriptors, ranges) and return the checked values;
-    the names in ``runtime`` may be set while the node runs (``runtime_params``)."""
-    from rclpy.exceptions import (
-        InvalidParameterTypeException,
-        InvalidParameterValueException,
-        ParameterUninitializedException,
-    )
+def given_values(node: Node, spec: Sequence[Param]) -> dict[str, Any]:
+    """Declare ``spec`` provisionally on ``node`` (any type, no value) and return what was
+    given for it ({name: raw value}; ``-p``, ``--params-file``)."""
+    given = {}
+    for p in spec:
+        node.declare_parameter(p.name, None, _descriptor(p, provisional=True))
+        value = node.get_parameter(p.name).value
+        if value is not None:
+            given[p.name] = list(value) if isinstance(value, (list, tuple)) else value
+    return given
+
+
+def pin(node: Node, spec: Sequence[Param], values: Mapping[str, Any],
+        runtime: Collection[str] = ()) -> None:
+    """Give each provisionally declared parameter its effective value and final descriptor
+    (read-only unless in ``runtime``); one whose value is None does not apply: undeclared."""
     from rclpy.parameter import Parameter
 
-    raw = {}
     for p in spec:
-        initial = Parameter.Type.INTEGER_ARRAY if p.default is None else p.default
-        try:
-            node.declare_parameter(p.name, initial, _descriptor(p, p.name in runtime))
-            raw[p.name] = node.get_parameter(p.name).value
-        except ParameterUninitializedException:
-            raw[p.name] = None
-        except InvalidParameterValueException:
-            lo, hi = p.bounds if p.bounds else (None, None)
-            raise ParameterError(
-                f"parameter {p.name!r}: out of range [{lo:g}, {hi:g}]"
-                if p.bounds
-                else f"parameter {p.name!r}: invalid value"
-            ) from None
-        except InvalidParameterTypeException as exc:
-            raise ParameterError(f"parameter {p.name!r}: {str(exc).splitlines()[0]}") from None
-    return check(spec, raw)
+        value = check_value(p, values.get(p.name))  # a resolved value passes a given's checks
+        if value is None:
+            node.undeclare_parameter(p.name)
+            continue
+        result = node.set_parameters([Parameter(p.name, value=value)])[0]
+        if not result.successful:
+            raise ParameterError(f"parameter {p.name!r}: {result.reason}")
+        node.set_descriptor(p.name, _descriptor(p, p.name in runtime))
+
+
+def declare_resolved(node: Node, p: Param, value: Any) -> None:
+    """Declare ``p`` read-only with ``value`` once the node has fixed it while running (a
+    realtime agent's ``start_time``)."""
+    if not node.has_parameter(p.name):
+        node.declare_parameter(p.name, value, _descriptor(p))
+
+
+Resolver = Callable[[dict[str, Any]], dict[str, Any]]
+
+
+def declare(
+    node: Node, spec: Sequence[Param], runtime: Collection[str] = (),
+    resolve: Resolver | None = None,
+) -> dict[str, Any]:
+    """Declare ``spec`` on ``node`` and return the values the node uses: the given ones
+    (checked), the fixed defaults, and what ``resolve`` makes of the rest (None: the parameter
+    does not apply and is not declared); the names in ``runtime`` may be set while the node
+    runs (``runtime_params``)."""
+    values = check(spec, given_values(node, spec))
+    if resolve is not None:
+        values = resolve(values)
+    pin(node, spec, values, runtime)
+    return values
+
+
+def scene_file(name: str) -> str:
+    """The scene file a 'scene' parameter names (a path, or a shipped scene's name)."""
+    from ...core.scene import resolve_scene_path
+
+    return os.path.abspath(resolve_scene_path(name))
+
+
+def resolve_monitor(values: dict[str, Any]) -> dict[str, Any]:
+    """The monitor's values: the scene file read and its end time unless given."""
+    from ...core.scene import load_scene
+
+    path = scene_file(values["scene"])
+    scene = load_scene(path, {"time.t_end": values["t_end"]})
+    return dict(values, scene=path, t_end=scene.t_end)
+
+
+def resolve_agent(values: dict[str, Any]) -> dict[str, Any]:
+    """The agent's values: the scene file read, its end time, gains, integrator and step unless
+    given, the agents this process hosts, how it starts; ParameterError for a parameter given
+    that the mode does not take, or for gains the model cannot run with."""
+    from ...core.scene import load_scene
+    from ...core.simulate import plan
+
+    v, mode = dict(values), values["mode"]
+    lockstep = mode == "lockstep"
+    _refuse_outside_mode(v, mode)
+    path = scene_file(v["scene"])
+    scene = load_scene(path, {"time.t_end": v["t_end"]})
+    model = check_gains(scene.model, mode, {} if lockstep else v)
+    v.update(scene=path, t_end=scene.t_end, kappa=model.kappa, gamma=model.gamma,
+             mass=model.mass if model.order == 2 else None)
+    v.update(_hosted(v["agent"], v["agents"]))
+    step = v["dt"] if lockstep else v["time_scale"] / v["rate"] if mode == "realtime" else (
+        1.0 / v["rate"])
+    the_plan = plan(replace(scene, model=model), v["integrator"], step, distributed=True)
+    v.update(integrator=the_plan.name, dt=the_plan.dt if lockstep else None)
+    v.update(_start(v["start"], v["start_time"]) if not lockstep else dict(start=None))
+    return v
+
+
+def _refuse_outside_mode(v: Mapping[str, Any], mode: str) -> None:
+    """ParameterError for a given parameter that ``mode`` does not take."""
+    if mode == "lockstep":
+        names = [k for k in (*GAINS, "start", "start_time") if v[k] is not None]
+        why = ("realtime and bridge only (lockstep runs the scene's model, to equal the "
+               "centralised simulation, and starts once every peer is matched)")
+    else:
+        names = ["dt"] if v["dt"] is not None else []
+        why = "lockstep only (" + ("a realtime agent steps time_scale/rate simulated seconds a "
+                                   "tick" if mode == "realtime" else "a bridge agent takes no "
+                                   "step: its robot moves") + ")"
+    if names:
+        plural = "s" if len(names) > 1 else ""
+        raise ParameterError(f"parameter{plural} {', '.join(map(repr, names))}: {why}")
+
+
+def _hosted(agent: int | None, agents: list[int] | None) -> dict[str, Any]:
+    """'agent' and 'agents' of a process: given either, or both when they agree."""
+    if not agents:
+        agents = [0 if agent is None else agent]
+    elif agent is not None and agent != agents[0]:
+        raise ParameterError(f"parameters 'agent', 'agents': agent {agent} is not the first of "
+                             f"agents {agents}")
+    return {"agent": agents[0], "agents": list(agents)}
+
+
+def _start(start: str | None, at: float | None) -> dict[str, Any]:
+    """'start' and 'start_time': at the given time, else now unless given otherwise."""
+    start = start or ("at" if at is not None else "now")
+    if start == "at" and at is None:
+        raise ParameterError("parameter 'start': at needs 'start_time' (the epoch of t = 0)")
+    if start != "at" and at is not None:
+        raise ParameterError(f"parameter 'start_time': a time of t = 0 with start {start}; "
+                             "give start:=at (or leave 'start' out)")
+    return {"start": start, "start_time": at}

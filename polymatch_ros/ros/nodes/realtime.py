@@ -32,7 +32,8 @@ from .. import wire
 from .agent_base import AgentBase, local_state
 from .clock_offset import ClockOffsets
 from .exchange import LeanReaders, MessageInfo, received_at
-from .runtime_params import RuntimeParams
+from .params import declare_resolved
+from .runtime_params import SPEC, RuntimeParams
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor
@@ -221,7 +222,8 @@ class PeerTable:
 
 class RealtimeAgent(RuntimeParams, AgentBase):
     """Steps on a wall-clock timer (``rate`` Hz, ``time_scale`` simulated s per s) with the newest
-    peer poses; starts on the runner's ``start <epoch>`` (start_time -1) or at ``start_time``."""
+    peer poses; starts now, on the runner's ``start <epoch>`` (start control) or at
+    ``start_time``."""
 
     mode = "realtime"
 
@@ -269,17 +271,20 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         return {"cpu": ((end or time.process_time()) - start) / self.rounds * 1e3}
 
     def _start_epoch(self: AgentBase) -> float:
-        """Wall-clock time of t = 0: the runner's 'start', or the start_time parameter."""
-        if self.params["start_time"] >= 0:
-            return self.params["start_time"] or time.time()
+        """Wall-clock time of t = 0 ('start'): now, the runner's 'start', or 'start_time';
+        from then on the start_time parameter holds it."""
+        start = self.params["start"]
         last = 0.0
-        while self.start_epoch is None and not self.stop_requested:
+        while start == "control" and self.start_epoch is None and not self.stop_requested:
             self.spin_once(0.05)
             if time.monotonic() - last > 0.5:  # keep announcing the initial pose
                 self.publish_state()
                 self._maybe_diagnostics(force=True)  # the runner counts agents that are up
                 last = time.monotonic()
-        return self.start_epoch if self.start_epoch is not None else time.time()
+        epoch = {"at": self.params["start_time"], "control": self.start_epoch}.get(start)
+        self.params["start_time"] = epoch = time.time() if epoch is None else epoch
+        declare_resolved(self.node, SPEC["start_time"], epoch)
+        return epoch
 
     def _wait_tick(self, next_tick: float, period: float) -> None:
         """Serve the agent node (control, services, parameters) until the tick is due; the

@@ -34,23 +34,24 @@ import numpy as np
 
 from ...core.command import saturate
 from ...core.errors import ParameterError
-from .params import Param, declare
+from .params import Param, declare, scene_file
 from .process import ros_main
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
 ROBOT = (
-    Param("scene", "", "scene file (YAML) or shipped scene name: the initial pose; required"),
+    Param("scene", str, "scene file (YAML) or shipped scene name: the initial pose; required; "
+          "shown as the file read"),
     Param("agent", 0, "the agent whose initial pose the robot starts at", (0, 1_000_000)),
     Param("rate", 50.0, "integration and pose publishing rate (Hz)", (0.1, 10000.0)),
     Param("lag", 0.1, "actuator time constant (s): v' = (v_cmd - v) / lag (second order: of the "
-          "acceleration); 0 = none", (0.0, 1e3)),
+          "acceleration; 0: it follows the command at once)", (0.0, 1e3)),
     Param("max_linear_speed", 1e6, "actuator linear speed limit (m/s)", (0.0, 1e6)),
     Param("max_angular_speed", 1e6, "actuator angular speed limit (rad/s)", (0.0, 1e6)),
     Param("position_noise", 0.0, "standard deviation of the measured position (m)", (0.0, 1e3)),
     Param("angle_noise", 0.0, "standard deviation of the measured orientation (rad)", (0.0, 1.0)),
-    Param("seed", 0, "noise seed (0 = from the agent index)", (0, 2**31 - 1)),
+    Param("seed", int, "noise seed: 1000 + agent unless given", (0, 2**31 - 1)),
     Param("cmd_timeout", 0.5, "stop when no command came for this long (s)", (0.001, 1e6)),
     Param("pose_type", "pose", "measured_pose is pose (PoseStamped) | odometry (second order)",
           choices=("pose", "odometry")),
@@ -59,8 +60,16 @@ ROBOT = (
     Param("command_frame", "world", "cmd_vel / cmd_accel components in the world | body frame",
           choices=("world", "body")),
     Param("frame_id", "world", "frame_id of the measured pose"),
-    Param("pose_log", "", "file for one line per step: time, true and measured pose ('' = none)"),
+    Param("pose_log", str, "file for one line per step: time, true and measured pose "
+          "(declared when given)"),
 )
+
+
+def resolve_robot(values: dict[str, Any]) -> dict[str, Any]:
+    """The robot's values: the scene file read, the noise seed 1000 + agent unless given."""
+    seed = 1000 + values["agent"] if values["seed"] is None else values["seed"]
+    return dict(values, scene=scene_file(values["scene"]), seed=seed)
+
 
 #: the columns of a ``pose_log`` line (world frame; quaternions x y z w)
 POSE_LOG_COLUMNS = ("wall_time", "x", "y", "z", "qx", "qy", "qz", "qw",
@@ -184,7 +193,7 @@ class RobotNode:
         if self.second_order and params["pose_type"] != "odometry":
             raise ParameterError("robot: a second-order scene publishes its velocity: "
                                  "pose_type:=odometry (nav_msgs/Odometry)")
-        self.rng = np.random.default_rng(params["seed"] or 1000 + params["agent"])
+        self.rng = np.random.default_rng(params["seed"])
         self.command = (np.zeros(3), np.zeros(3), -math.inf)
         pose_qos, cmd_qos = robot_qos()
         self.pose_msg = pose_class(params["pose_type"])
@@ -263,7 +272,7 @@ def make_robot(argv: list[str] | None = None) -> RobotNode:
     from rclpy.node import Node
 
     node = Node("robot", automatically_declare_parameters_from_overrides=False)
-    return RobotNode(node, declare(node, ROBOT))
+    return RobotNode(node, declare(node, ROBOT, resolve=resolve_robot))
 
 
 def main(args: list[str] | None = None) -> int:

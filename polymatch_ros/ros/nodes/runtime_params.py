@@ -1,10 +1,11 @@
 """Parameters changed while an agent runs (``ros2 param set``): checked now, applied next tick.
 
-In realtime and bridge modes ``params.RUNTIME`` (kappa, gamma, rate, speed and acceleration
-limits) may be set while running: a value is checked against its range (``params.check_value``)
-in the set callback - a bad one is rejected with the reason - and applied at the agent's next
-tick, so a tick never mixes old and new gains.  Every other parameter, and all of them in
-lockstep, are declared read-only.
+In realtime and bridge modes ``params.RUNTIME`` (kappa, gamma, mass, rate, speed and
+acceleration limits) may be set while running: a value is checked against its range
+(``params.check_value``) and the gains against the model (``params.check_gains``: gamma > 0
+for (A-2), ...) in the set callback - a bad one is rejected with the reason - and applied at
+the agent's next tick, so a tick never mixes old and new gains.  The parameter then reads the
+new value.  Every other parameter, and all of them in lockstep, are declared read-only.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ParameterError
-from .params import AGENT, RUNTIME, check_value
+from .params import AGENT, GAINS, RUNTIME, check_gains, check_value
 
 if TYPE_CHECKING:
     from rclpy.impl.rcutils_logger import RcutilsLogger
@@ -25,13 +26,13 @@ if TYPE_CHECKING:
     from ...core.scene import Scene
 
 SPEC = {p.name: p for p in AGENT}
+GAINS_SET = frozenset(GAINS)
 
 
 def gains(model: Model, params: dict[str, Any]) -> Model:
-    """``model`` with the kappa and gamma parameters (0 = the scene's value) of (A-1)/(A-2)."""
-    kappa = params["kappa"] or model.kappa
-    gamma = params["gamma"] or model.gamma
-    return replace(model, kappa=kappa, gamma=gamma)
+    """``model`` with the kappa, gamma and mass parameters of (A-1)/(A-2) (the parameters hold
+    the scene's values unless given; a first-order model has no mass parameter)."""
+    return replace(model, **{k: params[k] for k in GAINS if params.get(k) is not None})
 
 
 def validate(changes: Iterable[Parameter]) -> tuple[dict[str, Any] | None, str | None]:
@@ -57,6 +58,7 @@ class RuntimeParams:
     scene: Scene
     model: Model
     params: dict[str, Any]
+    mode: str
     state: State
     pending: dict[str, Any]
 
@@ -70,7 +72,15 @@ class RuntimeParams:
     def _on_set(self, changes: list[Parameter]) -> Any:
         from rcl_interfaces.msg import SetParametersResult
 
+        # a parameter the node declares while running (``start_time``) is not a change
+        changes = [c for c in changes if self.node.has_parameter(c.name)]
         accepted, reason = validate(changes)
+        if accepted is not None and GAINS_SET & set(accepted):
+            try:
+                check_gains(self.scene.model, self.mode, {**self.params, **self.pending,
+                                                          **accepted})
+            except ParameterError as exc:
+                accepted, reason = None, str(exc)
         if accepted is None:
             self.log.warning(f"parameter change rejected: {reason}")
             return SetParametersResult(successful=False, reason=reason)
@@ -84,7 +94,7 @@ class RuntimeParams:
         changed, self.pending = self.pending, {}
         old = {k: self._in_use(k) for k in changed}
         self.params.update(changed)
-        if "kappa" in changed or "gamma" in changed:
+        if GAINS_SET & set(changed):
             self.model = gains(self.scene.model, self.params)
             self.rebuild_system()
         described = ", ".join(f"{k} {old[k]:g} -> {self._in_use(k):g}" for k in changed)
@@ -92,8 +102,8 @@ class RuntimeParams:
         return True
 
     def _in_use(self, name: str) -> Any:
-        """The value in use: the model's gains (0 = the scene's), else the parameter."""
-        return getattr(self.model, name) if name in ("kappa", "gamma") else self.params[name]
+        """The value in use: the model's gains, else the parameter."""
+        return getattr(self.model, name) if name in GAINS else self.params[name]
 
     def rebuild_system(self) -> None:
         raise NotImplementedError
@@ -101,5 +111,7 @@ class RuntimeParams:
     def diagnostic_note(self) -> tuple[str, dict[str, Any]]:
         """The gains in use and the runtime parameters, for the diagnostics."""
         extra = {"kappa": float(self.model.kappa), "gamma": float(self.model.gamma)}
-        extra.update({k: self.params[k] for k in RUNTIME if k not in extra})
+        if self.model.order == 2:
+            extra["mass"] = float(self.model.mass)
+        extra.update({k: self.params[k] for k in RUNTIME if k not in extra and k not in GAINS})
         return "", extra

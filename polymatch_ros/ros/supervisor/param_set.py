@@ -8,8 +8,9 @@ graph and calls each one's ``set_parameters`` service (``rcl_interfaces/srv/SetP
 as ``ros2 param set`` would one at a time.  The value is checked against the parameter's range
 here first (``params.check_value``; a bad one is a one-line error, exit 2, nothing sent);
 each agent checks it again and applies it at its next tick (``runtime_params``).  One line per
-agent node; exit 0 if every one accepted, 2 if one refused (lockstep agents refuse: their
-parameters are read-only), 1 if no agent answered within ``--timeout``.
+agent node, with the value it reads back (``get_parameters``, as ``ros2 param get``); exit 0
+if every one accepted, 2 if one refused (lockstep agents refuse: their parameters are
+read-only), 1 if no agent answered within ``--timeout``.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ Answer = tuple[bool, str] | None
 
 SETTLE_SECONDS = 1.0  # the graph must stay unchanged this long before the calls go out
 RESEND_SECONDS = 2.0  # an answer can be lost (see lifecycle_driver): the same value again
+READ_BACK_SECONDS = 5.0  # for the accepted value as each agent reads it (get_parameters)
 
 
 def checked_value(name: str, text: str) -> float:
@@ -100,6 +102,29 @@ def _not_found(records: dict[str, wire.RunRecord], names: list[str]) -> list[int
     return sorted(set(range(n)) - found)
 
 
+def _ask_all(node: Node, executor: Executor, kind: Any, service: str, request: Any,
+             names: list[str], deadline: float) -> dict[str, Any]:
+    """{node name: its answer to ``request`` on its ``service`` (None: none came)}."""
+    namespace = node.get_namespace()
+    clients = {n: node.create_client(kind, f"{namespace}/{n}/{service}") for n in names}
+    futures: dict[str, tuple[Any, float]] = {}  # name -> (future, sent)
+    answers: dict[str, Any] = dict.fromkeys(names)
+    while time.monotonic() < deadline and any(a is None for a in answers.values()):
+        executor.spin_once(timeout_sec=0.05)
+        for n, client in clients.items():
+            if answers[n] is not None:
+                continue
+            if n in futures and futures[n][0].done():
+                answers[n] = futures[n][0].result()
+            elif n in futures and time.monotonic() - futures[n][1] > RESEND_SECONDS:
+                client.remove_pending_request(futures.pop(n)[0])  # a lost answer: ask again
+            elif n not in futures and client.service_is_ready():
+                futures[n] = (client.call_async(request), time.monotonic())
+    for client in clients.values():
+        node.destroy_client(client)
+    return answers
+
+
 def _call_all(node: Node, executor: Executor, names: list[str], name: str, value: float,
               deadline: float) -> dict[str, Answer]:
     """{node name: (accepted, reason)} of the set_parameters calls (None: no answer)."""
@@ -110,24 +135,21 @@ def _call_all(node: Node, executor: Executor, names: list[str], name: str, value
         name=name,
         value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value),
     )])
-    namespace = node.get_namespace()
-    clients = {n: node.create_client(SetParameters, f"{namespace}/{n}/set_parameters")
-               for n in names}
-    futures: dict[str, tuple[Any, float]] = {}  # name -> (future, sent)
-    answers: dict[str, Answer] = dict.fromkeys(names)
-    while time.monotonic() < deadline and any(a is None for a in answers.values()):
-        executor.spin_once(timeout_sec=0.05)
-        for n, client in clients.items():
-            if answers[n] is not None:
-                continue
-            if n in futures and futures[n][0].done():
-                result = futures[n][0].result().results[0]
-                answers[n] = (result.successful, result.reason)
-            elif n in futures and time.monotonic() - futures[n][1] > RESEND_SECONDS:
-                client.remove_pending_request(futures.pop(n)[0])  # a lost answer: ask again
-            elif n not in futures and client.service_is_ready():
-                futures[n] = (client.call_async(request), time.monotonic())
-    return answers
+    answers = _ask_all(node, executor, SetParameters, "set_parameters", request, names, deadline)
+    return {n: None if a is None else (a.results[0].successful, a.results[0].reason)
+            for n, a in answers.items()}
+
+
+def _read_back(node: Node, executor: Executor, names: list[str], name: str) -> dict[str, Any]:
+    """{node name: the value parameter ``name`` reads now (get_parameters; None: no answer)}."""
+    from rcl_interfaces.srv import GetParameters
+    from rclpy.parameter import parameter_value_to_python
+
+    request = GetParameters.Request(names=[name])
+    answers = _ask_all(node, executor, GetParameters, "get_parameters", request, names,
+                       time.monotonic() + READ_BACK_SECONDS)
+    return {n: None if a is None else parameter_value_to_python(a.values[0])
+            for n, a in answers.items()}
 
 
 def set_parameter(name: str, text: str, ensemble: str, timeout: float) -> int:
@@ -155,7 +177,8 @@ def set_parameter(name: str, text: str, ensemble: str, timeout: float) -> int:
                 f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})"
             )
         answers = _call_all(node, executor, names, name, value, deadline)
-        code = _report(answers, name, value)
+        accepted = [n for n, answer in answers.items() if answer is not None and answer[0]]
+        code = _report(answers, name, _read_back(node, executor, accepted, name))
     finally:
         with teardown_watchdog(exit_code=code):
             executor.shutdown(timeout_sec=1.0)
@@ -165,13 +188,15 @@ def set_parameter(name: str, text: str, ensemble: str, timeout: float) -> int:
     return code
 
 
-def _report(answers: dict[str, Answer], name: str, value: float) -> int:
-    """One line per agent node; the exit code."""
+def _report(answers: dict[str, Answer], name: str, read: dict[str, Any]) -> int:
+    """One line per agent node (an accepted value as the node reads it back); the exit code."""
     for n, answer in answers.items():
         if answer is None:
             print(f"{n}: no answer", flush=True)
+        elif answer[0] and read.get(n) is None:
+            print(f"{n}: {name} accepted, not read back (applied at its next tick)", flush=True)
         elif answer[0]:
-            print(f"{n}: {name} = {value:g} (applied at its next tick)", flush=True)
+            print(f"{n}: {name} = {read[n]:g} (applied at its next tick)", flush=True)
         else:
             print(f"{n}: refused: {answer[1]}", flush=True)
     if any(a is not None and not a[0] for a in answers.values()):

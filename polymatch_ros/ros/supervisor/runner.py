@@ -243,7 +243,7 @@ def _stepping_args(plan: RunPlan) -> list[str]:
             "-p",
             f"time_scale:={timing.time_scale!r}",
             "-p",
-            "start_time:=-1.0",
+            "start:=control",
             "-p",
             f"delay:={timing.delay!r}",
         ]
