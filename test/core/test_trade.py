@@ -159,6 +159,9 @@ def test_flat_model_is_the_papers_a1_a2(order):
     assert np.allclose(got["rot"], w @ o, atol=1e-12)
 
 
+BUDGET = 6.0   # s: far below the full grid, with room for the reference on a loaded machine
+
+
 def test_budget_is_honoured_and_the_grid_trimmed(triangles):
     """A budget far below the full grid: the estimate is said first, the most expensive runs
     are left out or stopped, and the measurement ends within the budget (plus the last
@@ -168,10 +171,10 @@ def test_budget_is_honoured_and_the_grid_trimmed(triangles):
     scene = load_scene(spec)
     said = []
     start = time.perf_counter()
-    result = trade(scene, 1e-6, 4.0, notice=said.append)
+    result = trade(scene, 1e-6, BUDGET, notice=said.append)
     took = time.perf_counter() - start
     assert said and "about" in said[0]
-    assert took < 4.0 + 1.0, took
+    assert took < BUDGET + 1.5, took
     assert result.elapsed <= took
     assert any(r.status.startswith(("not run", "stopped")) for r in result.rows)
     assert result.notes and ("trimmed" in result.notes[0] or "stopped" in result.notes[0])
