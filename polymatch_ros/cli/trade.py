@@ -181,8 +181,12 @@ def cmd_trade(args: argparse.Namespace) -> int:
     out = RunProgress(args.quiet or args.json)
     start = time.monotonic()
     grid_budget, ros_seconds = _budgets(args, scene, out.say)
-    result = trade(scene, args.target_error, max(grid_budget - (time.monotonic() - start), 0.1),
-                   distributed=args.over_ros, notice=out.say, progress=out)
+    left = grid_budget - (time.monotonic() - start)
+    if left <= 0:
+        raise ParameterError(f"--budget {args.budget:g}: spent before the first run; give "
+                             f"--budget a few seconds at least")
+    result = trade(scene, args.target_error, left, distributed=args.over_ros, notice=out.say,
+                   progress=out)
     out.done()
     rate = None
     if args.over_ros:      # the time left, or half the estimate (a rate needs a few rounds)
