@@ -181,7 +181,7 @@ def _winding_panel(ax, ring):
 
 
 def report(name, args, ring, rand, twist):
-    dims = list(args.dims)
+    dims = list(args.dims)[:2] if args.quick else list(args.dims)      # as ``basins._dims``
     rep = Report(name, "Basins of consensus on sparse graphs (`python -m benchmarks basins`)")
     rep.text("First-order model (A-2) with degree-normalised weights, centroids together, "
              "Haar-uniform rotations, seeds 0 .. B-1 per cell; rkmk4 dt 0.5; an ensemble stops "

@@ -7,10 +7,13 @@ change: every sum over k of (A-1)/(A-2) runs over the agent's own ensemble only,
     S_i = sum_{k in ens(i)} O_k,    mean_i = (1/N) sum_{k in ens(i)} xbar_k,
 
 i.e. one sparse product with the block-diagonal matrix kron(I_B, 1 1^T) (the rotation
-group's ``neighbour_fields``, the path of communication graphs).  Torque, centroid force,
-the exact centroid flow of Proposition 2.1 and every stepper are the core's own, so a
-batched run equals B separate ``simulate`` runs to round-off.  The sums are taken once per
-ensemble (a (B, B*N) sparse product with B*N entries) and handed to each row of it.
+group's ``neighbour_fields``, the path of communication graphs).  On a communication graph
+the block-diagonal matrix holds each ensemble's weights p_ik instead (``graphs``), so
+S_i = sum_k p_ik O_k over the agent's own ensemble's graph, still one sparse product.
+Torque, centroid force, the exact centroid flow of Proposition 2.1 and every stepper are
+the core's own, so a batched run equals B separate ``simulate`` runs to round-off.  The
+sums are taken once per ensemble (a (B, B*N) sparse product with B*N entries) and handed
+to each row of it.
 
 Angles (d = 2) take cos and sin from one tangent of the half angle (``HalfAngles``):
 t = tan(theta/2), cos = (1 - t^2)/(1 + t^2), sin = 2t/(1 + t^2): one transcendental per

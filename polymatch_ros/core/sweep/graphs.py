@@ -20,8 +20,12 @@ matrix.
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # scipy is imported where it is used
+    from scipy import sparse
 
 from ..centroids import mode_propagators
 from ..graph import Graph
@@ -64,7 +68,7 @@ class BatchGraphs:
     def directed(self) -> bool:
         return any(g.directed for g in self.graphs)
 
-    def weights(self):
+    def weights(self) -> "sparse.csr_matrix":
         """The block-diagonal (B*N, B*N) sparse matrix of every ensemble's p_ik."""
         import scipy.sparse
         blocks = [self.graphs[w].coupling_weights for w in self.which]
