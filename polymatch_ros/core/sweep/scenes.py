@@ -161,10 +161,11 @@ def ensemble_data(base: dict, seed: int) -> dict:
     from ..graph import build_graph, check_connected
     for draw in range(GRAPH_DRAWS):
         own = dict(spec, random=dict(spec["random"], seed=seed * GRAPH_DRAWS + draw))
+        graph = build_graph(own, "graph", size)          # a bad p is refused here, once
         if spec.get("allow_disconnected"):
             break
         try:
-            check_connected(build_graph(own, "graph", size), "graph")
+            check_connected(graph, "graph")
             break
         except SceneError:
             continue
