@@ -5,7 +5,7 @@ import pytest
 from scipy.sparse import csgraph
 
 from polymatch_ros.core import simulate
-from polymatch_ros.core.errors import ParameterError
+from polymatch_ros.core.errors import ParameterError, SceneError
 from polymatch_ros.core.sweep.run import run_batch
 from polymatch_ros.core.sweep.scenes import Cell, cell_scenes, graph_spec, template
 
@@ -63,6 +63,16 @@ def test_random_graphs_are_drawn_per_ensemble_and_connected():
         assert csgraph.connected_components(m, directed=False)[0] == 1
     fixed = _scenes(Cell(agents=9), {"random": {"p": 0.5, "seed": 4}}, ensembles=3)
     assert len({s.model.groups[0].graph.matrix().toarray().tobytes() for s in fixed}) == 1
+
+
+def test_graphs_a_batch_cannot_match_on_are_refused_naming_the_seed():
+    with pytest.raises(SceneError, match=r"^seed 3: graph \(groups\[0\]\): the graph is "
+                       "disconnected"):
+        _scenes(Cell(agents=10, graph="k_nearest:1"), None)
+    with pytest.raises(ParameterError, match="random p = 0.01 gave no connected graph of 8"):
+        _scenes(Cell(graph="random:0.01"), None)
+    with pytest.raises(SceneError, match=r"graph.random.p: must be <= 1, got 1.5"):
+        _scenes(Cell(graph="random:1.5"), None)
 
 
 def test_graph_spec_text():
