@@ -146,3 +146,37 @@ def test_two_twist_unwinds_through_the_third_dimension_one_twist_stays(d):
             assert _quaternion_class(final) == -1.0
     twisted = result.outcome == "twisted"
     assert list(np.rint(result.ring.turn[twisted])) == ([1, 1, 2, 2] if d == 2 else [1, 1])
+
+
+def _ring_energy_hessian(mats):
+    """Hessian of E = -sum_j tr(O_j^T O_{j+1}) (k = 1; (A-2) on the ring is its gradient flow,
+    up to a constant) in body coordinates O_j exp(hat(x_j)), by central differences."""
+    n, h = 3 * len(mats), 1e-4
+    a, b = np.triu_indices(n)
+    eye = np.eye(n) * h
+    points = np.concatenate([eye[a] + eye[b], eye[a] - eye[b], eye[b] - eye[a],
+                             -eye[a] - eye[b]])
+    o = mats @ Rotation.from_rotvec(points.reshape(-1, 3)).as_matrix().reshape(
+        len(points), len(mats), 3, 3)
+    energy = -np.einsum("pnji,pnji->p", o, np.roll(o, -1, axis=1)).reshape(4, -1)
+    hess = np.zeros((n, n))
+    hess[a, b] = (energy[0] - energy[1] - energy[2] + energy[3]) / (4 * h * h)
+    return np.linalg.eigvalsh(hess + np.triu(hess, 1).T)
+
+
+def test_planar_twists_in_so3_are_saddles_except_the_one_twist():
+    """Why the 2-twist unwinds: at a planar q-twist (step phi = 2 pi q / N) the rotations out
+    of its plane, in the co-rotating wave of p = q/2 turns, lower the energy by
+    2 cos(phi/2) (cos(phi/2) - 1) per site (the linearisation on the guide page), so even
+    twists are saddles; odd q > 1 have the waves (q +- 1)/2, negative for q > 1 and zero for
+    q = 1, whose only other flat directions are the 3 + 3 - 1 global rotations."""
+    n = 16                                  # q <= 3 < N/4: every twist is stable in its plane
+    for q, unstable in ((1, 0), (2, 2), (3, 4)):
+        w = _ring_energy_hessian(twisted_rotations(3, n, q))
+        assert np.sum(w < -1e-5) == unstable and np.sum(np.abs(w) < 1e-5) == 5, (q, w[:6])
+        half = np.pi * q / n
+        if q == 2:
+            assert w[0] == pytest.approx(4 * np.cos(half) * (np.cos(half) - 1), rel=1e-5)
+        if q == 3:
+            expected = 4 * np.cos(half) * (np.cos(half) - np.cos(np.pi / n))
+            assert w[0] == pytest.approx(expected, rel=1e-5)
