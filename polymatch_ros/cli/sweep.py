@@ -192,13 +192,14 @@ def d0_table(results: list[CellResult], bins: int) -> tuple[list[str], list[list
     """(header, rows): matched / ensembles per D0 bin, one row per cell."""
     d0 = np.concatenate([r.initial_rotation for _, _, r in results])
     edges = np.linspace(0.0, max(float(d0.max()), 1e-12), bins + 1)
-    header = ["d", "N", "order"] + [f"D0 {lo:.2f}-{hi:.2f}" for lo, hi in zip(edges, edges[1:])]
+    header = ["d", "N", "order", "graph"] + [f"D0 {lo:.2f}-{hi:.2f}"
+                                            for lo, hi in zip(edges, edges[1:])]
     rows = []
     for label, _, r in results:
         which = np.clip(np.searchsorted(edges, r.initial_rotation, side="right") - 1, 0,
                         bins - 1)
         matched = r.outcome == "matched"
-        rows.append([label["d"], label["N"], label["order"]] +
+        rows.append([label["d"], label["N"], label["order"], label["graph"]] +
                     [f"{int(matched[which == k].sum())}/{int((which == k).sum())}"
                      for k in range(bins)])
     return header, rows
