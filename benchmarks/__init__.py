@@ -8,6 +8,7 @@
     python -m benchmarks lossy        three namespace hosts: realtime error, lockstep rate vs loss
     python -m benchmarks bridge       simulated robots in the loop: error vs pose noise and lag
     python -m benchmarks faults       process deaths: a realtime soak with kills, lockstep resumes
+    python -m benchmarks basins       basins of consensus on rings and random graphs, d = 2, 3, 4
     python -m benchmarks all --out DIR [--only A,B]   every family, one report DIR/report.md
 
 Benchmarks *report* figures (markdown tables on stdout; with ``--out DIR``
@@ -53,6 +54,7 @@ FAMILIES = {
     "longhorizon": "benchmarks.longhorizon",
     "distributed": "benchmarks.distributed",
     "sweep": "benchmarks.sweep",
+    "basins": "benchmarks.basins",
     "graphs": "benchmarks.graphs",
     "lossy": "benchmarks.lossy",
     "trade": "benchmarks.trade",

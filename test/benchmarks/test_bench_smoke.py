@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 #: the families, in report order (stated here, not read from the package)
 FAMILY_NAMES = ["step", "meanfield", "dop853", "precision", "extremes", "longhorizon",
-                "distributed", "sweep", "graphs", "lossy", "trade", "bridge", "realtime",
+                "distributed", "sweep", "basins", "graphs", "lossy", "trade", "bridge", "realtime",
                 "reductions", "faults"]
 
 # headers every family must print
@@ -53,6 +53,8 @@ EXPECTED = {
                "(A-2) alone (no noise, no lag"],
     "sweep": ["| solver", "batch (rkmk8)", "scipy DOP853 loop", "max vertex error",
               "Speed-up (scipy loop / batch"],
+    "basins": ["| N", "stable q (d = 2)", "d = 3 twisted ends", "| p", "var q", "| eps",
+               "Findings (computed from the runs above)"],
 }
 
 # lossy runs ROS ensembles on namespace hosts: even --quick takes about a minute; its tables

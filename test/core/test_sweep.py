@@ -198,6 +198,7 @@ BAD_ARGUMENTS = [  # (arguments, the words of the one error line)
     (["--figure", "/no/such/dir/f.png"],
      "/no/such/dir/f.png: the directory /no/such/dir does not exist"),
     (["--dt", "0"], "argument --dt: must be a positive finite number, got 0"),
+    (["--graph", "ring:x"], "argument --graph: ring takes an integer, got 'x'"),
 ]
 
 
@@ -211,12 +212,17 @@ def test_bad_arguments_exit_2_with_one_line(args, words):
 
 def test_cli_sweep_saves_outcomes(tmp_path):
     out = tmp_path / "sweep.npz"
-    proc = _cli("-B", "3", "--agents", "3,4", "--t-end", "20", "-q", "--save", str(out))
+    proc = _cli("-B", "3", "--agents", "3,4", "--graph", "complete,ring:1", "--normalise",
+                "degree", "--t-end", "20", "-q", "--save", str(out))
     assert proc.returncode == 0, proc.stderr
-    assert "matched" in proc.stdout
+    assert "matched" in proc.stdout and "ring:1" in proc.stdout
     data = np.load(out, allow_pickle=False)
-    assert list(data["N"]) == [3, 3, 3, 4, 4, 4]
-    assert data["outcome"].shape == (6,)
+    assert list(data["N"]) == [3] * 6 + [4] * 6
+    assert list(data["graph"]) == (["complete"] * 3 + ["ring:1"] * 3) * 2
+    assert data["outcome"].shape == (12,)
+    ring = data["graph"] == "ring:1"
+    assert np.all(np.isnan(data["winding"][~ring])) and np.all(data["winding"][ring] % 1 == 0)
+    assert np.all(np.abs(data["loop_class"][ring]) == 1)
 
 
 def test_cli_sweep_with_rkmk8_steps_by_the_sample_interval():

@@ -2,6 +2,8 @@
 
     scenes.py    the ensembles: a template scene, a grid of cells, B seeds per cell
     batch.py     B ensembles as one system (every sum over k runs over the agent's ensemble)
+    graphs.py    their communication graphs: block-diagonal weights, each graph's centroid modes
+    rings.py     twisted states on rings: winding number (d = 2), total turn, loop class in SO(d)
     chart_rk.py  RKMK8, DOP853's 8th-order tableau on a fixed grid, for long batched runs
     run.py       ``run_batch``: integrate, record the matching time, classify the others
 

@@ -7,10 +7,13 @@ change: every sum over k of (A-1)/(A-2) runs over the agent's own ensemble only,
     S_i = sum_{k in ens(i)} O_k,    mean_i = (1/N) sum_{k in ens(i)} xbar_k,
 
 i.e. one sparse product with the block-diagonal matrix kron(I_B, 1 1^T) (the rotation
-group's ``neighbour_fields``, the path of communication graphs).  Torque, centroid force,
-the exact centroid flow of Proposition 2.1 and every stepper are the core's own, so a
-batched run equals B separate ``simulate`` runs to round-off.  The sums are taken once per
-ensemble (a (B, B*N) sparse product with B*N entries) and handed to each row of it.
+group's ``neighbour_fields``, the path of communication graphs).  On a communication graph
+the block-diagonal matrix holds each ensemble's weights p_ik instead (``graphs``), so
+S_i = sum_k p_ik O_k over the agent's own ensemble's graph, still one sparse product.
+Torque, centroid force, the exact centroid flow of Proposition 2.1 and every stepper are
+the core's own, so a batched run equals B separate ``simulate`` runs to round-off.  The
+sums are taken once per ensemble (a (B, B*N) sparse product with B*N entries) and handed
+to each row of it.
 
 Angles (d = 2) take cos and sin from one tangent of the half angle (``HalfAngles``):
 t = tan(theta/2), cos = (1 - t^2)/(1 + t^2), sin = 2t/(1 + t^2): one transcendental per
@@ -28,9 +31,11 @@ from typing import Any
 
 import numpy as np
 
+from ..graph import LocalWeights
 from ..model import Coupling, GroupCoupling, GroupState, Model, State, System
 from ..so.base import Array, RotationGroup
 from ..so.so2 import SO2
+from .graphs import BatchGraphFlow, BatchGraphs
 
 
 class HalfAngles(SO2):
@@ -58,15 +63,24 @@ def batch_rotations(rotations: RotationGroup) -> RotationGroup:
 
 
 class BatchSystem(System):
-    """``System`` for ``ensembles`` stacked copies of one single-group model (module doc)."""
+    """``System`` for ``ensembles`` stacked copies of one single-group model (module doc).
 
-    def __init__(self, model: Model, ensembles: int) -> None:
-        if len(model.groups) != 1 or model.groups[0].graph is not None \
-                or model.groups[0].scales is not None:
-            raise ValueError("a batch stacks congruent single-group ensembles on complete graphs")
+    On a communication graph (``graphs``: every ensemble's, ``core.sweep.graphs``) each
+    row's field is S_i = sum_k p_ik O_k over its own ensemble's graph, one sparse product
+    with the block-diagonal weights; the centroids follow each graph's exact flow
+    (undirected) or are integrated from the same weights (directed), as in ``simulate``.
+    """
+
+    def __init__(self, model: Model, ensembles: int, graphs: BatchGraphs | None = None) -> None:
         group = model.groups[0]
+        if len(model.groups) != 1 or group.scales is not None \
+                or (group.graph is None) != (graphs is None):
+            raise ValueError("a batch stacks congruent single-group ensembles (with their "
+                             "graphs when the model has one)")
         self.n, self.ensembles = group.size, int(ensembles)
-        stacked = replace(model, groups=(replace(group, size=self.n * self.ensembles),))
+        stacked = replace(model, groups=(replace(group, size=self.n * self.ensembles,
+                                                 graph=None),),
+                          centroids="exact" if model.centroids_exact else "integrated")
         super().__init__(replace(stacked, rotations=batch_rotations(model.rotations)))
         self.template = model
         import scipy.sparse  # here: a command refusing its arguments never needs it
@@ -74,16 +88,45 @@ class BatchSystem(System):
         self.sums = scipy.sparse.kron(eye, np.ones((1, self.n)), format="csr")
         self.means = self.sums / self.n
         self.owner = np.repeat(np.arange(self.ensembles), self.n)     # row -> its ensemble
+        self.graphs = graphs
+        self.graph_flow: BatchGraphFlow | None = None
+        if graphs is not None:
+            w = graphs.weights()
+            self.graph_weights = (LocalWeights(w, w, np.asarray(w.sum(axis=1)).ravel()),)
+            if model.centroids_exact:
+                self.graph_flow = BatchGraphFlow(graphs, model.mass, model.gamma, model.kappa)
 
     def couple(self, ensemble: Sequence, first_stage: bool = True) -> Coupling:
         """Per-row mean fields S_i and centroid means of each row's own ensemble."""
         (e,) = ensemble
-        s = self.group.take(self.group.neighbour_fields(e.rot, self.sums), self.owner)
         need_means = first_stage or not self.model.centroids_exact
+        if self.graphs is not None:
+            return Coupling((self._couple_graph_rows(e, need_means),))
+        s = self.group.take(self.group.neighbour_fields(e.rot, self.sums), self.owner)
         if not need_means:
             return Coupling((GroupCoupling(s, self.n),))
         mean_v = (self.means @ e.v)[self.owner] if self.model.order == 2 else None
         return Coupling((GroupCoupling(s, self.n, (self.means @ e.x)[self.owner], mean_v),))
+
+    def _couple_graph_rows(self, e: Any, need_means: bool) -> GroupCoupling:
+        """S_i = sum_k p_ik O_k (one block-diagonal product) and the centroid inputs."""
+        w = self.graph_weights[0]
+        assert w is not None, "a graph batch has weights"
+        out = GroupCoupling(self.group.neighbour_fields(e.rot, w.rot), self.n)
+        if not self.model.centroids_exact:
+            out.neighbour_x = w.p @ e.x
+        elif need_means:
+            out.group_x, out.group_v = e.x, (e.v if self.model.order == 2 else None)
+        return out
+
+    def exact_centroids(self, gi: int, gs: GroupState, coupling: Coupling,
+                        h: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """Prop 2.1's flow: the mean-field form, or each ensemble's graph modes."""
+        if self.graph_flow is None:
+            return super().exact_centroids(gi, gs, coupling, h)
+        c = coupling.groups[gi]
+        assert c is not None and c.group_x is not None, "graph centroids read the group"
+        return self.graph_flow.advance(c.group_x, c.group_v, h)
 
     def row_rates(self, state: State) -> np.ndarray:
         """|W_i| of the first-order field (|torque|/gamma for (A-1)) per row (``stationarity``)."""
@@ -187,17 +230,24 @@ class Equilibrium:
     asymmetry: np.ndarray
 
 
+def stationarity(system: BatchSystem, state: State) -> np.ndarray:
+    """max_i |W_i| per ensemble: the first-order field and (second order) the velocities."""
+    gs = state.all_groups()[0]
+    still = system.row_rates(state)
+    if gs.w is not None:
+        still = np.maximum(still, np.sqrt(system.group.algebra_sq_norm(gs.w)))
+    return still.reshape(-1, system.n).max(axis=1)
+
+
 def equilibrium_measures(system: BatchSystem, state: State) -> Equilibrium:
     """Stationarity, order parameter and pairwise asymmetry of every ensemble of ``state``."""
     n, d = system.n, system.model.dim
     gs = state.all_groups()[0]
     b = len(gs.x) // n
     grp = system.group
-    still = system.row_rates(state)
-    if gs.w is not None:
-        still = np.maximum(still, np.sqrt(grp.algebra_sq_norm(gs.w)))
+    still = stationarity(system, state)
     mats = grp.to_matrices(gs.rot).reshape(b, n, d, d)
     order = np.linalg.norm(mats.mean(axis=1), axis=(1, 2)) / np.sqrt(d)
     rel = np.einsum("bkji,bljm->bklim", mats, mats)
     asym = np.linalg.norm(rel - np.swapaxes(rel, -1, -2), axis=(-2, -1)).max(axis=(1, 2))
-    return Equilibrium(still.reshape(b, n).max(axis=1), order, asym)
+    return Equilibrium(still, order, asym)

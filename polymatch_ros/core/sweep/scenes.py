@@ -1,9 +1,16 @@
 """The ensembles of a sweep: one scene file as template, a grid of cells, B seeds per cell.
 
-A *cell* fixes what one batch shares (d, N, model order, kappa, gamma, m); its ensembles
-are the template scene built with seeds seed, seed + 1, ... (the scene's own random draws),
-optionally with the rotations redrawn at a prescribed initial rotation diameter
-D0 = max_{i,j} |O_i - O_j|_F (Prop 2.2, Thm 4.2) drawn uniformly in a range.
+A *cell* fixes what one batch shares (d, N, model order, kappa, gamma, m, graph); its
+ensembles are the template scene built with seeds seed, seed + 1, ... (the scene's own
+random draws), optionally with the rotations redrawn at a prescribed initial rotation
+diameter D0 = max_{i,j} |O_i - O_j|_F (Prop 2.2, Thm 4.2) drawn uniformly in a range.
+
+A cell's graph is the template's ``graph`` key or a short spec (``graph_spec``):
+``complete``, ``ring:K``, ``k_nearest:K``, ``random:P``; the template's graph options
+(``normalise``) carry over.  A random graph without a seed of its own is drawn anew for
+every ensemble, seeded by the ensemble's seed, and drawn again (at most GRAPH_DRAWS times)
+while it is disconnected unless the graph says ``allow_disconnected: true``: the
+ensembles of such a cell sample connected Erdos-Renyi graphs G(N, p).
 """
 
 import copy
@@ -13,7 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import ParameterError
+from ..errors import ParameterError, SceneError
 from ..limits import DEFAULT_MEMORY
 from ..model import GroupState, State
 from ..scene import Scene, build_scene, resolve_scene_path
@@ -23,6 +30,10 @@ from ..yamlfile import parse_yaml, read_scene_file
 BYTES_PER_ENTRY = 8 * 64
 #: bisection steps on the spread of the rotations (D0 to ~1e-15 relative)
 BISECTION_STEPS = 60
+#: draws of a random graph per ensemble until one is connected
+GRAPH_DRAWS = 1000
+#: the graph kinds a short spec names, with the type of their parameter
+GRAPH_SPECS = {"ring": int, "k_nearest": int, "random": float}
 
 
 @dataclass(frozen=True)
@@ -35,21 +46,58 @@ class Cell:
     kappa: float | None = None
     gamma: float | None = None
     mass: float | None = None
+    graph: str | None = None       # a ``graph_spec`` text
+    normalise: str | None = None   # the graph's weights: "size" (kappa/N) or "degree"
 
-    def label(self, scene: Scene) -> dict:
+    def label(self, scene: Scene, graph: str = "complete") -> dict:
         m = scene.model
         return {"d": m.dim, "N": m.n_agents, "order": m.order, "kappa": m.kappa,
-                "gamma": m.gamma, "mass": m.mass}
+                "gamma": m.gamma, "mass": m.mass, "graph": graph}
+
+
+def graph_text(data: dict) -> str:
+    """A scene file's graph (top level, as ``cell_data`` leaves it) in ``graph_spec`` form."""
+    spec = data.get("graph")
+    if spec is None or spec == "complete":
+        return "complete"
+    if not isinstance(spec, dict):
+        return str(spec)
+    for kind in GRAPH_SPECS:
+        if kind in spec:
+            value = spec[kind]
+            if kind == "random" and isinstance(value, dict):
+                value = value.get("p")
+            return f"{kind}:{value}"
+    return "edges"
+
+
+def graph_spec(text: str) -> str | dict:
+    """``complete`` | ``ring:K`` | ``k_nearest:K`` | ``random:P`` as a scene's ``graph`` value."""
+    if text == "complete":
+        return text
+    kind, _, value = text.partition(":")
+    if kind not in GRAPH_SPECS or not value:
+        raise ParameterError(f"--graph: expected complete, ring:K, k_nearest:K or random:P, "
+                             f"got {text!r}")
+    try:
+        number = GRAPH_SPECS[kind](value)
+    except ValueError:
+        raise ParameterError(f"--graph: {kind} takes "
+                             f"{'an integer' if kind != 'random' else 'a probability'}, "
+                             f"got {value!r}") from None
+    return {kind: {"p": number} if kind == "random" else number}
 
 
 def grid(dims: Iterable[int | None] = (None,), agents: Iterable[int | None] = (None,),
          orders: Iterable[int | None] = (None,), kappas: Iterable[float | None] = (None,),
          gammas: Iterable[float | None] = (None,),
-         masses: Iterable[float | None] = (None,)) -> list[Cell]:
+         masses: Iterable[float | None] = (None,),
+         graphs: Iterable[str | None] = (None,), normalise: str | None = None) -> list[Cell]:
     """Every combination of the given values (first-order cells ignore the masses)."""
     cells: list[Cell] = []
-    for d, n, o, k, g, m in itertools.product(dims, agents, orders, kappas, gammas, masses):
-        cell = Cell(d, n, o, k, g, None if o == 1 else m)
+    for d, n, o, k, g, m, gr in itertools.product(dims, agents, orders, kappas, gammas, masses,
+                                                 graphs):
+        cell = Cell(d, n, o, k, g, None if o == 1 else m, gr, normalise)
         if cell not in cells:
             cells.append(cell)
     return cells
@@ -81,8 +129,50 @@ def cell_data(data: dict, cell: Cell) -> dict:
     if model.get("order", 1) == 1:
         model.pop("mass", None)
         group.pop("velocities", None)
+    own = group.pop("graph", None)            # one group: its graph is the scene's
+    if own is not None:
+        out["graph"] = own
+    if cell.graph is not None:
+        out["graph"] = _with_options(graph_spec(cell.graph), out.get("graph"))
+    if cell.normalise is not None and isinstance(out.get("graph"), dict):
+        out["graph"] = dict(out["graph"], normalise=cell.normalise)   # complete: no weights
     out["model"], out["groups"] = model, [group]
     return out
+
+
+def _with_options(spec: str | dict, template: object) -> str | dict:
+    """A cell's graph with the template graph's ``normalise`` and ``allow_disconnected``."""
+    if not isinstance(spec, dict) or not isinstance(template, dict):
+        return spec
+    return dict(spec, **{k: template[k] for k in ("normalise", "allow_disconnected")
+                         if k in template})
+
+
+def ensemble_data(base: dict, seed: int) -> dict:
+    """One ensemble's scene data: its seed, and its own random graph (module doc)."""
+    spec = base.get("graph")
+    out = dict(base, seed=seed)
+    if not (isinstance(spec, dict) and isinstance(spec.get("random"), dict)
+            and "seed" not in spec["random"]):
+        return out
+    size = base["groups"][0].get("count")
+    if not isinstance(size, int) or isinstance(size, bool) or size < 1:
+        return out                            # build_scene says what is wrong with it
+    from ..graph import build_graph, check_connected
+    for draw in range(GRAPH_DRAWS):
+        own = dict(spec, random=dict(spec["random"], seed=seed * GRAPH_DRAWS + draw))
+        graph = build_graph(own, "graph", size)          # a bad p is refused here, once
+        if spec.get("allow_disconnected"):
+            break
+        try:
+            check_connected(graph, "graph")
+            break
+        except SceneError:
+            continue
+    else:
+        raise ParameterError(f"graph: random p = {spec['random'].get('p')} gave no connected "
+                             f"graph of {size} agents in {GRAPH_DRAWS} draws")
+    return dict(out, graph=own)
 
 
 def cell_scenes(data: dict, cell: Cell, ensembles: int, seed: int,
@@ -93,14 +183,14 @@ def cell_scenes(data: dict, cell: Cell, ensembles: int, seed: int,
     Refuses (ParameterError) a batch whose arrays would need more than ``memory`` bytes.
     """
     base = cell_data(data, cell)
-    first = build_scene(dict(base, seed=seed))
+    first = _ensemble(base, seed)
     n, d = first.model.n_agents, first.model.dim
     need = BYTES_PER_ENTRY * ensembles * n * (d * d + 2 * d)
     if need > memory:
         raise ParameterError(f"{ensembles} ensembles of {n} agents in d = {d} need about "
                              f"{need / 2**30:.3g} GiB, more than the {memory / 2**30:.3g} GiB "
                              "limit; run fewer ensembles per cell")
-    scenes = [first] + [build_scene(dict(base, seed=seed + b)) for b in range(1, ensembles)]
+    scenes = [first] + [_ensemble(base, seed + b) for b in range(1, ensembles)]
     if d0 is None:
         return scenes
     lo, hi = d0
@@ -109,6 +199,17 @@ def cell_scenes(data: dict, cell: Cell, ensembles: int, seed: int,
     mats = rotations_at_diameter(scenes[0].model.dim, scenes[0].model.n_agents, targets,
                                  [seed + b for b in range(ensembles)])
     return [with_rotations(s, m) for s, m in zip(scenes, mats)]
+
+
+def _ensemble(base: dict, seed: int) -> Scene:
+    """The ensemble of one seed; a graph it cannot match on is refused with the seed named."""
+    try:
+        return build_scene(ensemble_data(base, seed))
+    except SceneError as exc:
+        if "disconnected" not in str(exc):
+            raise
+        raise SceneError(f"seed {seed}: {exc} (every ensemble's graph must be connected, or "
+                         "the scene's graph must say allow_disconnected: true)") from None
 
 
 def with_rotations(scene: Scene, mats: np.ndarray) -> Scene:
