@@ -189,6 +189,8 @@ BAD_ARGUMENTS = [  # (arguments, the words of the one error line)
     (["--integrator", "nope"], "unknown integrator 'nope'; known: "),
     (["no_such_scene"], "no_such_scene: no such scene file"),
     (["mixed_triangles_tetrahedra"], "a sweep takes a scene with exactly one group"),
+    (["radio_connected"], "a sweep takes fixed graphs (complete, ring, k_nearest, random, edges), "
+                          "not a proximity graph"),
     (["--order", "3"], "model.order: must be 1 (A-2) or 2 (A-1), got 3"),
     (["--order", "2", "--mass", "0"], "model.mass: the second-order model needs m > 0, got 0.0"),
     (["-B", "100000", "--agents", "5000"],

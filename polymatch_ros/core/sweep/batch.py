@@ -112,7 +112,7 @@ class BatchSystem(System):
         """S_i = sum_k p_ik O_k (one block-diagonal product) and the centroid inputs."""
         w = self.graph_weights[0]
         assert w is not None, "a graph batch has weights"
-        out = GroupCoupling(self.group.neighbour_fields(e.rot, w.rot), self.n)
+        out = GroupCoupling(self.group.neighbour_fields(e.rot, w.rot), self.n, row_sums=w.row_sums)
         if not self.model.centroids_exact:
             out.neighbour_x = w.p @ e.x
         elif need_means:

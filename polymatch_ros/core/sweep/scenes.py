@@ -118,6 +118,11 @@ def cell_data(data: dict, cell: Cell) -> dict:
     groups = out.get("groups")
     if not isinstance(groups, list) or len(groups) != 1 or not isinstance(groups[0], dict):
         raise ParameterError("a sweep takes a scene with exactly one group")
+    graph = out.get("graph", groups[0].get("graph"))
+    if isinstance(graph, dict) and "radius" in graph:
+        raise ParameterError("a sweep takes fixed graphs (complete, ring, k_nearest, random, "
+                             "edges), not a proximity graph ({radius: R}): its edges change "
+                             "with the state; run it with `polymatch simulate`")
     group = dict(groups[0])
     if cell.agents is not None:
         group["count"] = cell.agents
