@@ -9,7 +9,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from core_testlib import brute_matching_diameter, rot_matrices, skew_matrices
+from core_testlib import (
+    agents_of_one_row,
+    brute_matching_diameter,
+    rot_matrices,
+    skew_matrices,
+)
 from scipy import sparse
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
@@ -172,38 +177,20 @@ def lockstep(sc, method, h, steps):
     System.sources names (everything else left blank), as the ROS agents will be."""
     model, grp = sc.model, sc.model.rotations
     n = model.groups[0].size
-    systems = [System(model, [[i]]) for i in range(n)]
-    g0 = sc.initial.groups[0]
-    states = [State(0.0, (GroupState(g0.x[[i]], grp.take(g0.rot, [i]),
-                                     None if g0.v is None else g0.v[[i]],
-                                     None if g0.w is None else grp.algebra_take(g0.w, [i])),))
-              for i in range(n)]
-    for _ in range(steps):
-        gens = [get_method(method).step(s, st, h) for s, st in zip(systems, states)]
-        requests = [next(g) for g in gens]
-        done = [None] * n
-        while any(d is None for d in done):
-            rows = [r.stage.groups[0] for r in requests]
-            blank_rot = grp.identity(n)
-            for i, (gen, req) in enumerate(zip(gens, requests)):
-                if done[i] is not None:
-                    continue
-                need = systems[i].sources(0, i, req.boundary)
-                e = GroupState(np.full((n, model.dim), np.nan), blank_rot.copy(),
-                               np.full((n, model.dim), np.nan))
-                for f, who in need.items():
-                    for k in list(who) + [i]:
-                        if f == "rot":
-                            grp.put(e.rot, [k], rows[k].rot)
-                        else:
-                            getattr(e, f)[k] = getattr(rows[k], f)[0]
-                e.x, e.v = np.nan_to_num(e.x), np.nan_to_num(e.v)
-                try:
-                    requests[i] = gen.send((e,))
-                except StopIteration as stop:
-                    done[i] = stop.value
-        states = [State(d.t, d.groups) for d in done]
-    return states
+
+    def sources_only(i, system, req, rows):
+        e = GroupState(np.full((n, model.dim), np.nan), grp.identity(n),
+                       np.full((n, model.dim), np.nan))
+        for f, who in system.sources(0, i, req.boundary).items():
+            for k in list(who) + [i]:
+                if f == "rot":
+                    grp.put(e.rot, [k], rows[k].rot)
+                else:
+                    getattr(e, f)[k] = getattr(rows[k], f)[0]
+        e.x, e.v = np.nan_to_num(e.x), np.nan_to_num(e.v)
+        return e
+
+    return agents_of_one_row(sc, method, h, steps, sources_only)
 
 
 @pytest.mark.parametrize("order, method, centroids", [

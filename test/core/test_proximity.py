@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 import pytest
-from core_testlib import rot_matrices
+from core_testlib import agents_of_one_row, rot_matrices
 from scipy.sparse import csgraph
 from scipy.spatial.distance import cdist, pdist, squareform
 
@@ -206,28 +206,12 @@ def one_row_agents(sc, method, h, steps):
     systems = [System(model, [[i]]) for i in range(n)]
     assert all(set(systems[0].sources(0, 0, first)["x"]) == set(range(1, n))
                for first in (True, False))                    # any peer may come into range
-    g0 = sc.initial.groups[0]
-    states = [State(0.0, (GroupState(g0.x[[i]], grp.take(g0.rot, [i]),
-                                     None if g0.v is None else g0.v[[i]],
-                                     None if g0.w is None else grp.algebra_take(g0.w, [i])),))
-              for i in range(n)]
-    for _ in range(steps):
-        gens = [get_method(method).step(s, st, h) for s, st in zip(systems, states)]
-        requests = [next(g) for g in gens]
-        done = [None] * n
-        while any(d is None for d in done):
-            rows = [r.stage.groups[0] for r in requests]
-            e = GroupState(np.concatenate([r.x for r in rows]),
-                           grp.concat([r.rot for r in rows]),
-                           None if rows[0].v is None else np.concatenate([r.v for r in rows]))
-            for i, gen in enumerate(gens):
-                if done[i] is None:
-                    try:
-                        requests[i] = gen.send((e,))
-                    except StopIteration as stop:
-                        done[i] = stop.value
-        states = [State(d.t, d.groups) for d in done]
-    return states
+
+    def every_peer(i, system, req, rows):
+        return GroupState(np.concatenate([r.x for r in rows]), grp.concat([r.rot for r in rows]),
+                          None if rows[0].v is None else np.concatenate([r.v for r in rows]))
+
+    return agents_of_one_row(sc, method, h, steps, every_peer)
 
 
 @pytest.mark.parametrize("order, method", [(1, "rkmk4"), (2, "rkmk4"), (2, "etd2")])

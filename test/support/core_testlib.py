@@ -138,3 +138,36 @@ def make_scene(dim, order=1, *, count=4, t_end=1.0, method="rkmk4", dt=0.01, **k
     (``scene_data``'s arguments) integrated by ``method`` at ``dt``."""
     return load_scene(scene_data(dim, order, count=count, t_end=t_end, group_name="g0",
                                  integrator={"method": method, "dt": dt}, **kw))
+
+
+def agents_of_one_row(sc, method, h, steps, ensemble_for):
+    """Every agent a System of its own row (as each lockstep agent is), stepped ``steps`` times
+    by ``method``; at each stage agent i is answered with the one-group ensemble
+    ``ensemble_for(i, system_i, request_i, rows)`` (``rows``: every agent's stage group state).
+    Returns every agent's final state."""
+    from polymatch_ros.core.integrators import get_method
+    from polymatch_ros.core.model import GroupState, State, System
+
+    model, grp = sc.model, sc.model.rotations
+    n = model.groups[0].size
+    systems = [System(model, [[i]]) for i in range(n)]
+    g0 = sc.initial.groups[0]
+    states = [State(0.0, (GroupState(g0.x[[i]], grp.take(g0.rot, [i]),
+                                     None if g0.v is None else g0.v[[i]],
+                                     None if g0.w is None else grp.algebra_take(g0.w, [i])),))
+              for i in range(n)]
+    for _ in range(steps):
+        gens = [get_method(method).step(s, st, h) for s, st in zip(systems, states)]
+        requests = [next(g) for g in gens]
+        done = [None] * n
+        while any(d is None for d in done):
+            rows = [r.stage.groups[0] for r in requests]
+            for i, gen in enumerate(gens):
+                if done[i] is None:
+                    try:
+                        requests[i] = gen.send((ensemble_for(i, systems[i], requests[i],
+                                                             rows),))
+                    except StopIteration as stop:
+                        done[i] = stop.value
+        states = [State(d.t, d.groups) for d in done]
+    return states
