@@ -85,14 +85,15 @@ def test_a_second_run_of_the_same_ensemble_refuses_before_it_starts_a_process(ro
 
     from ros_harness import cli_argv
 
-    first = ros.start(cli_argv("run", scene_path("congruent_triangles"), "--timeout", "150"),
-                      timeout=170, name="first")
+    # four agents a process: the names that collide are the runner's and the monitor's
+    first = ros.start(cli_argv("run", scene_path("congruent_triangles"), "-k", "4",
+                               "--timeout", "150"), timeout=170, name="first")
     deadline = time.monotonic() + 90
     while "t = " not in ros.output(first) and time.monotonic() < deadline:
         time.sleep(0.2)  # its agents are up once it shows progress
     assert first.poll() is None and "t = " in ros.output(first), ros.output(first)[-2000:]
-    second = ros.start(cli_argv("run", scene_path("congruent_triangles"), "--timeout", "60"),
-                       timeout=80, name="second")
+    second = ros.start(cli_argv("run", scene_path("congruent_triangles"), "-k", "4",
+                                "--timeout", "60"), timeout=80, name="second")
     assert ros.wait(second, 90) == 1, ros.output(second)
     errors = [line for line in ros.output(second).splitlines() if "error" in line]
     assert len(errors) == 1 and errors[0].startswith(
