@@ -12,7 +12,9 @@ Markers follow the folders, so ``pytest -m "not ros and not hosts" test`` runs t
 ``ros`` gives a test its own loopback-only ROS world (support/ros_harness.py).
 """
 
+import collections
 import compileall
+import os
 import pathlib
 import sys
 
@@ -22,7 +24,7 @@ HERE = pathlib.Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE / "support"))
 sys.path.insert(0, str(HERE.parent))        # benchmarks/, beside the package
 
-from ros_harness import ros  # noqa: E402, F401
+from ros_harness import ROS_SLOTS, ros  # noqa: E402, F401
 
 collect_ignore = ["support"]
 
@@ -36,6 +38,24 @@ def pytest_configure(config):
     if not hasattr(config, "workerinput"):  # the controller, or a run without xdist
         for folder in COMPILED:
             compileall.compile_dir(HERE.parent / folder, quiet=1)
+
+
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto`` (pytest.ini): a worker per core, and ``ROS_SLOTS`` more when ROS tests may
+    run (they mostly wait on their processes); ``-m "not ros and not hosts"`` gets the cores."""
+    cores = len(os.sched_getaffinity(0))
+    return cores + (ROS_SLOTS if _may_select(config, "ros") or _may_select(config, "hosts")
+                    else 0)
+
+
+def _may_select(config, marker):
+    """Whether the ``-m`` expression accepts a test marked ``marker`` only (True if unsure)."""
+    expression = config.getoption("markexpr") or "True"
+    try:
+        return bool(eval(expression, {"__builtins__": {}},  # noqa: S307 -- and/or/not of names
+                         collections.defaultdict(bool, {marker: True})))
+    except Exception:  # noqa: BLE001 -- pytest's richer syntax (marker(arg=...)): assume so
+        return True
 
 
 FOLDER_MARKERS = {"ros": ("ros",), "hosts": ("hosts",), "benchmarks": ("ros", "slow")}

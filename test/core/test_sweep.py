@@ -1,10 +1,10 @@
 """Sweeps (core.batch, core.sweep): a batch equals separate simulate runs; Theorem 4.2; CLI."""
 
-import subprocess
-import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from input_fuzz import run_main
 
 from polymatch_ros.core import METHODS, simulate
 from polymatch_ros.core.rk import RKMK
@@ -174,8 +174,10 @@ def test_antipodal_and_twisted_end_states_are_classified():
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "polymatch_ros.cli", "sweep", *args],
-                          capture_output=True, text=True, timeout=120)
+    """`polymatch sweep ARGS` in this process (the console script's own path is tested in
+    test_extremes and test_input_contract): its exit code, stdout and stderr."""
+    code, out, err = run_main(["sweep", *map(str, args)], seconds=60)
+    return SimpleNamespace(returncode=code, stdout=out, stderr=err)
 
 
 BAD_ARGUMENTS = [  # (arguments, the words of the one error line)
