@@ -71,6 +71,9 @@ class PeerTable:
         self.latest: dict[int, SimpleNamespace] = {}  # agent -> (t, x, rot, v, heard)
         self.silent: set[int] = set()
         self.in_range_count: int | None = None  # proximity graphs: peers heard at the last tick
+        # the groups on a proximity graph (edges by range): only these filter peers each tick
+        self.radio_groups = tuple(gi for gi, g in enumerate(self.model.groups)
+                                  if g.graph is not None and g.graph.dynamic)
         dim = self.model.dim
         self.readers = LeanReaders(node, "_peers")
         # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
@@ -180,11 +183,13 @@ class PeerTable:
     def in_range(self, alive: list[int], state: State) -> list[int]:
         """The peers a radio hears: on a proximity graph those of ``alive`` within R of one of
         this process's agents (``state``) in their latest poses; every other peer as it is."""
+        if not self.radio_groups:
+            return alive
         model, keep = self.model, set(alive)
         radio = False
-        for gi, g in enumerate(model.groups):
-            gs = state.groups[gi]
-            if g.graph is None or not g.graph.dynamic or gs is None:
+        for gi in self.radio_groups:
+            g, gs = model.groups[gi], state.groups[gi]
+            if gs is None:
                 continue
             radio = True
             peers = [a for a in alive if self.layout.owner[a][0] == gi]
