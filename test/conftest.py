@@ -14,8 +14,10 @@ Markers follow the folders, so ``pytest -m "not ros and not hosts" test`` runs t
 
 import collections
 import compileall
+import itertools
 import os
 import pathlib
+import re
 import sys
 
 import pytest
@@ -32,6 +34,9 @@ collect_ignore = ["support"]
 # and where PYTHONDONTWRITEBYTECODE is set no process caches what it compiles, so each of the
 # suite's ~1,500 ROS processes compiled the package anew (0.2 s of CPU each on these machines).
 COMPILED = ("polymatch_ros", "benchmarks", "test/support")
+# The test modules themselves, as pytest rewrites their asserts, are cached the same way: 6 s of
+# each worker's collection on the second run (pytest writes them only where this is False).
+sys.dont_write_bytecode = False
 
 
 def pytest_configure(config):
@@ -40,22 +45,42 @@ def pytest_configure(config):
             compileall.compile_dir(HERE.parent / folder, quiet=1)
 
 
+@pytest.hookimpl(optionalhook=True)  # xdist's hook: a run with -p no:xdist has no such hook
 def pytest_xdist_auto_num_workers(config):
     """``-n auto`` (pytest.ini): a worker per core, and ``ROS_SLOTS`` more when ROS tests may
     run (they mostly wait on their processes); ``-m "not ros and not hosts"`` gets the cores."""
     cores = len(os.sched_getaffinity(0))
-    return cores + (ROS_SLOTS if _may_select(config, "ros") or _may_select(config, "hosts")
+    return cores + (ROS_SLOTS if _may_select(config, ("ros",)) or _may_select(config, ("hosts",))
                     else 0)
 
 
-def _may_select(config, marker):
-    """Whether the ``-m`` expression accepts a test marked ``marker`` only (True if unsure)."""
+def _may_select(config, markers):
+    """Whether the ``-m`` expression accepts some test that has ``markers``, whatever other
+    markers it has (every assignment of the expression's other names is tried; True if
+    unsure)."""
     expression = config.getoption("markexpr") or "True"
+    others = sorted(set(re.findall(r"[A-Za-z_]\w*", expression)) - KEYWORDS - set(markers))
+    if len(others) > 8:
+        return True
     try:
-        return bool(eval(expression, {"__builtins__": {}},  # noqa: S307 -- and/or/not of names
-                         collections.defaultdict(bool, {marker: True})))
+        return any(
+            eval(expression, {"__builtins__": {}},  # noqa: S307 -- and/or/not of names
+                 collections.defaultdict(bool, {**dict.fromkeys(markers, True),
+                                                **dict(zip(others, values))}))
+            for values in itertools.product((False, True), repeat=len(others)))
     except Exception:  # noqa: BLE001 -- pytest's richer syntax (marker(arg=...)): assume so
         return True
+
+
+KEYWORDS = {"and", "or", "not", "True", "False"}
+
+
+def pytest_ignore_collect(collection_path, config):
+    """Folders whose every test ``-m`` leaves out are not even imported (``FOLDER_MARKERS``)."""
+    parts = collection_path.resolve().relative_to(HERE).parts if collection_path.resolve(
+    ).is_relative_to(HERE) else ()
+    markers = FOLDER_MARKERS.get(parts[0], ()) if parts else ()
+    return True if markers and not _may_select(config, markers) else None
 
 
 FOLDER_MARKERS = {"ros": ("ros",), "hosts": ("hosts",), "benchmarks": ("ros", "slow")}

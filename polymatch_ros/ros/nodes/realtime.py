@@ -71,9 +71,9 @@ class PeerTable:
         self.latest: dict[int, SimpleNamespace] = {}  # agent -> (t, x, rot, v, heard)
         self.silent: set[int] = set()
         self.in_range_count: int | None = None  # proximity graphs: peers heard at the last tick
-        # the groups on a proximity graph (edges by range): only these filter peers each tick
-        self.radio_groups = tuple(gi for gi, g in enumerate(self.model.groups)
-                                  if g.graph is not None and g.graph.dynamic)
+        # group -> radio range R, for the groups on a proximity graph: only these filter peers
+        self.radio_ranges = {gi: g.graph.radius for gi, g in enumerate(self.model.groups)
+                             if g.graph is not None and g.graph.dynamic}
         dim = self.model.dim
         self.readers = LeanReaders(node, "_peers")
         # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
@@ -183,19 +183,19 @@ class PeerTable:
     def in_range(self, alive: list[int], state: State) -> list[int]:
         """The peers a radio hears: on a proximity graph those of ``alive`` within R of one of
         this process's agents (``state``) in their latest poses; every other peer as it is."""
-        if not self.radio_groups:
+        if not self.radio_ranges:
             return alive
-        model, keep = self.model, set(alive)
+        keep = set(alive)
         radio = False
-        for gi in self.radio_groups:
-            g, gs = model.groups[gi], state.groups[gi]
+        for gi, radius in self.radio_ranges.items():
+            gs = state.groups[gi]
             if gs is None:
                 continue
             radio = True
             peers = [a for a in alive if self.layout.owner[a][0] == gi]
             if peers:
                 xs = np.array([self.latest[a].x for a in peers])
-                near = proximity.in_range(gs.x, xs, g.graph.radius)
+                near = proximity.in_range(gs.x, xs, radius)
                 keep -= {a for a, n in zip(peers, near) if not n}
         out = [a for a in alive if a in keep]
         if radio:
