@@ -1,4 +1,5 @@
-"""A host that dies and comes back, across three network-namespace hosts.
+"""A host that dies and comes back, and a lockstep agent killed on a non-lead host, across
+three network-namespace hosts.
 
 Realtime, 12 agents 4/4/4: host 1's runner and its agents are killed (SIGKILL, the whole
 process tree) mid-run. The other hosts' agents keep running (the monitor on host 2 reports the
@@ -11,6 +12,7 @@ the root namespace must see no DDS packet.
 
 import contextlib
 import os
+import re
 import signal
 import sys
 import time
@@ -21,6 +23,7 @@ from host_runs import (
     PEER_TIMEOUT,
     REALTIME_SCENE,
     TIME_SCALE,
+    check_lockstep_on_hosts,
     realtime_argvs,
     run_on_hosts,
     saved_diameter,
@@ -28,9 +31,9 @@ from host_runs import (
     three_hosts,
     wait_for_record,
 )
-from ros_harness import needs_ros
+from ros_harness import needs_ros, scene_path
 
-from benchmarks.hosts.runs import descendants, scene_with
+from benchmarks.hosts.runs import argv_of, descendants, lockstep_argvs, node_name, scene_with
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.ros.supervisor import discovery
 
@@ -107,3 +110,38 @@ def test_realtime_host_killed_then_run_again_rejoins_and_matches(net, tmp_path):
     assert root.matched() == 0, "the root namespace's interfaces saw DDS packets"
     print(f"\nrealtime, {AGENTS} agents on 3 hosts, h{KILLED_HOST} killed and run again: "
           f"{time.monotonic() - started:.1f} s")
+
+
+LOCKSTEP_SCENE = "mixed_triangles_tetrahedra"     # 12 agents: 4/4/4, one process a host
+LOCKSTEP_T_END = 3.0
+PROGRESS = re.compile(r"^t = +(\S+) /", re.M)
+RESTARTED = re.compile(r"^  agents_4_7 \(pid (\d+)\) killed by SIGKILL at t = \S+; restarted "
+                       r"after \S+ s as pid \d+, back after \S+ s", re.M)
+
+
+def test_lockstep_agent_killed_on_a_non_lead_host_resumes_exactly_theorem_4_2(net, tmp_path):
+    """Lockstep, 12 agents 4/4/4: SIGKILL of host 1's agent process mid-run. Host 1's runner
+    restarts it, it resumes from its checkpoint (its peers on the other hosts keep the rounds
+    it needs), and the lead's summary and saved poses equal the centralised run to 1e-9."""
+    out = tmp_path / "final.npz"
+    argvs = lockstep_argvs(LOCKSTEP_SCENE, AGENTS, out, t_end=LOCKSTEP_T_END, timeout=TIMEOUT)
+
+    def during(procs, started, env):
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline:
+            shown = PROGRESS.findall(procs.output(started[2]))
+            if shown and float(shown[-1]) >= 0.3 * LOCKSTEP_T_END:
+                break
+            assert all(p.poll() is None for p in started), procs.output(started[2])[-3000:]
+            time.sleep(0.1)
+        victims = [pid for pid in descendants(started[KILLED_HOST].pid)
+                   if node_name(argv_of(pid)) == "agents_4_7"]
+        assert len(victims) == 1, procs.output(started[KILLED_HOST])[-3000:]
+        os.kill(victims[0], signal.SIGKILL)
+        return victims[0]
+
+    _, texts, root, victim = run_on_hosts(net, tmp_path, argvs, during, seconds=TIMEOUT)
+    restarted = RESTARTED.search(texts[KILLED_HOST])
+    assert restarted and int(restarted.group(1)) == victim, texts[KILLED_HOST][-3000:]
+    check_lockstep_on_hosts(scene_path(LOCKSTEP_SCENE), texts, out, AGENTS)
+    assert root.matched() == 0, "the root namespace's interfaces saw DDS packets"
