@@ -145,6 +145,25 @@ def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_p
     assert len(run_records(lines)) >= 2  # the run records are still readable around them
 
 
+def test_bridge_run_survives_a_killed_agent_a_hung_agent_and_a_killed_monitor(ros):
+    """Bridge, 8 robots: SIGKILL of agent 1's process, SIGSTOP of agent 2's for 2 s (then
+    SIGCONT), SIGKILL of the monitor. The dead are restarted (the agent takes its robot's
+    measured pose), the hung one is waited for, not killed, and the robots match to the noise
+    floor (exit 0); the summary lists the two deaths and nothing else."""
+    run = _run(ros, "--mode", "bridge", "--rate", "10", "--t-end", "120")
+    _progress_past(ros, run, 3)
+    os.kill(_process(run, "agent_1"), signal.SIGKILL)
+    hung = _process(run, "agent_2")
+    os.kill(hung, signal.SIGSTOP)
+    time.sleep(2)
+    os.kill(hung, signal.SIGCONT)
+    _progress_past(ros, run, 8)
+    os.kill(_process(run, "monitor"), signal.SIGKILL)
+    rc, out = _finish(ros, run)
+    assert rc == 0 and "converged" in out, out[-3000:]
+    assert [f[0] for f in FAILURE.findall(out)] == ["agent_1", "monitor"], out[-3000:]
+
+
 def test_on_failure_stop_ends_the_run_at_the_first_death(ros):
     """``--on-failure stop``: the first death ends every process, exit 1, naming it."""
     run = _run(ros, "--mode", "realtime", "--rate", "20", "--on-failure", "stop", "-k", "2")
@@ -158,13 +177,17 @@ def test_on_failure_stop_ends_the_run_at_the_first_death(ros):
     assert "not restarted" in out and _gone(before)
 
 
-@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+EARLY_END_OPTIONS = {"lockstep": ["--dt", "0.02", "-k", "4"],
+                     "realtime": ["--mode", "realtime", "--rate", "20", "-k", "4"],
+                     "bridge": ["--mode", "bridge", "--rate", "10"]}  # a process per robot
+
+
+@pytest.mark.parametrize("mode", list(EARLY_END_OPTIONS))
 def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_path, mode):
     """SIGTERM to the runner mid-run: exit 130, and --save still holds every agent's last
     state, its time, and ``partial``; no process is left over."""
     save = tmp_path / "poses.npz"
-    extra = ["--mode", "realtime", "--rate", "20"] if mode == "realtime" else ["--dt", "0.02"]
-    run = _run(ros, "--t-end", "500", "--save", save, "-k", "4", *extra)
+    run = _run(ros, "--t-end", "500", "--save", save, *EARLY_END_OPTIONS[mode])
     _until(ros, 0.5, run)
     before = descendants(run.pid)
     os.kill(_runner(run), signal.SIGTERM)

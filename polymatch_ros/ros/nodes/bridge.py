@@ -250,6 +250,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
             return
         gi, row = self.layout.owner[self.layout.local[0]]
         self.state = self._state_at(t, own)
+        self.checkpoint.write(self.steps, t, self.state)  # what --save keeps if the run ends now
         super().publish_state()
         request = SimpleNamespace(stage=self.state, fields=("rot", "x"))
         heard = self.peers.in_range(self.peers.active(), self.state)  # a radio: peers in range

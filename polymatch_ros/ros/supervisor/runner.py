@@ -69,10 +69,9 @@ class RunContext:
     run_id: int                           # the stage messages' and checkpoints' run id
 
     def checkpoint_path(self, name: str) -> str:
-        """The checkpoint of the agent process ``name`` ('' in bridge mode: a bridge agent's
-        state is its robot's measured pose)."""
-        if self.plan.bridge is not None:
-            return ""
+        """The checkpoint of the agent process ``name`` (a bridge agent's holds the measured
+        pose it relayed last: for ``--save`` of a run that ends early; restarted, it takes its
+        robot's pose)."""
         return os.path.join(self.directory, name + ".checkpoint")
 
     def checkpoints(self, children: Sequence[Child]) -> list[tuple[tuple[int, ...],
