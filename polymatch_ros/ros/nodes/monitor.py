@@ -197,18 +197,21 @@ class MonitorNode(NodeApp):
     def _collect_completed(self) -> None:
         """Lockstep: advance to the latest simulated time all agents (and velocities) have
         reached; its poses wait in ``unreported`` for the next report, earlier ones are
-        superseded unreported."""
+        superseded unreported.  An earlier time still incomplete is passed over: each agent
+        publishes its steps in order, so it lacks a message that will not come (a monitor
+        restarted mid-step heard only the rest of it)."""
         need_v = self.model.order == 2
         for key in sorted(self.pending):
             rows = self.pending[key]
             if len(rows) < self.n or (need_v and len(self.pending_v.get(key, {})) < self.n):
-                break
+                continue
             vel = self.pending_v.pop(key, {})
             del self.pending[key]
             self.completed = key
             self.unreported = (key * 1e-9, rows, vel)
-        for key in [k for k in self.pending if k <= self.completed]:
-            del self.pending[key]
+        for pending in (self.pending, self.pending_v):
+            for key in [k for k in pending if k <= self.completed]:
+                del pending[key]
 
     def _report_completed(self) -> None:
         """Lockstep, at ``report_rate`` Hz: publish the latest completed time if it is new."""

@@ -342,7 +342,10 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
         if plan.hosts.lead and not plan.hosts.monitor:
             watcher.host_ensemble_services(plan.mode)
         if plan.bridge is not None:
-            others = bridge_run.robots(plan, context.env)
+            # the robots' nodes discover as the agents do (a discovery server's clients)
+            robot_env = context.env if context.envs is None else context.envs.for_role(
+                "client", context.env)
+            others = bridge_run.robots(plan, robot_env)
         others += start_recorder(plan, context.env, context.envs, context.directory)
         monitor, children = _start(context)
         supervision = Supervision(plan, watcher, children, monitor, progress, server)

@@ -59,6 +59,7 @@ class Watcher:
         self.grp = self.model.rotations
         self.diameter = None
         self.monitor = None  # the monitor's latest run record
+        self.last_known_time: float | None = None  # ``ensemble_time``'s last answer
         self.agents = {}  # agents tuple -> latest run record of that process
         self.poses, self.velocities = {}, {}
         node, dim = self.node, self.model.dim
@@ -127,11 +128,14 @@ class Watcher:
         return len(self.agent_time()) >= self.model.n_agents
 
     def ensemble_time(self) -> float | None:
-        """Simulated time of the ensemble: the monitor's last report, else the slowest agent's."""
-        if self.monitor is not None:
-            return self.monitor.t
+        """Simulated time of the ensemble: the monitor's last report, else the slowest agent's;
+        while neither is known (a monitor and an agent restarting), the last time known."""
         times = self.agent_time()
-        return min(times.values()) if len(times) >= self.model.n_agents else None
+        if self.monitor is not None:
+            self.last_known_time = self.monitor.t
+        elif len(times) >= self.model.n_agents:
+            self.last_known_time = min(times.values())
+        return self.last_known_time
 
     def all_heard(self) -> bool:
         """The monitor's last report covered every agent."""
