@@ -5,6 +5,7 @@
     python -m benchmarks dop853       adaptive Lie DOP853 against scipy's DOP853 at a target error
     python -m benchmarks precision    work-precision: every integrator and scipy, error vs cost
     python -m benchmarks longhorizon  orthogonality defect and energy drift after 10^5 steps
+    python -m benchmarks packing      lockstep rounds/s of `polymatch run`: N agents in P processes
     python -m benchmarks lossy        three namespace hosts: realtime error, lockstep rate vs loss
     python -m benchmarks bridge       simulated robots in the loop: error vs pose noise and lag
     python -m benchmarks faults       process deaths: a realtime soak with kills, lockstep resumes
@@ -53,6 +54,7 @@ FAMILIES = {
     "extremes": "benchmarks.extremes",
     "longhorizon": "benchmarks.longhorizon",
     "distributed": "benchmarks.distributed",
+    "packing": "benchmarks.packing",
     "sweep": "benchmarks.sweep",
     "basins": "benchmarks.basins",
     "graphs": "benchmarks.graphs",

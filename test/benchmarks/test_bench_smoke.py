@@ -19,8 +19,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 #: the families, in report order (stated here, not read from the package)
 FAMILY_NAMES = ["step", "meanfield", "dop853", "precision", "extremes", "longhorizon",
-                "distributed", "sweep", "basins", "graphs", "lossy", "trade", "bridge", "realtime",
-                "reductions", "faults"]
+                "distributed", "packing", "sweep", "basins", "graphs", "lossy", "trade", "bridge",
+                "realtime", "reductions", "faults"]
 
 # headers every family must print
 EXPECTED = {
@@ -47,6 +47,8 @@ EXPECTED = {
                    "exact flow (Prop. 2.1)", "O(m/gamma) modelling error"],
     "distributed": ["| processes", "bare rounds/s best / median", "agents / bare (medians)",
                     "deployed / agents (medians)", "slowest match"],
+    "packing": ["| agents", "processes x agents each: rounds/s", "| fastest", "default (no -k)",
+                "default / fastest", "1 x 8:", "2 x 4:"],
     "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
               "injected delay"],
     "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
@@ -73,7 +75,8 @@ def test_family_table_is_the_stated_list_in_report_order():
 #: the families that start ROS processes: they take one of the suite's ROS slots; the others
 #: are numerics, run beside the ROS tests as test/core is (their timings are printed, never
 #: asserted)
-ROS_FAMILIES = {"distributed", "graphs", "lossy", "trade", "bridge", "realtime", "faults"}
+ROS_FAMILIES = {"distributed", "packing", "graphs", "lossy", "trade", "bridge", "realtime",
+                "faults"}
 
 
 def test_ros_families_are_families():

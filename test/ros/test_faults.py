@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from ros_harness import PY, cli_argv, needs_ros, scene_path
 
-from benchmarks.hosts.runs import argv_of, children, descendants, node_name
+from benchmarks.hosts.runs import argv_of, children, descendants, node_name, scene_with
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros
@@ -25,6 +25,7 @@ SCENE = "congruent_triangles"
 PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "support",
                      "service_probe.py")
 BOUND = 150  # s: only a hang takes this long
+BRIDGE_AGENTS = 4
 SERVER_MODULE = b"polymatch_ros.ros.supervisor.discovery_server"
 DEVIATION = re.compile(r"max vertex deviation (\S+)")
 FAILURE = re.compile(r"^  (\S+) \(pid (\d+)\) (killed by \w+|exit code -?\d+|hung \(stopped\) "
@@ -65,9 +66,15 @@ def _until(ros, t, run):
     assert ros.wait(probe, BOUND + 10) == 0, ros.output(probe) + ros.output(run)[-3000:]
 
 
-def _run(ros, *args):
-    return ros.start(cli_argv("run", scene_path(SCENE), "--timeout", BOUND, *args),
+def _run(ros, *args, scene=None):
+    """`polymatch run` of ``scene`` (default: the shipped SCENE, 8 agents)."""
+    return ros.start(cli_argv("run", scene or scene_path(SCENE), "--timeout", BOUND, *args),
                      timeout=BOUND + 20, name="runner")
+
+
+def _four_robots(tmp_path):
+    """SCENE with 4 agents: a bridge run has a robot process beside each agent's."""
+    return scene_with(tmp_path, SCENE, BRIDGE_AGENTS)
 
 
 def _finish(ros, run):
@@ -130,16 +137,16 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
 
 
 def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_path):
-    """Realtime, 8 agents: SIGKILL of agent 3, then of the monitor; both are restarted, the
-    agent rejoins the ensemble's clock from its last state and the run converges (exit 0);
-    ``--records`` lists both deaths.  Agent 5, stopped (SIGSTOP) for 2 s in between, is waited
-    out (its peers go on without it), never killed or restarted."""
+    """Realtime, 8 agents two a process: SIGKILL of agents 2-3, then of the monitor; both are
+    restarted, the agents rejoin the ensemble's clock from their last state and the run
+    converges (exit 0); ``--records`` lists both deaths.  Agents 4-5, stopped (SIGSTOP) for
+    2 s in between, are waited out (their peers go on without them), never killed."""
     records = tmp_path / "records.jsonl"
     run = _run(ros, "--mode", "realtime", "--rate", "20", "--time-scale", "4", "--t-end", "300",
-               "--records", records)
+               "--records", records, "-k", "2")
     _until(ros, 4, run)
-    os.kill(_process(run, "agent_3"), signal.SIGKILL)
-    hung = _process(run, "agent_5")
+    os.kill(_process(run, "agents_2_3"), signal.SIGKILL)
+    hung = _process(run, "agents_4_5")
     os.kill(hung, signal.SIGSTOP)
     time.sleep(2)
     os.kill(hung, signal.SIGCONT)
@@ -147,20 +154,21 @@ def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_p
     os.kill(_process(run, "monitor"), signal.SIGKILL)
     rc, out = _finish(ros, run)
     assert rc == 0 and "converged" in out, out[-3000:]
-    assert [f[0] for f in FAILURE.findall(out)] == ["agent_3", "monitor"], out[-3000:]
+    assert [f[0] for f in FAILURE.findall(out)] == ["agents_2_3", "monitor"], out[-3000:]
     lines = records.read_text().splitlines()
     deaths = [line for line in lines if line.startswith('{"polymatch_failure"')]
     assert len(deaths) == 2 and '"code": -9' in deaths[0], lines
     assert len(run_records(lines)) >= 2  # the run records are still readable around them
 
 
-def test_bridge_run_survives_every_fault_of_the_matrix(ros):
-    """Bridge, 8 robots, ``--discovery server``: SIGKILL of the discovery server, of agent 1's
+def test_bridge_run_survives_every_fault_of_the_matrix(ros, tmp_path):
+    """Bridge, 4 robots, ``--discovery server``: SIGKILL of the discovery server, of agent 1's
     process and of the monitor, SIGSTOP of agent 2's for 2 s (then SIGCONT). The dead are
     restarted (the agent takes its robot's measured pose, and finds its peers through the
     restarted server), the hung one is waited for, not killed, and the robots match to the
     noise floor (exit 0); the summary lists the three deaths and nothing else."""
-    run = _run(ros, "--mode", "bridge", "--rate", "10", "--t-end", "120", "--discovery", "server")
+    run = _run(ros, "--mode", "bridge", "--rate", "10", "--t-end", "120", "--discovery", "server",
+               scene=_four_robots(tmp_path))
     _progress_past(ros, run, 2)
     os.kill(_server(run), signal.SIGKILL)
     _progress_past(ros, run, 4)
@@ -192,7 +200,7 @@ def test_on_failure_stop_ends_the_run_at_the_first_death(ros):
 
 EARLY_END_OPTIONS = {"lockstep": ["--dt", "0.02", "-k", "4"],
                      "realtime": ["--mode", "realtime", "--rate", "20", "-k", "4"],
-                     "bridge": ["--mode", "bridge", "--rate", "10"]}  # a process per robot
+                     "bridge": ["--mode", "bridge", "--rate", "10"]}  # 4 robots, 8 processes
 
 
 @pytest.mark.parametrize("mode", list(EARLY_END_OPTIONS))
@@ -200,7 +208,8 @@ def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_
     """SIGTERM to the runner mid-run: exit 130, and --save still holds every agent's last
     state, its time, and ``partial``; no process is left over."""
     save = tmp_path / "poses.npz"
-    run = _run(ros, "--t-end", "500", "--save", save, *EARLY_END_OPTIONS[mode])
+    scene, n = (_four_robots(tmp_path), BRIDGE_AGENTS) if mode == "bridge" else (None, 8)
+    run = _run(ros, "--t-end", "500", "--save", save, *EARLY_END_OPTIONS[mode], scene=scene)
     _until(ros, 0.5, run)
     before = descendants(run.pid)
     os.kill(_runner(run), signal.SIGTERM)
@@ -209,7 +218,7 @@ def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_
     data = np.load(save)
     assert bool(data["partial"]) and 0.5 <= float(data["t"]) < 500
     times = data["group0_times"]
-    assert times.shape == (8,) and np.all(times >= 0.5) and np.all(times < 500)
+    assert times.shape == (n,) and np.all(times >= 0.5) and np.all(times < 500)
     rotations = data["group0_rotations"]
     assert np.allclose(rotations @ rotations.transpose(0, 2, 1), np.eye(2), atol=1e-12)
     assert _gone(before)

@@ -80,6 +80,11 @@ class RunContext:
         return [(c.agents, CheckpointFile(self.checkpoint_path(c.name), self.run_id).read())
                 for c in children]
 
+    def role_env(self, role: str) -> dict[str, str]:
+        """The environment of a process in ``role`` ("client": agents and robots,
+        "super_client": monitor and recorder) under the run's discovery; LOCALHOST: ``env``."""
+        return self.env if self.envs is None else self.envs.for_role(role, self.env)
+
     def checkpoint_args(self, name: str) -> list[str]:
         path = self.checkpoint_path(name)
         return ["-p", f"checkpoint:={path}"] if path else []
@@ -255,9 +260,8 @@ def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
     ``context.envs`` (DiscoveryEnvironments, None for LOCALHOST) gives the agents the client
     and the monitor (and the recorder) the super-client environment.
     """
-    plan, env, envs = context.plan, context.env, context.envs
-    agent_env = env if envs is None else envs.for_role("client", env)
-    monitor_env = env if envs is None else envs.for_role("super_client", env)
+    plan = context.plan
+    agent_env, monitor_env = context.role_env("client"), context.role_env("super_client")
     mon_args, agent_args = _node_args(context)
     py = [sys.executable, "-m"]
     monitor = None
@@ -342,10 +346,7 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
         if plan.hosts.lead and not plan.hosts.monitor:
             watcher.host_ensemble_services(plan.mode)
         if plan.bridge is not None:
-            # the robots' nodes discover as the agents do (a discovery server's clients)
-            robot_env = context.env if context.envs is None else context.envs.for_role(
-                "client", context.env)
-            others = bridge_run.robots(plan, robot_env)
+            others = bridge_run.robots(plan, context.role_env("client"))  # as the agents
         others += start_recorder(plan, context.env, context.envs, context.directory)
         monitor, children = _start(context)
         supervision = Supervision(plan, watcher, children, monitor, progress, server)
