@@ -59,10 +59,8 @@ def _row(n, measured, default_k):
     """One table row: each packing's rate, the best, and the default's share of it."""
     finished = {pk: r for pk, r in measured.items() if r == r}
     best = max(finished, key=finished.get, default=None)
-    cells = [n]
-    for (p, k), rate in measured.items():
-        cells.append(f"{p} x {k}: {rate:.1f}" if rate == rate else f"{p} x {k}: failed")
-    shown = "; ".join(str(c) for c in cells[1:])
+    shown = "; ".join(f"{p} x {k}: {rate:.1f}" if rate == rate else f"{p} x {k}: failed"
+                      for (p, k), rate in measured.items())
     default = next(((p, k) for (p, k) in measured if k == default_k), None)
     share = (f"{finished[default] / finished[best]:.0%}"
              if best and default in finished else "-")

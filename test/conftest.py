@@ -12,7 +12,6 @@ Markers follow the folders, so ``pytest -m "not ros and not hosts" test`` runs t
 ``ros`` gives a test its own loopback-only ROS world (support/ros_harness.py).
 """
 
-import collections
 import compileall
 import itertools
 import os
@@ -56,20 +55,25 @@ def pytest_xdist_auto_num_workers(config):
 
 def _may_select(config, markers):
     """Whether the ``-m`` expression accepts some test that has ``markers``, whatever other
-    markers it has (every assignment of the expression's other names is tried; True if
-    unsure)."""
-    expression = config.getoption("markexpr") or "True"
-    others = sorted(set(re.findall(r"[A-Za-z_]\w*", expression)) - KEYWORDS - set(markers))
+    markers it has (every assignment of the expression's other names is tried, by pytest's own
+    parser of ``-m``; True if unsure)."""
+    from _pytest.mark.expression import Expression
+
+    text = config.getoption("markexpr")
+    if not text:
+        return True
+    others = sorted(set(re.findall(r"[A-Za-z_]\w*", text)) - KEYWORDS - set(markers))
     if len(others) > 8:
         return True
     try:
-        return any(
-            eval(expression, {"__builtins__": {}},  # noqa: S307 -- and/or/not of names
-                 collections.defaultdict(bool, {**dict.fromkeys(markers, True),
-                                                **dict(zip(others, values))}))
-            for values in itertools.product((False, True), repeat=len(others)))
-    except Exception:  # noqa: BLE001 -- pytest's richer syntax (marker(arg=...)): assume so
+        expression = Expression.compile(text)
+    except Exception:  # noqa: BLE001 -- pytest reports a bad -m itself
         return True
+    for values in itertools.product((False, True), repeat=len(others)):
+        marked = set(markers) | {name for name, on in zip(others, values) if on}
+        if expression.evaluate(lambda name, marked=marked, **kwargs: name in marked):
+            return True
+    return False
 
 
 KEYWORDS = {"and", "or", "not", "True", "False"}
@@ -77,9 +81,10 @@ KEYWORDS = {"and", "or", "not", "True", "False"}
 
 def pytest_ignore_collect(collection_path, config):
     """Folders whose every test ``-m`` leaves out are not even imported (``FOLDER_MARKERS``)."""
-    parts = collection_path.resolve().relative_to(HERE).parts if collection_path.resolve(
-    ).is_relative_to(HERE) else ()
-    markers = FOLDER_MARKERS.get(parts[0], ()) if parts else ()
+    path = collection_path.resolve()
+    if path == HERE or not path.is_relative_to(HERE):
+        return None
+    markers = FOLDER_MARKERS.get(path.relative_to(HERE).parts[0], ())
     return True if markers and not _may_select(config, markers) else None
 
 

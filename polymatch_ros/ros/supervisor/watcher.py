@@ -130,11 +130,12 @@ class Watcher:
     def ensemble_time(self) -> float | None:
         """Simulated time of the ensemble: the monitor's last report, else the slowest agent's;
         while neither is known (a monitor and an agent restarting), the last time known."""
-        times = self.agent_time()
         if self.monitor is not None:
             self.last_known_time = self.monitor.t
-        elif len(times) >= self.model.n_agents:
-            self.last_known_time = min(times.values())
+        else:
+            times = self.agent_time()
+            if len(times) >= self.model.n_agents:
+                self.last_known_time = min(times.values())
         return self.last_known_time
 
     def all_heard(self) -> bool:
