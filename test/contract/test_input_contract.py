@@ -150,7 +150,7 @@ def test_harness_bound_is_not_reported_as_an_internal_error(tmp_path):
     used = time.process_time() - start
     assert used < 5.0
     if ended.value.clock == "cpu":  # else the wall-clock guard (10 s) came first: a loaded CPU
-        assert used >= 0.4, used  # the timer ticks at the clock rate
+        assert used >= 0.5, used  # the bound is the CPU time the process measures
 
 
 @pytest.mark.slow

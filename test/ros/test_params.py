@@ -36,7 +36,7 @@ AGENT_NAMES = [
     "max_angular_accel", "pose_timeout", "pose_type", "cmd_type", "command_frame", "run_id",
 ]
 MONITOR_NAMES = ["scene", "mode", "rate", "report_rate", "peer_timeout", "frame_id", "markers",
-                 "t_end"]
+                 "t_end", "report_readers"]
 
 STRING, BOOLEAN, INTEGER, NUMBER = ("expected a string", "expected a boolean",
                                     "expected an integer", "expected a number")
@@ -413,7 +413,7 @@ def test_parameters_read_back_what_the_nodes_use_and_a_runtime_set_is_used(ros):
     assert before < start_time < time.time(), text  # declared once t = 0 was fixed
     assert got[2] == dict(scene=scene_path("congruent_triangles"), mode="lockstep", rate=10.0,
                           report_rate=20.0, peer_timeout=1.0, frame_id="world", markers=True,
-                          t_end=12.5, **RCLPY_OWN), text
+                          t_end=12.5, report_readers=0, **RCLPY_OWN), text
     assert got[3:] == [{"kappa": 3.0}, {"mass": 0.5, "t_end": 50.0}, {"kappa": 1.0}], text
     sets = re.findall(r"^SET (\S+) (\S+) (True|False) ?(.*)$", text, re.M)
     assert [s[:3] for s in sets] == [(real, "kappa", "True"), (real, "mass", "False"),

@@ -25,16 +25,20 @@ In lockstep it collects every step's poses and reports, at most ``report_rate`` 
 second, the latest simulated time that every agent's pose has reached (its loop, at that rate,
 takes the poses that came since its last report and publishes it, so the last step is reported
 within 1/report_rate s); in realtime at ``rate`` Hz from the latest poses, taken only then.
+It ends on SIGINT or SIGTERM (exit 0), in lockstep after one more report of the latest step
+completed, and never in the middle of a report.
 The headline topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo`
 still gets the last value.
 """
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import replace
+from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -57,6 +61,9 @@ if TYPE_CHECKING:
     from ...core.model import Model
     from .exchange import MessageInfo
 
+#: how long the monitor waits for its report topics' readers (``report_readers``); the
+#: agents' discovery timeout, for which they wait for the monitor, is longer
+REPORT_READERS_SECONDS = 20.0
 #: an agent's velocities as heard: (v, W as one algebra row)
 Velocity = tuple[np.ndarray, np.ndarray]
 
@@ -93,7 +100,6 @@ class MonitorNode(NodeApp):
         self.certificate = CertificateKeeper(self.scene.tolerance)
         self.components = ComponentTracker()  # proximity graphs: who hears whom, since when
         self._wire_up()
-        self.cert_pub = wire.publisher(node, "certificate")
         rate = params["report_rate"] if self.lockstep else params["rate"]
         self.report_period = 1.0 / rate
         self.report_due: Callable[[], None] = (
@@ -110,19 +116,38 @@ class MonitorNode(NodeApp):
         the poses of the steps since the last report (RELIABLE, depth 100), every one of
         which is taken, to complete every step."""
         node, dim = self.node, self.model.dim
-        self.readers = LeanReaders(node, "_poses")
-        kinds = ("pose", "twist") if self.model.order == 2 else ("pose",)
-        for a in range(self.n):
-            for kind in kinds:
-                self.readers.subscribe(kind, self._receiver(a, kind), dim, a, self.params["mode"])
         self.pub = {
             key: wire.publisher(node, key)
             for key in ("diameter", "diameter_centroid", "diameter_rotation")
         }
         self.diag_pub = wire.publisher(node, "diagnostics")
         self.status_pub = wire.publisher(node, "status")
+        self.cert_pub = wire.publisher(node, "certificate")
         self.marker_pub = wire.publisher(node, "markers") if self.params["markers"] else None
+        self._wait_for_report_readers()
+        self.readers = LeanReaders(node, "_poses")
+        kinds = ("pose", "twist") if self.model.order == 2 else ("pose",)
+        for a in range(self.n):
+            for kind in kinds:
+                self.readers.subscribe(kind, self._receiver(a, kind), dim, a, self.params["mode"])
         self.control = EnsembleControl(node, self.params["mode"])
+
+    def _wait_for_report_readers(self) -> None:
+        """Until ``report_readers`` readers matched every report writer (at most
+        ``REPORT_READERS_SECONDS``, then a warning): only then are the pose readers created,
+        and the agents, which wait for them (``pose_subscribers``), start.  So a run's recorder
+        hears the first report too: the writers' and readers' endpoints are matched pair by
+        pair, and a short run may report only once."""
+        want = self.params["report_readers"]
+        writers = [*self.pub.values(), self.diag_pub, self.status_pub, self.cert_pub]
+        writers += [self.marker_pub] if self.marker_pub is not None else []
+        deadline = time.monotonic() + REPORT_READERS_SECONDS
+        while any(w.get_subscription_count() < want for w in writers):
+            if time.monotonic() > deadline:
+                self.log.warning(f"reporting although not every report topic has "
+                                 f"{want} reader(s) after {REPORT_READERS_SECONDS:g} s")
+                return
+            time.sleep(0.02)
 
     def _decode(self, agent: int, kind: str, msg: Any) -> wire.Received | None:
         got, reason = wire.decode_motion(
@@ -304,20 +329,33 @@ class MonitorNode(NodeApp):
         )
 
     def run(self) -> int:
-        """Serve the node (services, control) and report every ``report_period`` s.
+        """Serve the node (services, control) and report every ``report_period`` s, until
+        SIGINT or SIGTERM (the monitor's normal end); then the latest completed step is
+        reported (lockstep), so the last report is the final step's.
 
-        The reports run here, not in a timer callback: a Ctrl-C (the monitor's normal end) that
-        lands inside a callback leaves rclpy's task holding the timer, and destroying the node
-        then once crashed the process (SIGSEGV)."""
+        The reports run here, not in a timer callback: a Ctrl-C that lands inside a callback
+        leaves rclpy's task holding the timer, and destroying the node then once crashed the
+        process (SIGSEGV).  The signals only set a flag: one landing in the middle of a report
+        (the first one evaluates the certificate, which takes a while) once cut it between
+        the diameters and the certificate and markers, and a recording lacked them."""
+        self.stopping = False
+        for sig in (signal.SIGINT, signal.SIGTERM):  # after rclpy's: the end is ours
+            signal.signal(sig, self._stop)
         due = time.monotonic() + self.report_period
-        while True:
-            self.executor.spin_once(timeout_sec=min(0.5, max(0.0, due - time.monotonic())))
+        while not self.stopping:
+            self.executor.spin_once(timeout_sec=min(0.1, max(0.0, due - time.monotonic())))
             now = time.monotonic()
             if now >= due:
                 due += self.report_period
                 if due <= now:  # behind (a loaded machine): the next one a period from now
                     due = now + self.report_period
                 self.report_due()
+        if self.lockstep:
+            self._report_completed()
+        return 0
+
+    def _stop(self, sig: int, frame: FrameType | None) -> None:
+        self.stopping = True
 
     def destroy(self) -> None:
         self.readers.destroy()

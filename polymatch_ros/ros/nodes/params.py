@@ -242,6 +242,13 @@ MONITOR = (
     Param("markers", True, "publish visualization_msgs/MarkerArray"),
     Param("t_end", float, "end time: the scene's unless given; poses stamped later are refused",
           (MIN_T_END, 1e12)),
+    Param(
+        "report_readers",
+        0,
+        "read no pose before this many readers listen to every report topic (a run's "
+        "recorder: its file then holds every report; agents wait for the monitor's readers)",
+        (0, 1000),
+    ),
 )
 
 

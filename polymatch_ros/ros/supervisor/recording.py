@@ -3,9 +3,10 @@
 It starts before the monitor and the agents, subscribed at once to every topic of the run
 (``wire.recording.run_topics``: types and writer profiles from the topic table), and the
 agents wait for it as for the monitor (``pose_subscribers``), so a lockstep recording holds
-every step's poses.  It is ended last, after the monitor (and bridge mode's robots), by SIGINT:
-it takes what its readers still hold, finishes the file and exits 0; a recorder that died or
-failed is the run's error.
+every step's poses; the monitor waits for its report readers (``report_readers``) before it
+reads a pose, so the recording holds every report, the first too.  It is ended last, after
+the monitor (and bridge mode's robots), by SIGINT: it takes what its readers still hold,
+finishes the file and exits 0; a recorder that died or failed is the run's error.
 """
 
 from __future__ import annotations

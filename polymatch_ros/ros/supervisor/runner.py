@@ -232,6 +232,8 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
     monitor_mode = "realtime" if plan.realtime else "lockstep"
     monitor = common + ["-p", f"mode:={monitor_mode}"]
     monitor += ["-p", f"peer_timeout:={timing.peer_timeout!r}"]
+    # the recorder (--record) hears every report, the first too (``report_readers``)
+    monitor += ["-p", f"report_readers:={int(plan.outputs.record is not None)}"]
     if plan.realtime:
         monitor += ["-p", "rate:=10.0"]
     return monitor, agent
