@@ -68,6 +68,7 @@ TYPE_CASES = [
     ("monitor", "rate", "abc", NUMBER), ("monitor", "report_rate", "abc", NUMBER),
     ("monitor", "peer_timeout", "abc", NUMBER), ("monitor", "frame_id", 1.5, STRING),
     ("monitor", "markers", 1.5, BOOLEAN), ("monitor", "t_end", "abc", NUMBER),
+    ("monitor", "report_readers", 2.5, INTEGER),
 ]
 # (spec, parameter, lowest accepted, highest accepted, just below, just above, range text)
 RANGE_CASES = [
@@ -99,6 +100,7 @@ RANGE_CASES = [
     ("monitor", "report_rate", 0.01, 1e4, 0.0099, 10000.01, "[0.01, 10000]"),
     ("monitor", "peer_timeout", 0.001, 1e6, 0.00099, 1.000001e6, "[0.001, 1e+06]"),
     ("monitor", "t_end", 1e-12, 1e12, 0.0, 1.000001e12, "[1e-12, 1e+12]"),
+    ("monitor", "report_readers", 0, 1000, -1, 1001, "[0, 1000]"),
 ]
 # (spec, parameter, the allowed values)
 CHOICE_CASES = [
