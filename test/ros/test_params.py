@@ -32,11 +32,12 @@ AGENT_NAMES = [
     "peer_timeout", "delay",
     "clock_offset_warn", "hold_final", "round_timeout", "stall_timeout", "peers_restart",
     "checkpoint", "discovery_timeout",
-    "pose_subscribers", "frame_id", "max_linear_speed", "max_angular_speed", "max_linear_accel",
-    "max_angular_accel", "pose_timeout", "pose_type", "cmd_type", "command_frame", "run_id",
+    "pose_subscribers", "exchange_subscribers", "frame_id", "max_linear_speed",
+    "max_angular_speed", "max_linear_accel", "max_angular_accel", "pose_timeout", "pose_type",
+    "cmd_type", "command_frame", "run_id",
 ]
 MONITOR_NAMES = ["scene", "mode", "rate", "report_rate", "peer_timeout", "frame_id", "markers",
-                 "t_end", "report_readers"]
+                 "t_end", "run_id", "report_readers"]
 
 STRING, BOOLEAN, INTEGER, NUMBER = ("expected a string", "expected a boolean",
                                     "expected an integer", "expected a number")
@@ -59,6 +60,7 @@ TYPE_CASES = [
     ("agent", "stall_timeout", "abc", NUMBER), ("agent", "peers_restart", 1, BOOLEAN),
     ("agent", "checkpoint", 1.5, STRING), ("agent", "discovery_timeout", "abc", NUMBER),
     ("agent", "pose_subscribers", 2.5, INTEGER), ("agent", "frame_id", 1.5, STRING),
+    ("agent", "exchange_subscribers", 2.5, INTEGER), ("monitor", "run_id", 2.5, INTEGER),
     ("agent", "max_linear_speed", "abc", NUMBER), ("agent", "max_angular_speed", "abc", NUMBER),
     ("agent", "max_linear_accel", "abc", NUMBER), ("agent", "max_angular_accel", "abc", NUMBER),
     ("agent", "pose_timeout", "abc", NUMBER), ("agent", "pose_type", 1.5, STRING),
@@ -90,6 +92,8 @@ RANGE_CASES = [
     ("agent", "stall_timeout", 0.001, 1e6, 0.00099, 1.000001e6, "[0.001, 1e+06]"),
     ("agent", "discovery_timeout", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("agent", "pose_subscribers", 0, 100_000, -1, 100_001, "[0, 100000]"),
+    ("agent", "exchange_subscribers", 0, 100_000, -1, 100_001, "[0, 100000]"),
+    ("monitor", "run_id", 0, 2**31 - 1, -1, 2**31, "[0, 2.14748e+09]"),
     ("agent", "max_linear_speed", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("agent", "max_angular_speed", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("agent", "max_linear_accel", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
@@ -221,7 +225,8 @@ LOCKSTEP_TABLE = {
     "dt": 0.05, "t_end": 30.0, "rate": 50.0, "kappa": 1.0, "gamma": 1.0, "time_scale": 1.0,
     "peer_timeout": 1.0, "delay": 0.0, "clock_offset_warn": 0.1, "hold_final": 0.0,
     "round_timeout": 10.0, "stall_timeout": 300.0, "peers_restart": False,
-    "discovery_timeout": 120.0, "pose_subscribers": 0, "frame_id": "world",
+    "discovery_timeout": 120.0, "pose_subscribers": 0, "exchange_subscribers": 0,
+    "frame_id": "world",
     "max_linear_speed": 1e6, "max_angular_speed": 1e6, "max_linear_accel": 1e6,
     "max_angular_accel": 1e6, "pose_timeout": 0.5, "pose_type": "pose", "cmd_type": "twist",
     "command_frame": "world", "run_id": 0,
@@ -415,7 +420,7 @@ def test_parameters_read_back_what_the_nodes_use_and_a_runtime_set_is_used(ros):
     assert before < start_time < time.time(), text  # declared once t = 0 was fixed
     assert got[2] == dict(scene=scene_path("congruent_triangles"), mode="lockstep", rate=10.0,
                           report_rate=20.0, peer_timeout=1.0, frame_id="world", markers=True,
-                          t_end=12.5, report_readers=0, **RCLPY_OWN), text
+                          t_end=12.5, run_id=0, report_readers=0, **RCLPY_OWN), text
     assert got[3:] == [{"kappa": 3.0}, {"mass": 0.5, "t_end": 50.0}, {"kappa": 1.0}], text
     sets = re.findall(r"^SET (\S+) (\S+) (True|False) ?(.*)$", text, re.M)
     assert [s[:3] for s in sets] == [(real, "kappa", "True"), (real, "mass", "False"),

@@ -30,13 +30,16 @@ pytestmark = needs_ros
 # (measured: 0 to about 1.3 s after the first agent); a run of t_end 1 lasts about 1.3 s, and
 # in 2 of 28 runs one agent had not matched it before the end, so it had nothing to drop.
 ROGUE_T_END = 4.0
+ROGUE = os.path.join(REPO, "test", "support", "rogue_publisher.py")
+# the foreign states' stamp: late in the realtime run (its t_end is one more), so that a reader
+# that took them would take them as agent 3's newest
+FOREIGN_STAMP = 299
 
 
 def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     # the rogue outlives the longest run this test allows (30 s to start flooding + the run's
     # 150 s): it is still sending when the run ends, and the harness ends it by its PID
-    rogue = ros.start([PY, os.path.join(REPO, "test", "support", "rogue_publisher.py"),
-                      "polymatch", "3", "200"], timeout=210)
+    rogue = ros.start([PY, ROGUE, "polymatch", "3", "200"], timeout=210)
     deadline = time.monotonic() + 30                  # the flood is on before the run starts
     while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -71,12 +74,45 @@ def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     assert len(drops) >= 7, text
     reasons = " ".join(d[2] for d in drops)
     assert "non-finite value" in reasons and "unknown sender (run id)" in reasons
+    # the monitor reads the run's exchange (the rogue's poses do not reach it), where it
+    # dropped the rogue's NaN states and another run's
     mon = re.search(r"^monitor: .*dropped (\d+) messages \((.*)\)$", text, re.M)
     assert (
         mon
-        and "quaternion far from unit norm" in mon.group(2)
+        and "unknown sender (run id)" in mon.group(2)
         and "non-finite value" in mon.group(2)
     ), text
+
+
+def test_foreign_well_formed_states_are_not_read_in_a_realtime_run_theorem_4_2(ros):
+    """Another writer sends well-formed states of agent 3, far away and stamped late in the
+    run (newer than any real pose), on agent_3/pose and on agent_3/exchange with another run's
+    id.  The agents and the monitor read only their run's exchange: the ensemble converges
+    (Theorem 4.2) as without the writer, and agent 3's peers count the foreign states as
+    another run's.  Read, they would hold agent 3 at (50, 0) in its peers' sums."""
+    rogue = ros.start([PY, ROGUE, "polymatch", "3", "200", str(FOREIGN_STAMP)], timeout=210)
+    deadline = time.monotonic() + 30
+    while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert "rogue: flooding" in ros.output(rogue), ros.output(rogue)
+    proc = ros.start(cli_argv("run", scene_path("congruent_triangles"), "--mode", "realtime",
+                              "--rate", "20", "--time-scale", "4", "--t-end", FOREIGN_STAMP + 1,
+                              "-k", 4, "--timeout", 150), timeout=180)
+    rc = ros.wait(proc, 190)
+    text = ros.output(proc)
+    assert rc == 0 and "converged" in text, text[-3000:]
+    # it stopped on convergence, long before the foreign stamp (a run that read the foreign
+    # states, tried by accepting any run id, went on to t_end)
+    (t_final,) = re.findall(r"^t = (\S+), wall time", text, re.M)
+    assert float(t_final) < FOREIGN_STAMP / 2, text[-3000:]
+    assert rogue.poll() is None, "the rogue must still be sending when the run ends"
+    # -k 4: agents 0-3 share a process (they take agent 3's rows from it), agents 4-7 read
+    # agent 3's exchange, where the foreign states are
+    peers = re.search(r"^agent 4,5,6,7: finished.*; dropped \d+ messages \((.*)\)$", text,
+                      re.M)
+    assert peers and "unknown sender (run id)" in peers.group(1), text[-3000:]
+    mon = re.search(r"^monitor: .*dropped (\d+) messages \((.*)\)$", text, re.M)
+    assert mon and "unknown sender (run id)" in mon.group(2), text[-3000:]
 
 
 def _refused(ros, argv):

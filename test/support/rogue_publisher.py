@@ -1,57 +1,92 @@
-"""A rogue publisher for the robustness test: floods one agent's topics with bad messages.
+"""A rogue publisher for the robustness tests: floods one agent's topics.
 
-    python test/support/rogue_publisher.py ENSEMBLE AGENT SECONDS
+    python test/support/rogue_publisher.py ENSEMBLE AGENT SECONDS [STAMP]
 
 Sends, at ~100 Hz each: PoseStamped with NaN positions, PoseStamped with a quaternion of
-norm 2, and lockstep stage messages with NaN data, a foreign run id, or no header.  It is started
-by
-the test in the test's own ROS domain (loopback discovery) under `timeout`.
+norm 2, lockstep stage messages with NaN data, a foreign run id, or no header, and exchange
+messages (``wire.exchange``) with NaN data or a foreign run id.  With STAMP it sends instead,
+at 20 Hz, well-formed states of a 2-D agent far away (centroid (50, 0), rotation 0.3 rad)
+stamped STAMP (late in the run: newer than any real pose), on the agent's pose topic and on its
+exchange with a foreign run id: what another run, or a stale process of an earlier one, would
+send.  It is
+started by the test in the test's own ROS domain (loopback discovery) under `timeout`.
 """
 
 import math
 import sys
 import time
 
+import numpy as np
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
+from polymatch_ros.core.so import SO2
 from polymatch_ros.ros import wire
+
+FOREIGN_RUN = 12345
+FAR = (50.0, 0.0)
+ANGLE = 0.3
+
+
+def well_formed(pose, exchange, agent, stamp):
+    """A far-away pose stamped ``stamp`` on the pose topic and on the exchange (another run's)."""
+    grp = SO2()
+    pose.publish(wire.pose_message(grp, stamp, np.array(FAR), np.array([ANGLE]), "world"))
+    exchange.publish(wire.encode_exchange(Float64MultiArray(), grp, FOREIGN_RUN, agent, stamp,
+                                          np.array(FAR), np.array([ANGLE])))
+
+
+def malformed(pose, stage, exchange, agent, k):
+    """NaN and non-unit poses, stages with NaN data, a foreign run id or no header, exchange
+    messages with NaN data or a foreign run id."""
+    p = PoseStamped()
+    p.header.frame_id = "world"
+    p.header.stamp.sec = k
+    if k % 2:
+        p.pose.position.x = math.nan
+        p.pose.orientation.w = 1.0
+    else:
+        p.pose.orientation.w = 2.0                      # quaternion far from unit norm
+    pose.publish(p)
+    fields = {"x": [0.0, 0.0], "rot": [math.nan if k % 2 else 0.3]}
+    msg = wire.encode_stage(Float64MultiArray(), FOREIGN_RUN if k % 2 == 0 else 0, agent, k, 0,
+                            0, 0.0, fields)
+    stage.publish(msg)
+    junk = Float64MultiArray()                          # no header at all
+    junk.data = [1.0, 2.0]
+    stage.publish(junk)
+    grp = SO2()
+    x = np.array([math.nan if k % 2 else 0.0, 0.0])
+    exchange.publish(wire.encode_exchange(Float64MultiArray(), grp, FOREIGN_RUN, agent, 0.0, x,
+                                          np.array([0.3])))
 
 
 def main():
     ensemble, agent, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+    stamp = float(sys.argv[4]) if len(sys.argv) > 4 else None
     rclpy.init()
     node = Node("rogue")
     qos = wire.qos_profiles()
     pose = node.create_publisher(PoseStamped, wire.full_name(ensemble, "pose", agent), qos["pose"])
     stage = node.create_publisher(Float64MultiArray, wire.full_name(
         ensemble, "stage", agent), qos["stage"])
+    exchange = node.create_publisher(Float64MultiArray, wire.full_name(
+        ensemble, "exchange", agent), qos["pose"])
     end = time.monotonic() + seconds
     k = 0
     while time.monotonic() < end:
-        p = PoseStamped()
-        p.header.frame_id = "world"
-        p.header.stamp.sec = k
-        if k % 2:
-            p.pose.position.x = math.nan
-            p.pose.orientation.w = 1.0
+        if stamp is None:
+            malformed(pose, stage, exchange, agent, k)
         else:
-            p.pose.orientation.w = 2.0                      # quaternion far from unit norm
-        pose.publish(p)
-        fields = {"x": [0.0, 0.0], "rot": [math.nan if k % 2 else 0.3]}
-        msg = wire.encode_stage(Float64MultiArray(), 12345 if k %
-                                2 == 0 else 0, agent, k, 0, 0, 0.0, fields)
-        stage.publish(msg)
-        junk = Float64MultiArray()                          # no header at all
-        junk.data = [1.0, 2.0]
-        stage.publish(junk)
+            well_formed(pose, exchange, agent, stamp)
         k += 1
         if k == 20:
             print("rogue: flooding", flush=True)           # the test starts the run after this
-        rclpy.spin_once(node, timeout_sec=0.01)
-    print(f"rogue: sent {k} bad poses and {k} bad stage messages", flush=True)
+        # malformed: a flood; well-formed: at a run's own rate (a realtime run at 20 Hz)
+        rclpy.spin_once(node, timeout_sec=0.01 if stamp is None else 0.05)
+    print(f"rogue: sent {k} rounds of messages", flush=True)
     node.destroy_node()
     rclpy.shutdown()
 

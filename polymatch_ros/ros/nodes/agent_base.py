@@ -106,6 +106,7 @@ class AgentBase(NodeApp):
     def _make_publishers(self) -> None:
         node, dim, local = self.node, self.model.dim, self.layout.local
         self.pose_pubs = {a: wire.publisher(node, "pose", dim, a) for a in local}
+        self.exchange_pubs = {a: wire.publisher(node, "exchange", dim, a) for a in local}
         self.final_pubs = {a: wire.publisher(node, "final_pose", dim, a) for a in local}
         second = self.model.order == 2
         self.twist_pubs = (
@@ -147,19 +148,37 @@ class AgentBase(NodeApp):
 
     # -- publishing ------------------------------------------------------------------------------
     def publish_state(self, final: bool = False) -> None:
-        """Publish every local agent's pose (and velocity); ``final``: on the latched final topics
-        only (the last step's pose is already on the pose topic: once is not a repeat).
+        """Publish every local agent's state on the run's exchange (peers, monitor) and its
+        pose (and velocity) for people and tools; ``final``: on the latched final topics only
+        (the last step's pose is already on the pose topic: once is not a repeat).
 
-        Per-step poses nobody subscribes to are not even built (the lockstep hot loop).
+        Per-step messages nobody subscribes to are not even built (the lockstep hot loop).
         """
-        pose_pubs, twist_pubs = (
-            (self.final_pubs, self.final_twist_pubs)
-            if final
-            else (self.pose_pubs, self.twist_pubs)
-        )
-        if final or any(p.get_subscription_count() for p in pose_pubs.values()):
-            self._publish_rows(pose_pubs, twist_pubs)
+        if final:
+            self._publish_rows(self.final_pubs, self.final_twist_pubs)
+        else:
+            if any(p.get_subscription_count() for p in self.exchange_pubs.values()):
+                self._publish_exchange()
+            if any(p.get_subscription_count() for p in self.pose_pubs.values()):
+                self._publish_rows(self.pose_pubs, self.twist_pubs)
         self._maybe_diagnostics()
+
+    def _publish_exchange(self) -> None:
+        """Every local agent's state with the run's id (``wire.exchange``)."""
+        from std_msgs.msg import Float64MultiArray
+
+        st, run_id, grp = self.state, self.params["run_id"], self.grp
+        for gi in self.layout.local_groups:
+            gs, g = st.groups[gi], self.model.groups[gi]
+            assert gs is not None  # the state holds every local group
+            for r, row in enumerate(self.layout.rows[gi]):
+                a = g.start + row
+                v = w = None
+                if gs.v is not None and gs.w is not None:  # second order: its velocities
+                    v, w = gs.v[r], grp.algebra_take(gs.w, [r])
+                self.exchange_pubs[a].publish(wire.encode_exchange(
+                    Float64MultiArray(), grp, run_id, a, st.t, gs.x[r], grp.take(gs.rot, [r]),
+                    v, w))
 
     def _publish_rows(
         self, pose_pubs: dict[int, Publisher], twist_pubs: dict[int, Publisher]
@@ -220,7 +239,8 @@ class AgentBase(NodeApp):
         """Wait until the last poses reached every subscriber (the monitor, the runner)."""
         from rclpy.duration import Duration
 
-        pubs = [self.pose_pubs, self.twist_pubs, self.final_pubs, self.final_twist_pubs]
+        pubs = [self.pose_pubs, self.twist_pubs, self.final_pubs, self.final_twist_pubs,
+                self.exchange_pubs]
         for pub in [p for group in pubs for p in group.values()] + [self.status_pub]:
             pub.wait_for_all_acked(Duration(seconds=timeout))
 
@@ -272,13 +292,15 @@ class AgentBase(NodeApp):
 
     def wait_for_discovery(self, peers_matched: Callable[[], bool] | None = None,
                            missing: Callable[[], list[int]] | None = None) -> None:
-        """Wait until ``peers_matched()`` and pose_subscribers readers on every pose topic."""
+        """Wait until ``peers_matched()``, pose_subscribers readers on every pose topic and
+        exchange_subscribers on every exchange topic."""
         deadline = time.monotonic() + self.params["discovery_timeout"]
-        want = self.params["pose_subscribers"]
+        wants = ((self.pose_pubs, self.params["pose_subscribers"]),
+                 (self.exchange_pubs, self.params["exchange_subscribers"]))
         while True:
             peers_ok = peers_matched is None or peers_matched()
             if peers_ok and all(
-                p.get_subscription_count() >= want for p in self.pose_pubs.values()
+                p.get_subscription_count() >= want for pubs, want in wants for p in pubs.values()
             ):
                 self.matched_after = time.monotonic() - self.created
                 return

@@ -1,5 +1,8 @@
 """The monitor: hears every agent's pose and publishes the ensemble's diameters.
 
+It reads the run's exchange (``agent_<i>/exchange``, ``wire.exchange``), whose messages carry
+the run's id: a pose published on ``agent_<i>/pose`` by anything else does not reach it.
+
     ros2 run polymatch_ros monitor --ros-args -r __ns:=/polymatch -r __node:=monitor \\
         -p scene:=config/congruent_triangles.yaml
     ros2 topic echo /polymatch/diameter
@@ -107,8 +110,9 @@ class MonitorNode(NodeApp):
         )
 
     def _wire_up(self) -> None:
-        """Readers of every agent's pose (and twist); the headline, diagnostics, status and
-        marker writers; the ensemble's services.
+        """Readers of every agent's state on the run's exchange (``wire.exchange``: pose and
+        velocities with the run's id); the headline, diagnostics, status and marker writers;
+        the ensemble's services.
 
         The readers live on a lean node of their own (``exchange.LeanReaders``), and each report
         takes what they hold first (``_drain``), so the poses do not wake the monitor between
@@ -126,10 +130,8 @@ class MonitorNode(NodeApp):
         self.marker_pub = wire.publisher(node, "markers") if self.params["markers"] else None
         self._wait_for_report_readers()
         self.readers = LeanReaders(node, "_poses")
-        kinds = ("pose", "twist") if self.model.order == 2 else ("pose",)
         for a in range(self.n):
-            for kind in kinds:
-                self.readers.subscribe(kind, self._receiver(a, kind), dim, a, self.params["mode"])
+            self.readers.subscribe("exchange", self._receiver(a), dim, a, self.params["mode"])
         self.control = EnsembleControl(node, self.params["mode"])
 
     def _wait_for_report_readers(self) -> None:
@@ -149,14 +151,6 @@ class MonitorNode(NodeApp):
                 return
             time.sleep(0.02)
 
-    def _decode(self, agent: int, kind: str, msg: Any) -> wire.Received | None:
-        got, reason = wire.decode_motion(
-            kind, msg, self.grp, self.model.dim, self.params["frame_id"], self.scene.t_end
-        )
-        if got is None:
-            self.drops(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
-        return got
-
     def _fresh(self, agent: int, key: int, pending: Mapping[int, Mapping[int, Any]]) -> bool:
         """Lockstep: True if this stamp is still to be completed.  The same stamp heard again
         (an agent's initial pose re-announced, a repeated publish) is expected traffic, not a
@@ -169,26 +163,31 @@ class MonitorNode(NodeApp):
             self.drops(f"agent {agent}", "stale pose (a stamp from the past)")
         return False
 
-    def _receiver(self, agent: int, kind: str) -> Callable[[Any, MessageInfo], None]:
-        """The callback of one agent's pose or twist topic: the latest of each agent, and in
-        lockstep the pending report of its stamp (a pose as a Row, a twist as (v, W))."""
-        pose = kind == "pose"
-        latest: dict[int, Any] = self.latest if pose else self.velocity
-        pending: dict[int, dict[int, Any]] = self.pending if pose else self.pending_v
+    def _receiver(self, agent: int) -> Callable[[Any, MessageInfo], None]:
+        """The callback of one agent's exchange topic (``wire.exchange``: only this run's
+        messages are read, anything else is dropped and counted): the latest state of each
+        agent, and in lockstep the pending report of its stamp (a Row, and in second order
+        the velocities (v, W))."""
+        second = self.model.order == 2
+        run_id = self.params["run_id"]
 
         def receive(msg: Any, info: MessageInfo) -> None:
-            got = self._decode(agent, kind, msg)
+            got, reason = wire.decode_exchange(msg, self.grp, self.model.dim, run_id, agent,
+                                               self.scene.t_end)
             if got is None:
+                self.drops(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
                 return
-            value: wire.Row | Velocity
-            if pose:
-                value = wire.Row(got.vec - self.scene.origin, got.rot)
-                latest[agent] = (got.key, value, received_at(info)[1])
-            else:
-                value = velocity = (got.vec, got.rot)
-                latest[agent] = (got.key, *velocity)
-            if self.lockstep and self._fresh(agent, got.key, pending):
-                pending.setdefault(got.key, {})[agent] = value
+            row = wire.Row(got.x, got.rot)
+            self.latest[agent] = (got.key, row, received_at(info)[1])
+            velocity: Velocity | None = None
+            if second and got.v is not None and got.w is not None:
+                velocity = (got.v, got.w)
+            if velocity is not None:
+                self.velocity[agent] = (got.key, *velocity)
+            if self.lockstep and self._fresh(agent, got.key, self.pending):
+                self.pending.setdefault(got.key, {})[agent] = row
+                if velocity is not None:
+                    self.pending_v.setdefault(got.key, {})[agent] = velocity
                 self._collect_completed()
 
         return receive

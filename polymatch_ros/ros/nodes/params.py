@@ -176,6 +176,12 @@ AGENT = (
         "do not start before this many subscribers listen to the poses",
         (0, 100000),
     ),
+    Param(
+        "exchange_subscribers",
+        0,
+        "do not start before this many subscribers (the monitor) listen to the run's exchange",
+        (0, 100000),
+    ),
     Param("frame_id", "world", "frame_id of published poses"),
     Param(
         "max_linear_speed", 1e6, "bridge: commanded linear speed limit (m/s, by norm)", (0.0, 1e6)
@@ -208,7 +214,8 @@ AGENT = (
     Param(
         "run_id",
         0,
-        "run identifier shared by the ensemble; stage messages with another are dropped",
+        "run identifier shared by the ensemble; stage and exchange messages with another are "
+        "dropped",
         (0, 2**31 - 1),
     ),
 )
@@ -238,10 +245,12 @@ MONITOR = (
         "realtime: ignore agents silent this long (s); also the markers' lifetime",
         (0.001, 1e6),
     ),
-    Param("frame_id", "world", "expected frame_id of poses and frame of the markers"),
+    Param("frame_id", "world", "frame of the markers"),
     Param("markers", True, "publish visualization_msgs/MarkerArray"),
     Param("t_end", float, "end time: the scene's unless given; poses stamped later are refused",
           (MIN_T_END, 1e12)),
+    Param("run_id", 0, "the run's id, as its agents': exchange messages with another are "
+          "dropped", (0, 2**31 - 1)),
     Param(
         "report_readers",
         0,

@@ -54,20 +54,18 @@ class PeerTable:
     for every pose in between.
     """
 
-    def __init__(self, node: Node, layout: Layout, frame_id: str, timeout: float,
-                 drops: DropCounter, origin: np.ndarray, delay: float, t_max: float | None,
+    def __init__(self, node: Node, layout: Layout, run_id: int, timeout: float,
+                 drops: DropCounter, delay: float, t_max: float | None,
                  clock: ClockOffsets | None = None, velocities: bool = True) -> None:
-        self.node, self.layout, self.drops = node, layout, drops
+        self.node, self.layout, self.drops, self.run_id = node, layout, drops, int(run_id)
         self.clock = clock  # ClockOffsets fed with every pose's stamp and arrival, or None
         # injected transport delay (s): a pose is used this long after arrival
         self.delay = float(delay)
         # agent -> [(arrival, kind, values)] not yet delivered
         self.pending: defaultdict[int, list[tuple[float, str, Any]]] = defaultdict(list)
-        # poses are absolute; the core works in offsets
-        self.origin = np.asarray(origin, dtype=float)
         self.model = layout.model
         self.grp = self.model.rotations
-        self.frame_id, self.timeout, self.t_max = frame_id, timeout, t_max
+        self.timeout, self.t_max = timeout, t_max
         self.latest: dict[int, SimpleNamespace] = {}  # agent -> (t, x, rot, v, heard)
         self.silent: set[int] = set()
         self.in_range_count: int | None = None  # proximity graphs: peers heard at the last tick
@@ -77,45 +75,42 @@ class PeerTable:
         dim = self.model.dim
         self.readers = LeanReaders(node, "_peers")
         # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
-        want_v = velocities and self.model.order == 2 and self.model.centroids_exact
-        for a in layout.peers:
-            kinds = ["pose"]
-            if want_v and self.layout.owner[a][0] in layout.local_groups:
-                kinds.append("twist")
-            for kind in kinds:
-                self.readers.subscribe(kind, self._receiver(a, kind), dim, a, "realtime")
+        self.want_v = velocities and self.model.order == 2 and self.model.centroids_exact
+        for a in layout.peers:  # the run's exchange (wire.exchange): pinned to this run's id
+            self.readers.subscribe("exchange", self._receiver(a), dim, a, "realtime")
 
     @classmethod
     def of_agent(cls, agent: AgentBase, clock: ClockOffsets | None = None) -> PeerTable:
         """The table of a realtime or bridge agent (``AgentBase``), from its parameters; a bridge
         agent (centroids measured, never advanced by the flow) hears no peer velocities."""
         p = agent.params
-        return cls(agent.node, agent.layout, p["frame_id"], p["peer_timeout"], agent.drops,
-                   agent.scene.origin, p["delay"], agent.scene.t_end, clock,
-                   velocities=agent.mode != "bridge")
+        return cls(agent.node, agent.layout, p["run_id"], p["peer_timeout"], agent.drops,
+                   p["delay"], agent.scene.t_end, clock, velocities=agent.mode != "bridge")
 
     def _entry(self, agent: int) -> SimpleNamespace:
         return self.latest.setdefault(
             agent, SimpleNamespace(t=-np.inf, x=None, rot=None, v=None, heard=0.0)
         )
 
-    def _receiver(self, agent: int, kind: str) -> Callable[[Any, MessageInfo], None]:
-        """The callback of one peer's pose or twist topic: decoded messages wait in ``pending``
-        (a pose as (t, offset x, rotation), a twist as its centroid velocity), stamped with the
-        time the middleware received them."""
+    def _receiver(self, agent: int) -> Callable[[Any, MessageInfo], None]:
+        """The callback of one peer's exchange topic: decoded states wait in ``pending`` as
+        (t, offset x, rotation) and, where the flow needs it, the centroid velocity, stamped
+        with the time the middleware received them.  Another run's message, or anything
+        malformed, is dropped and counted."""
+        want_v = self.want_v and self.layout.owner[agent][0] in self.layout.local_groups
 
         def receive(msg: Any, info: MessageInfo) -> None:
-            got, reason = wire.decode_motion(
-                kind, msg, self.grp, self.model.dim, self.frame_id, self.t_max
-            )
+            got, reason = wire.decode_exchange(msg, self.grp, self.model.dim, self.run_id,
+                                               agent, self.t_max)
             if got is None:
                 self.drops(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
                 return
             wall, mono = received_at(info)
-            if kind == "pose" and self.clock is not None:
+            if self.clock is not None:
                 self.clock.add(agent, got.t, wall)
-            value: Any = (got.t, got.vec - self.origin, got.rot) if kind == "pose" else got.vec
-            self.pending[agent].append((mono, kind, value))
+            self.pending[agent].append((mono, "pose", (got.t, got.x, got.rot)))
+            if want_v and got.v is not None:
+                self.pending[agent].append((mono, "twist", got.v))
 
         return receive
 

@@ -205,9 +205,11 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
         f"run_id:={context.run_id}",
         "-p",
         f"agents_per_process:={k}",
+        # the recorder (--record) reads every pose, the monitor every state of the exchange
         "-p",
-        # the monitor and the recorder (--record) read every pose
-        f"pose_subscribers:={int(plan.hosts.monitor) + int(plan.outputs.record is not None)}",
+        f"pose_subscribers:={int(plan.outputs.record is not None)}",
+        "-p",
+        f"exchange_subscribers:={int(plan.hosts.monitor)}",
         "-p",
         "autostart:=false",  # the runner drives the lifecycle (``lifecycle_driver``)
         "-p",
@@ -231,7 +233,7 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
         agent += bridge_run.agent_args(plan.bridge, plan.scene.model.order)
     monitor_mode = "realtime" if plan.realtime else "lockstep"
     monitor = common + ["-p", f"mode:={monitor_mode}"]
-    monitor += ["-p", f"peer_timeout:={timing.peer_timeout!r}"]
+    monitor += ["-p", f"peer_timeout:={timing.peer_timeout!r}", "-p", f"run_id:={context.run_id}"]
     # the recorder (--record) hears every report, the first too (``report_readers``)
     monitor += ["-p", f"report_readers:={int(plan.outputs.record is not None)}"]
     if plan.realtime:

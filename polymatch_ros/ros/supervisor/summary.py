@@ -139,10 +139,9 @@ def _summary(plan: RunPlan, final: State, records: list[RunRecord], wall: float,
     for rec in agents:
         if outputs.verbose or rec.dropped_total:
             print(rec.describe())
-    if mode == "lockstep":
-        for rec in records:
-            if rec.role == "monitor":
-                print(rec.describe())
+    for rec in records:  # lockstep: the monitor's last report is the final step's
+        if rec.role == "monitor" and (mode == "lockstep" or rec.dropped_total):
+            print(rec.describe())
     if outputs.save:
         _save(outputs.save, scene, final, watcher.pose_times())
     if mode == "lockstep" and outputs.compare:

@@ -26,6 +26,7 @@ from .codec import (
     time_key,
 )
 from .ensemble import Row, assemble  # noqa: F401
+from .exchange import EXCHANGE_FORMAT, Motion, decode_exchange, encode_exchange
 from .motion import (
     MOTIONS,
     Received,

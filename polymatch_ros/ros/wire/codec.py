@@ -137,17 +137,19 @@ class Stage:
 
 
 def encode_stage(msg: Any, run_id: int, agent: int, step: int, stage: int, flags: int, t: float,
-                 fields: Mapping[str, Sequence[float]]) -> Any:
-    """Fill a Float64MultiArray with a stage: fields is a dict label -> values (x, v, rot)."""
+                 fields: Mapping[str, Sequence[float]], fmt: int = STAGE_FORMAT,
+                 order: Sequence[tuple[str, int]] = FIELDS) -> Any:
+    """Fill a Float64MultiArray with a stage: fields is a dict label -> values (x, v, rot);
+    ``fmt`` and ``order`` (labels and mask bits): another message of the stage layout."""
     mask = 0
     body: list[float] = []
-    for label, bit in FIELDS:
+    for label, bit in order:
         if label in fields:
             mask |= bit
             body.extend(fields[label])
     # an array.array is taken as it is; a list would be type- and range-checked item by item
     msg.data = array.array("d", [
-        float(STAGE_FORMAT),
+        float(fmt),
         float(run_id),
         float(agent),
         float(step),
@@ -185,7 +187,7 @@ def _stage_header(
     return (int(head[3]), int(head[4]), int(head[5]), float(head[6]), int(head[7])), None
 
 
-def _stage_data(
+def stage_data(
     msg: Any, run_id: int, sender: int, t_max: float | None, fmt: int
 ) -> tuple[np.ndarray | None, Header | None, str | None]:
     """(data, header, None) of a stage or block message, or (None, None, reason)."""
@@ -203,7 +205,7 @@ def decode_stage(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: int
                  rot_tol: float = ROTATION_TOL,
                  t_max: float | None = None) -> tuple[Stage | None, str | None]:
     """Float64MultiArray -> (Stage, None) or (None, reason)."""
-    data, head, reason = _stage_data(msg, run_id, agent, t_max, STAGE_FORMAT)
+    data, head, reason = stage_data(msg, run_id, agent, t_max, STAGE_FORMAT)
     if data is None or head is None:
         return None, reason
     step, stage, flags, t, mask = head
@@ -282,7 +284,7 @@ def decode_block(msg: Any, grp: RotationGroup, dim: int, run_id: int, block: int
 
     Checked as ``decode_stage`` checks one agent's message, each row's rotation included;
     every agent index must lie in the block (bK .. bK + K - 1) and appear once."""
-    data, head, reason = _stage_data(msg, run_id, block, t_max, BLOCK_FORMAT)
+    data, head, reason = stage_data(msg, run_id, block, t_max, BLOCK_FORMAT)
     if data is None or head is None:
         return None, reason
     step, stage, flags, t, mask = head

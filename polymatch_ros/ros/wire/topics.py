@@ -37,6 +37,9 @@ TOPICS = {
     # d <= 3: geometry_msgs/PoseStamped and TwistStamped; d >= 4: std_msgs/Float64MultiArray
     "pose": Topic("agent_{agent}/pose", "pose", "pose", realtime_reader_qos="latest"),
     "twist": Topic("agent_{agent}/twist", "twist", "pose", realtime_reader_qos="latest"),
+    # the run's own exchange (wire.exchange): each state with the run's id, for the peers and
+    # the monitor; the pose and twist topics above are for people and tools
+    "exchange": Topic("agent_{agent}/exchange", "array", "pose", realtime_reader_qos="latest"),
     # the final state, latched, for whoever supervises the run (the runner's summary)
     "final_pose": Topic("agent_{agent}/final_pose", "pose", "latched"),
     "final_twist": Topic("agent_{agent}/final_twist", "twist", "latched"),

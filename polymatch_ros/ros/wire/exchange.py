@@ -1,0 +1,104 @@
+"""The run's own exchange of states: what peers and the monitor read, pinned to the run.
+
+``agent_<i>/pose`` is for people and tools (``ros2 topic echo``, RViz, a recording): anything
+on the ROS graph may publish there, and a reader cannot tell its writers apart (rclpy's
+message info carries no publisher id).  The agents of a run therefore also publish each
+state on ``agent_<i>/exchange``, stamped with the run's id, and their peers (realtime,
+bridge) and the monitor read only that: a message of another run, of a stale process of an
+earlier run or of any other writer without the id is dropped and counted with its reason
+(``unknown sender (run id)``), never used.  A restarted agent process gets its run's id
+again, so its peers take it back.
+
+``agent_<i>/exchange``  ``std_msgs/Float64MultiArray``, no layout dims: data = [format 4,
+                        run id, agent, 0, 0, 0, t, mask] then x (d) if mask & 1, v (d) if
+                        mask & 2, the rotation (mask & 4, always: the core's representation,
+                        as in the stage messages), W_i as a row-major d x d skew matrix
+                        (mask & 8, with v: second order).  x is the centroid relative to the
+                        scene's origin, the number the core computes with.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .codec import (
+    HEADER,
+    ROTATION_TOL,
+    encode_stage,
+    orthogonality,
+    rot_from_values,
+    rot_size,
+    rot_values,
+    stage_data,
+)
+
+if TYPE_CHECKING:
+    from ...core.so import RotationGroup
+
+EXCHANGE_FORMAT = 4
+#: field, bit in the header's mask, in wire order: the stage fields and W_i
+EXCHANGE_FIELDS = (("x", 1), ("v", 2), ("rot", 4), ("w", 8))
+
+
+@dataclass
+class Motion:
+    """One agent's state as exchanged: simulated time (s, and its integer ns key), centroid
+    offset x, rotation (a one-row group array), and in second order v and W_i (an algebra
+    row)."""
+
+    t: float
+    key: int
+    x: np.ndarray
+    rot: np.ndarray
+    v: np.ndarray | None = None
+    w: np.ndarray | None = None
+
+
+def encode_exchange(msg: Any, grp: RotationGroup, run_id: int, agent: int, t: float,
+                    x: np.ndarray, rot_one: np.ndarray, v: np.ndarray | None = None,
+                    w_one: np.ndarray | None = None) -> Any:
+    """Fill a Float64MultiArray with one agent's state (``w_one``: its W_i as an algebra row,
+    given with ``v``)."""
+    fields: dict[str, Sequence[float]] = {"x": np.asarray(x, dtype=float).tolist(),
+                                          "rot": rot_values(grp, rot_one)}
+    if v is not None and w_one is not None:
+        fields["v"] = np.asarray(v, dtype=float).tolist()
+        fields["w"] = grp.algebra_to_skew(w_one)[0].ravel().tolist()
+    return encode_stage(msg, run_id, agent, 0, 0, 0, t, fields, fmt=EXCHANGE_FORMAT,
+                        order=EXCHANGE_FIELDS)
+
+
+def decode_exchange(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: int,
+                    t_max: float | None = None) -> tuple[Motion | None, str | None]:
+    """Float64MultiArray -> (Motion, None) or (None, reason): the header as a stage message's
+    (format, this run's id, this agent, a stamp inside the run), the rotation in SO(d), W_i
+    skew."""
+    data, head, reason = stage_data(msg, run_id, agent, t_max, EXCHANGE_FORMAT)
+    if data is None or head is None:
+        return None, reason
+    t, mask = head[3], head[4]
+    sizes = {"x": dim, "v": dim, "rot": rot_size(grp), "w": dim * dim}
+    if (mask & ~15 or mask & 5 != 5 or bool(mask & 2) != bool(mask & 8)
+            or len(data) != HEADER + sum(sizes[f] for f, bit in EXCHANGE_FIELDS if mask & bit)):
+        return None, "malformed layout"
+    values: dict[str, np.ndarray] = {}
+    pos = HEADER
+    for label, bit in EXCHANGE_FIELDS:
+        if mask & bit:
+            values[label] = data[pos:pos + sizes[label]].copy()
+            pos += sizes[label]
+    if grp.name != "angle":
+        mat = values["rot"].reshape(dim, dim)
+        if orthogonality(mat) > ROTATION_TOL or np.linalg.det(mat) < 0:
+            return None, "rotation not in SO(d)"
+    out = Motion(t, int(round(t * 1e9)), values["x"], rot_from_values(grp, values["rot"]))
+    if "w" in values:
+        skew = values["w"].reshape(dim, dim)
+        if np.max(np.abs(skew + skew.T)) > ROTATION_TOL * max(1.0, float(np.max(np.abs(skew)))):
+            return None, "angular velocity not skew"
+        out.v, out.w = values["v"], grp.algebra_from_skew(skew[None])
+    return out, None
