@@ -1,6 +1,6 @@
 """Every way a decoder of ``wire`` refuses a message, reached on purpose: one hand-made message
-per rejection path of ``codec`` (stage and block messages) and ``motion`` (poses and
-velocities), each dropped with its own reason.  test_wire_fuzz.py throws random messages at the
+per rejection path of ``codec`` (stage and block messages), ``exchange`` (the run's own
+states) and ``motion`` (poses and velocities), each dropped with its own reason.  test_wire_fuzz.py throws random messages at the
 same decoders; here no path depends on what the fuzzer happens to draw.  Messages are built
 directly (no DDS)."""
 
@@ -268,3 +268,75 @@ def test_the_unchanged_array_messages_are_accepted(kind):
                          ids=[c[0] for c in ARRAY_CASES])
 def test_array_message_is_dropped_with_its_reason(what, kind, arguments, reason):
     assert _decode_geometry(kind, 4, _motion_array(kind, **arguments)) == (None, reason)
+
+
+# -- the run's exchange (wire.exchange) -------------------------------------------------------
+
+SPIN = [[0.0, -0.5, 0.25], [0.5, 0.0, -1.0], [-0.25, 1.0, 0.0]]  # W_i, skew
+
+
+def _exchange_data():
+    """A valid second-order exchange of agent 3, d = 3: header, x, v, rot, W (mask 15)."""
+    return ([4.0, RUN_ID, AGENT, 0.0, 0.0, 0.0, 1.25, 15.0] + [0.5, -1.0, 2.0]
+            + [0.1, 0.2, -0.3] + _tilted(3, 0.0) + [w for row in SPIN for w in row])
+
+
+def _decode_exchange(msg):
+    from polymatch_ros.ros import wire
+
+    return wire.decode_exchange(msg, _group(3), 3, RUN_ID, AGENT, T_MAX)
+
+
+X, V, ROT, W = 8, 11, 14, 23  # where each field starts in _exchange_data
+EXCHANGE_CASES = HEADER_CASES + [
+    ("a stage message's format", 0, 2.0, "unknown format"),
+    ("another run", 1, 12345.0, "unknown sender (run id)"),
+    ("agent index", 2, AGENT + 1.0, "unknown sender (agent index)"),
+    ("NaN in x", X, math.nan, "non-finite value"),
+    ("infinity in W", W + 1, math.inf, "non-finite value"),
+    ("v beyond MAX_ABS", V, 1e101, "value out of range"),
+    ("unknown mask bit", 7, 31.0, "malformed layout"),
+    ("mask without rot", 7, 11.0, "malformed layout"),
+    ("mask v without W", 7, 7.0, "malformed layout"),
+    ("mask W without v", 7, 13.0, "malformed layout"),
+    ("rotation not orthogonal", ROT, 1.001, "rotation not in SO(d)"),
+    ("W not skew", W, 0.5, "angular velocity not skew"),
+]
+
+
+def test_an_exchange_message_round_trips_and_is_accepted():
+    """What an agent publishes (encode_exchange) reads back as it was; the hand-made message
+    is accepted with its fields in place."""
+    from std_msgs.msg import Float64MultiArray
+
+    from polymatch_ros.ros import wire
+
+    grp = _group(3)
+    rot = grp.from_matrices(np.eye(3)[None])
+    w = grp.algebra_from_skew(np.array(SPIN)[None])
+    msg = wire.encode_exchange(Float64MultiArray(), grp, RUN_ID, AGENT, 1.25,
+                               np.array([0.5, -1.0, 2.0]), rot, np.array([0.1, 0.2, -0.3]), w)
+    assert list(msg.data) == _exchange_data()
+    got, reason = _decode_exchange(_array_msg(_exchange_data()))
+    assert reason is None and (got.t, got.key) == (1.25, 1_250_000_000)
+    assert got.x.tolist() == [0.5, -1.0, 2.0] and got.v.tolist() == [0.1, 0.2, -0.3]
+    assert np.array_equal(grp.algebra_to_skew(got.w)[0], SPIN)
+    first = _exchange_data()[:V] + _tilted(3, 0.0)     # first order: x and rot (mask 5)
+    got, reason = _decode_exchange(_array_msg(_set(first, 7, 5.0)))
+    assert reason is None and got.v is None and got.w is None
+
+
+@pytest.mark.parametrize("what,index,value,reason", EXCHANGE_CASES,
+                         ids=[c[0] for c in EXCHANGE_CASES])
+def test_exchange_message_is_dropped_with_its_reason(what, index, value, reason):
+    assert _decode_exchange(_array_msg(_set(_exchange_data(), index, value))) == (None, reason)
+
+
+def test_an_exchange_with_a_reflection_or_the_wrong_length_is_dropped():
+    reflection = _exchange_data()
+    reflection[ROT:ROT + 9] = np.diag([-1.0, 1.0, 1.0]).ravel().tolist()
+    assert _decode_exchange(_array_msg(reflection)) == (None, "rotation not in SO(d)")
+    full = _exchange_data()
+    for msg in (_array_msg(full[:-1]), _array_msg(full + [0.0]), _array_msg(full[:7]),
+                _array_msg(full, dims=[("t", 1)])):
+        assert _decode_exchange(msg) == (None, "malformed layout")
