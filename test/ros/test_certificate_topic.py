@@ -37,7 +37,7 @@ def test_monitor_grants_certificate_mid_run_and_a_late_echo_gets_it_thm_4_2(ros,
     ros.monitor(str(path), timeout=120)
     # one process hosts the three agents (as `polymatch run -k 3` does): fewer starts
     agents = ros.start(node_argv("nodes.agent", str(path), agents=list(range(N)),
-                                 agents_per_process=N, pose_subscribers=1)
+                                 agents_per_process=N, exchange_subscribers=1)
                        + ["-r", f"__node:=agents_0_{N - 1}"], 90, "agents")
     assert ros.wait(agents, 100) == 0, ros.output(agents)[-2000:]
     # the run is over, the monitor still serves its latched certificate to a late reader
