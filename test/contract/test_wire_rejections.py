@@ -1,8 +1,8 @@
 """Every way a decoder of ``wire`` refuses a message, reached on purpose: one hand-made message
 per rejection path of ``codec`` (stage and block messages), ``exchange`` (the run's own
-states) and ``motion`` (poses and velocities), each dropped with its own reason.  test_wire_fuzz.py throws random messages at the
-same decoders; here no path depends on what the fuzzer happens to draw.  Messages are built
-directly (no DDS)."""
+states) and ``motion`` (poses and velocities), each dropped with its own reason.
+test_wire_fuzz.py throws random messages at the same decoders; here no path depends on what the
+fuzzer happens to draw.  Messages are built directly (no DDS)."""
 
 import math
 
