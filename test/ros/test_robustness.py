@@ -1,7 +1,9 @@
 """Bad input from the network or the command line never poisons the ensemble.
 
-- a rogue publisher on an agent's pose and stage topics (NaN, non-unit quaternions,
-  foreign run ids) changes nothing in a lockstep result, and the drops are counted;
+- a rogue publisher on an agent's pose, stage, exchange and final topics (NaN, non-unit
+  quaternions, foreign run ids, another run's final state) changes nothing in a lockstep
+  result, and the drops are counted;
+- another run's well-formed states of an agent change nothing in a realtime run;
 - bad ROS parameters are one line and exit code 2;
 - the package builds with colcon (from PyPI) in a scratch workspace and the installed
   `agent` and `monitor` executables start; a one-agent scene runs to t_end.

@@ -3,13 +3,13 @@
     python test/support/rogue_publisher.py ENSEMBLE AGENT SECONDS [STAMP]
 
 Sends, at ~100 Hz each: PoseStamped with NaN positions, PoseStamped with a quaternion of
-norm 2, lockstep stage messages with NaN data, a foreign run id, or no header, and exchange
-messages (``wire.exchange``) with NaN data or a foreign run id.  With STAMP it sends instead,
-at 20 Hz, well-formed states of a 2-D agent far away (centroid (50, 0), rotation 0.3 rad)
-stamped STAMP (late in the run: newer than any real pose), on the agent's pose topic and on its
-exchange with a foreign run id: what another run, or a stale process of an earlier one, would
-send.  It is
-started by the test in the test's own ROS domain (loopback discovery) under `timeout`.
+norm 2, lockstep stage messages with NaN data, a foreign run id, or no header, exchange
+messages (``wire.exchange``) with NaN data or a foreign run id, and another run's final state
+on the latched ``final_exchange``.  With STAMP it sends instead, at 20 Hz, well-formed states
+of a 2-D agent far away (centroid (50, 0), rotation 0.3 rad) stamped STAMP (late in the run:
+newer than any real pose), on the agent's pose topic and on its exchange with a foreign run
+id: what another run, or a stale process of an earlier one, would send.  It is started by the
+test in the test's own ROS domain (loopback discovery) under `timeout`.
 """
 
 import math
@@ -38,9 +38,10 @@ def well_formed(pose, exchange, agent, stamp):
                                           np.array(FAR), np.array([ANGLE])))
 
 
-def malformed(pose, stage, exchange, agent, k):
+def malformed(pose, stage, exchange, final, agent, k):
     """NaN and non-unit poses, stages with NaN data, a foreign run id or no header, exchange
-    messages with NaN data or a foreign run id."""
+    messages with NaN data or a foreign run id, and another run's well-formed final state (far
+    away, stamped t = 1) on the latched final exchange the runner summarises."""
     p = PoseStamped()
     p.header.frame_id = "world"
     p.header.stamp.sec = k
@@ -61,6 +62,8 @@ def malformed(pose, stage, exchange, agent, k):
     x = np.array([math.nan if k % 2 else 0.0, 0.0])
     exchange.publish(wire.encode_exchange(Float64MultiArray(), grp, FOREIGN_RUN, agent, 0.0, x,
                                           np.array([0.3])))
+    final.publish(wire.encode_exchange(Float64MultiArray(), grp, FOREIGN_RUN, agent, 1.0,
+                                       np.array(FAR), np.array([ANGLE])))
 
 
 def main():
@@ -74,11 +77,13 @@ def main():
         ensemble, "stage", agent), qos["stage"])
     exchange = node.create_publisher(Float64MultiArray, wire.full_name(
         ensemble, "exchange", agent), qos["pose"])
+    final = node.create_publisher(Float64MultiArray, wire.full_name(
+        ensemble, "final_exchange", agent), qos["latched"])
     end = time.monotonic() + seconds
     k = 0
     while time.monotonic() < end:
         if stamp is None:
-            malformed(pose, stage, exchange, agent, k)
+            malformed(pose, stage, exchange, final, agent, k)
         else:
             well_formed(pose, exchange, agent, stamp)
         k += 1

@@ -107,6 +107,9 @@ class AgentBase(NodeApp):
         node, dim, local = self.node, self.model.dim, self.layout.local
         self.pose_pubs = {a: wire.publisher(node, "pose", dim, a) for a in local}
         self.exchange_pubs = {a: wire.publisher(node, "exchange", dim, a) for a in local}
+        self.final_exchange_pubs = {
+            a: wire.publisher(node, "final_exchange", dim, a) for a in local
+        }
         self.final_pubs = {a: wire.publisher(node, "final_pose", dim, a) for a in local}
         second = self.model.order == 2
         self.twist_pubs = (
@@ -155,16 +158,17 @@ class AgentBase(NodeApp):
         Per-step messages nobody subscribes to are not even built (the lockstep hot loop).
         """
         if final:
+            self._publish_exchange(self.final_exchange_pubs)
             self._publish_rows(self.final_pubs, self.final_twist_pubs)
         else:
             if any(p.get_subscription_count() for p in self.exchange_pubs.values()):
-                self._publish_exchange()
+                self._publish_exchange(self.exchange_pubs)
             if any(p.get_subscription_count() for p in self.pose_pubs.values()):
                 self._publish_rows(self.pose_pubs, self.twist_pubs)
         self._maybe_diagnostics()
 
-    def _publish_exchange(self) -> None:
-        """Every local agent's state with the run's id (``wire.exchange``)."""
+    def _publish_exchange(self, pubs: dict[int, Publisher]) -> None:
+        """Every local agent's state with the run's id (``wire.exchange``) on ``pubs``."""
         from std_msgs.msg import Float64MultiArray
 
         st, run_id, grp = self.state, self.params["run_id"], self.grp
@@ -176,7 +180,7 @@ class AgentBase(NodeApp):
                 v = w = None
                 if gs.v is not None and gs.w is not None:  # second order: its velocities
                     v, w = gs.v[r], grp.algebra_take(gs.w, [r])
-                self.exchange_pubs[a].publish(wire.encode_exchange(
+                pubs[a].publish(wire.encode_exchange(
                     Float64MultiArray(), grp, run_id, a, st.t, gs.x[r], grp.take(gs.rot, [r]),
                     v, w))
 
@@ -240,7 +244,7 @@ class AgentBase(NodeApp):
         from rclpy.duration import Duration
 
         pubs = [self.pose_pubs, self.twist_pubs, self.final_pubs, self.final_twist_pubs,
-                self.exchange_pubs]
+                self.exchange_pubs, self.final_exchange_pubs]
         for pub in [p for group in pubs for p in group.values()] + [self.status_pub]:
             pub.wait_for_all_acked(Duration(seconds=timeout))
 

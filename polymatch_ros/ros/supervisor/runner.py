@@ -344,7 +344,7 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
     progress = Progress(plan.scene.t_end, plan.outputs.quiet)
     try:
         name = "runner" if plan.every_agent_here else f"runner_{plan.hosts.agents[0]}"
-        watcher = Watcher(plan.scene, plan.hosts.ensemble, name)
+        watcher = Watcher(plan.scene, plan.hosts.ensemble, name, context.run_id)
         if context.shared_domain:
             watcher.refuse_names_in_use(_node_names(context, name), GRAPH_LISTEN_SECONDS)
         if plan.hosts.lead and not plan.hosts.monitor:

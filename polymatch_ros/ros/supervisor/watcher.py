@@ -27,9 +27,10 @@ class Watcher:
 
     It hears the headline diameter and every process's run record (``status``: progress,
     agents up), calls the ensemble's start and stop services (``control``), and takes each
-    agent's *final* pose from its latched ``final_pose``/``final_twist`` topics for the
-    summary - not the per-step poses, so supervising a run adds no load to the lockstep
-    rounds.
+    agent's *final* state from its latched ``final_exchange`` topic for the summary - not
+    the per-step poses, so supervising a run adds no load to the lockstep rounds.  Only this
+    run's final states are taken (``run_id``, ``wire.exchange``): a latched final pose of
+    another run, or anything else on the topic, is ignored.
     """
 
     node: Node
@@ -48,7 +49,8 @@ class Watcher:
     stop_requested_at: float | None                 # ensemble time of a stop not the runner's
     stop_sent: bool                                 # the runner called the stop service
 
-    def __init__(self, scene: Scene, ensemble: str, name: str = "runner") -> None:
+    def __init__(self, scene: Scene, ensemble: str, name: str = "runner",
+                 run_id: int = 0) -> None:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
@@ -70,9 +72,7 @@ class Watcher:
         wire.subscription(node, "control", self._control)  # a stop someone else asked for
         self.services = ControlClient(node)  # start and stop: the ensemble's services
         for a in range(self.model.n_agents):
-            wire.subscription(node, "final_pose", self._pose(a), dim, a)
-            if self.model.order == 2:
-                wire.subscription(node, "final_twist", self._twist(a), dim, a)
+            wire.subscription(node, "final_exchange", self._final(a, run_id), dim, a)
 
     def _control(self, msg: Any) -> None:
         """A 'stop' on the control topic that the runner did not send: the ensemble's stop
@@ -101,19 +101,19 @@ class Watcher:
         if old is None or rec.t >= old.t or rec.steps < old.steps:
             self.agents[rec.agents] = rec
 
-    def _pose(self, agent: int) -> Callable[[Any], None]:
-        def receive(msg: Any) -> None:
-            got, _ = wire.decode_pose_msg(msg, self.grp, self.model.dim, t_max=self.scene.t_end)
-            if got is not None:
-                self.poses[agent] = (got.t, wire.Row(got.vec - self.scene.origin, got.rot))
+    def _final(self, agent: int, run_id: int) -> Callable[[Any], None]:
+        """The callback of one agent's final state: its pose and, in second order, its
+        velocities, if the message is this run's and well formed."""
+        second = self.model.order == 2
 
-        return receive
-
-    def _twist(self, agent: int) -> Callable[[Any], None]:
         def receive(msg: Any) -> None:
-            got, _ = wire.decode_twist_msg(msg, self.grp, self.model.dim, t_max=self.scene.t_end)
-            if got is not None:
-                self.velocities[agent] = (got.vec, got.rot)
+            got, _ = wire.decode_exchange(msg, self.grp, self.model.dim, run_id, agent,
+                                          self.scene.t_end)
+            if got is None:
+                return
+            self.poses[agent] = (got.t, wire.Row(got.x, got.rot))
+            if second and got.v is not None and got.w is not None:
+                self.velocities[agent] = (got.v, got.w)
 
         return receive
 

@@ -43,6 +43,9 @@ TOPICS = {
     # the final state, latched, for whoever supervises the run (the runner's summary)
     "final_pose": Topic("agent_{agent}/final_pose", "pose", "latched"),
     "final_twist": Topic("agent_{agent}/final_twist", "twist", "latched"),
+    # the final state on the run's exchange (with the run's id): what the runner summarises
+    "final_exchange": Topic("agent_{agent}/final_exchange", "array", "latched",
+                            reader_qos="final_in"),
     "stage": Topic("agent_{agent}/stage", "array", "stage", reader_qos="stage_in"),
     # lockstep with K agents per process: the rows of block b (agents bK .. bK + K - 1)
     "stage_block": Topic("stages/block_{agent}", "array", "stage", reader_qos="stage_in"),
@@ -159,6 +162,9 @@ QOS = {
     # writer's (a topic without keys is one instance: depth is shared by all writers)
     "status": (1, True, True),
     "status_in": (1000, True, True),
+    # the runner's reader of final states keeps every sample (as stage_in): a flood of another
+    # writer on the topic then cannot evict the agent's own final state before it is taken
+    "final_in": (None, True, True),
     # commands are not replayed to agents that join later (a restarted agent must not stop)
     "control": (10, True, False),
     "markers": (10, True, False),
