@@ -100,6 +100,7 @@ class MonitorNode(NodeApp):
         # (t, metrics, agents heard) of the last report
         self.last: tuple[float, EnsembleMetrics, int] | None = None
         self.reports = 0
+        self.stopping = False  # SIGINT or SIGTERM came: end after the report under way
         self.certificate = CertificateKeeper(self.scene.tolerance)
         self.components = ComponentTracker()  # proximity graphs: who hears whom, since when
         self._wire_up()
@@ -180,9 +181,8 @@ class MonitorNode(NodeApp):
             row = wire.Row(got.x, got.rot)
             self.latest[agent] = (got.key, row, received_at(info)[1])
             velocity: Velocity | None = None
-            if second and got.v is not None and got.w is not None:
+            if second and got.v is not None and got.w is not None:  # decoded together
                 velocity = (got.v, got.w)
-            if velocity is not None:
                 self.velocity[agent] = (got.key, *velocity)
             if self.lockstep and self._fresh(agent, got.key, self.pending):
                 self.pending.setdefault(got.key, {})[agent] = row
@@ -337,7 +337,6 @@ class MonitorNode(NodeApp):
         process (SIGSEGV).  The signals only set a flag: one landing in the middle of a report
         (the first one evaluates the certificate, which takes a while) once cut it between
         the diameters and the certificate and markers, and a recording lacked them."""
-        self.stopping = False
         for sig in (signal.SIGINT, signal.SIGTERM):  # after rclpy's: the end is ours
             signal.signal(sig, self._stop)
         due = time.monotonic() + self.report_period

@@ -95,6 +95,20 @@ def orthogonality(mat: np.ndarray) -> float:
     return float(np.max(np.abs(np.swapaxes(mat, -1, -2) @ mat - np.eye(mat.shape[-1]))))
 
 
+def bad_rotation(mat: np.ndarray) -> str | None:
+    """The reason a d x d matrix on the wire is no rotation in SO(d), or None."""
+    if orthogonality(mat) > ROTATION_TOL or np.linalg.det(mat) < 0:
+        return "rotation not in SO(d)"
+    return None
+
+
+def bad_skew(mat: np.ndarray) -> str | None:
+    """The reason a d x d matrix on the wire is no angular velocity (skew), or None."""
+    if np.max(np.abs(mat + mat.T)) > ROTATION_TOL * max(1.0, float(np.max(np.abs(mat)))):
+        return "angular velocity not skew"
+    return None
+
+
 def _bad_numbers(values: np.ndarray) -> str | None:
     """The reason a vector of numbers is unusable, or None (one reduction: a NaN or an
     infinity makes the largest magnitude non-finite)."""

@@ -27,9 +27,9 @@ import numpy as np
 
 from .codec import (
     HEADER,
-    ROTATION_TOL,
+    bad_rotation,
+    bad_skew,
     encode_stage,
-    orthogonality,
     rot_from_values,
     rot_size,
     rot_values,
@@ -91,14 +91,12 @@ def decode_exchange(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: 
         if mask & bit:
             values[label] = data[pos:pos + sizes[label]].copy()
             pos += sizes[label]
-    if grp.name != "angle":
-        mat = values["rot"].reshape(dim, dim)
-        if orthogonality(mat) > ROTATION_TOL or np.linalg.det(mat) < 0:
-            return None, "rotation not in SO(d)"
+    reason = None if grp.name == "angle" else bad_rotation(values["rot"].reshape(dim, dim))
+    if "w" in values:
+        reason = reason or bad_skew(values["w"].reshape(dim, dim))
+    if reason:
+        return None, reason
     out = Motion(t, int(round(t * 1e9)), values["x"], rot_from_values(grp, values["rot"]))
     if "w" in values:
-        skew = values["w"].reshape(dim, dim)
-        if np.max(np.abs(skew + skew.T)) > ROTATION_TOL * max(1.0, float(np.max(np.abs(skew)))):
-            return None, "angular velocity not skew"
-        out.v, out.w = values["v"], grp.algebra_from_skew(skew[None])
+        out.v, out.w = values["v"], grp.algebra_from_skew(values["w"].reshape(1, dim, dim))
     return out, None

@@ -18,8 +18,9 @@ from .codec import (
     ROTATION_TOL,
     _bad_numbers,
     _bad_stamp,
+    bad_rotation,
     bad_scalars,
-    orthogonality,
+    bad_skew,
     stamp_of,
     time_key,
 )
@@ -155,11 +156,9 @@ def array_to_state(
     if reason:
         return None, reason
     mat = data[1 + dim :].reshape(dim, dim)
-    if rot_check:
-        if orthogonality(mat) > ROTATION_TOL or np.linalg.det(mat) < 0:
-            return None, "rotation not in SO(d)"
-    elif np.max(np.abs(mat + mat.T)) > ROTATION_TOL * max(1.0, np.max(np.abs(mat))):
-        return None, "angular velocity not skew"
+    reason = bad_rotation(mat) if rot_check else bad_skew(mat)
+    if reason:
+        return None, reason
     return (float(data[0]), data[1 : 1 + dim].copy(), mat), None
 
 

@@ -40,7 +40,7 @@ TOPICS = {
     # the run's own exchange (wire.exchange): each state with the run's id, for the peers and
     # the monitor; the pose and twist topics above are for people and tools
     "exchange": Topic("agent_{agent}/exchange", "array", "pose", realtime_reader_qos="latest"),
-    # the final state, latched, for whoever supervises the run (the runner's summary)
+    # the final state, latched, for people and tools
     "final_pose": Topic("agent_{agent}/final_pose", "pose", "latched"),
     "final_twist": Topic("agent_{agent}/final_twist", "twist", "latched"),
     # the final state on the run's exchange (with the run's id): what the runner summarises
