@@ -273,8 +273,8 @@ EQUILIBRIA = {
 }
 
 
-def equilibrium_run(name, order, rep, t_rates, every, m=0.5, gamma=1.0):
-    """Run an equilibrium for ``t_rates`` e-folding times.
+def equilibrium_run(name, order, rep, t_rates, every, m=0.5, gamma=1.0, dt=0.05):
+    """Run an equilibrium for ``t_rates`` e-folding times (rkmk4 at ``dt``).
 
     Returns (scene, traj, times, deviations, rate)."""
     from polymatch_ros.core import simulate
@@ -284,6 +284,6 @@ def equilibrium_run(name, order, rep, t_rates, every, m=0.5, gamma=1.0):
                representation=rep, mass=m, gamma=gamma, t_end=t_rates / rate,
                samples={"every": every},
                centroids={"box": [-1.0, 1.0]})
-    traj = simulate(sc, "rkmk4", 0.05)
+    traj = simulate(sc, "rkmk4", dt)
     eps = np.array([deviation(sc.model.rotations, st) for st in traj.states])
     return sc, traj, np.array(traj.times), eps, rate

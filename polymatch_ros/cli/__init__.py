@@ -25,6 +25,7 @@ The benchmarks live beside the package, in a checkout: ``python -m benchmarks FA
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import os
 import sys
@@ -63,8 +64,12 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"polymatch: error: {message.splitlines()[0]} ({hint})\n")
 
 
+@functools.cache
 def build_parser() -> Parser:
-    """The ``polymatch`` parser with every subcommand of ``COMMAND_MODULES`` and ``NODES``."""
+    """The ``polymatch`` parser with every subcommand of ``COMMAND_MODULES`` and ``NODES``.
+
+    Built once per process (each ``parse_args`` makes its own namespace), for callers that run
+    ``main`` many times in one process."""
     parser = Parser(prog="polymatch", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True

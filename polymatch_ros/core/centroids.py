@@ -82,10 +82,12 @@ class CentroidFlow:
             return mean_x + pk * dx, None
         assert v is not None and mean_v is not None, "the second-order model has velocities"
         dv = v - mean_v
-        mx = p0[0, 0] * mean_x + p0[0, 1] * mean_v
-        mv = p0[1, 0] * mean_x + p0[1, 1] * mean_v
-        return (mx + pk[0, 0] * dx + pk[0, 1] * dv,
-                mv + pk[1, 0] * dx + pk[1, 1] * dv)
+        (m_xx, m_xv), (m_vx, m_vv) = p0.tolist()        # floats: cheaper factors than items
+        (d_xx, d_xv), (d_vx, d_vv) = pk.tolist()
+        mx = m_xx * mean_x + m_xv * mean_v
+        mv = m_vx * mean_x + m_vv * mean_v
+        return (mx + d_xx * dx + d_xv * dv,
+                mv + d_vx * dx + d_vv * dv)
 
 
 def mode_propagators(mass: float, gamma: float, stiffness: np.ndarray, h: float) -> tuple:

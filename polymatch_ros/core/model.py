@@ -46,7 +46,7 @@ from .centroids import CentroidFlow, GraphCentroidFlow, pair_force
 from .errors import SceneError
 from .graph import Graph
 from .so import RotationGroup
-from .so.base import Array, MeanField
+from .so.base import Array, MeanField, constant_weights
 
 __all__ = ["Coupling", "CentroidFlow", "Group", "GroupCoupling", "GroupState", "Model", "Request",
            "State", "System", "lohe_torque", "pair_force", "validate_model"]
@@ -411,7 +411,7 @@ def _mean_rows(a):
     """Mean of the rows of an (n, d) array (a BLAS product: axis-0 reductions are slow)."""
     if a is None or len(a) == 0:
         return None
-    return (np.full(len(a), 1.0 / len(a)) @ a)
+    return constant_weights(len(a), 1.0 / len(a)) @ a
 
 
 def _ensemble_scales(group, ensemble_rows, n):

@@ -109,7 +109,9 @@ def test_first_order_rotation_bound_prop_2_2_ii(dim, seed):
     kappa = 1.5                                           # gamma = 1 as in the proposition
     scene = make_scene(dim, 1, count=6, seed=seed, kappa=kappa, gamma=1.0,
                        rotations={"within": 0.3}, t_end=8.0, samples={"every": 0.05})
-    traj = simulate(scene, "rkmk4", 0.01)
+    # a step a sample; rkmk4 at dt = 0.05 is within 2e-6 of dt = 0.01 relative to the bound,
+    # and the bound is met with >= 3% to spare at every t > 0
+    traj = simulate(scene, "rkmk4", 0.05)
     t = np.array(traj.times)
     d = np.array([brute_rotation_diameter(rot_matrices(scene.model.rotations, st.groups[0].rot))
                   for st in traj.states])
@@ -126,25 +128,33 @@ def test_first_order_rotation_bound_prop_2_2_ii(dim, seed):
 # Proposition 2.2 (i)
 
 
+def _sum_sq_rotation_rates(rep, groups):
+    """sum_i |O_i'|_F^2 = sum_i |W_i O_i|_F^2 of each group state, the hats of all of them built
+    in one call: these algebra layouts ((N,), (3, N), so(4) parts (6, N)) put the agent last."""
+    mats = np.stack([rot_matrices(rep, gs.rot) for gs in groups])          # (S, N, d, d)
+    assert all(np.shape(gs.w)[-1] == mats.shape[1] for gs in groups)
+    hats = skew_matrices(rep, np.concatenate([gs.w for gs in groups], axis=-1))
+    odot = np.einsum("snij,snjk->snik", hats.reshape(mats.shape), mats)
+    return np.sum(odot * odot, axis=(1, 2, 3))
+
+
 @pytest.mark.parametrize("dim,rep", [(2, "angle"), (3, "so3"), (4, "matrix")])
 def test_energy_nonincreasing_and_dissipation_identity_prop_2_2_i(dim, rep):
     m, gamma, kappa, n = 0.5, 0.5, 1.0, 5
     scene = make_scene(dim, 2, count=n, seed=41, mass=m, gamma=gamma, kappa=kappa, t_end=8.0,
                        samples={"every": 0.02}, velocities={"angular": {"normal": 1.0}})
     assert scene.model.rotations.name == rep
-    traj = simulate(scene, "rkmk4", 0.01)
+    # a step a sample: E is checked after every step.  The identity's residual is Simpson's on
+    # the samples, 0.02 apart: <= 2.2e-8 at dt = 0.02 (1.6e-8 at dt = 0.01), against 1e-7
+    traj = simulate(scene, "rkmk4", 0.02)
     e = np.array([rotation_energy(scene.model, st.groups[0]) for st in traj.states])
     core = np.array([met.groups[0].energy for met in traj.metrics])
     np.testing.assert_allclose(core, e, rtol=1e-12, atol=0)
     assert np.all(np.diff(e) <= 1e-12 * e[0])             # never increases
     assert e[-1] < 0.5 * e[0]
     # E(0) - E(t) = (2 gamma / N) int_0^t sum_i |O_i'|_F^2 ds   (proof of Prop. 2.2 i)
-    kin = []
-    for st in traj.states:
-        o = rot_matrices(scene.model.rotations, st.groups[0].rot)
-        odot = np.einsum("nij,njk->nik", skew_matrices(scene.model.rotations, st.groups[0].w), o)
-        kin.append(float(np.sum(odot * odot)))
-    dissipated = 2 * gamma / n * simpson(np.array(kin), x=np.array(traj.times))
+    kin = _sum_sq_rotation_rates(scene.model.rotations, [st.groups[0] for st in traj.states])
+    dissipated = 2 * gamma / n * simpson(kin, x=np.array(traj.times))
     assert e[0] - e[-1] == pytest.approx(dissipated, rel=1e-7)
 
 
@@ -167,14 +177,16 @@ def _energy_run(method, dt, t_end=100.0, every=0.1):
 
 
 def test_energy_conserved_without_drift_gamma_0_lie_verlet_prop_2_2_i():
-    dev1, early1 = _energy_run("lie_verlet", 0.05)
-    dev2, early2 = _energy_run("lie_verlet", 0.025)
-    assert dev1 < 1e-3
+    """Over t = 100 at dt = 0.1 and 0.05 (measured: deviations 1.3e-3 and 2.9e-4, ratio 4.6;
+    max over [0, T] / max over [0, T/8]: 1.12 and 1.00; lie_heun at dt = 0.1: 7.6)."""
+    dev1, early1 = _energy_run("lie_verlet", 0.1)
+    dev2, early2 = _energy_run("lie_verlet", 0.05)
+    assert dev2 < 1e-3
     # O(dt^2) oscillation (O(dt) would give 2)
     assert dev1 / dev2 > 2.5
     assert dev1 < 3 * early1 and dev2 < 3 * early2         # bounded: no growth over 8x the time
     # the criterion does detect drift: a non-symplectic 2nd-order method fails it
-    dev_h, early_h = _energy_run("lie_heun", 0.05)
+    dev_h, early_h = _energy_run("lie_heun", 0.1)
     assert dev_h > 3 * early_h
 
 
@@ -211,8 +223,10 @@ def test_complete_vertex_matching_inline_theorems_4_1_4_2(order, dim):
     """Theorem 4.2 under its own hypothesis D0 < 1, and Theorem 4.1 for tetrahedra in R^3."""
     rotations = {"within": 0.3} if order == 1 else "uniform"
     velocities = {"centroid": {"normal": 0.5}, "angular": {"normal": 0.5}}
+    # measured at t_end: 8.5e-9 and 9.8e-9 (first order, R^3 and R^4, t = 20), 4.8e-9 (second)
+    t_end = 20.0 if order == 1 else 25.0
     scene = make_scene(dim, order, count=6, seed=8, rotations=rotations, mass=0.5,
-                       velocities=velocities, t_end=30.0, samples={"every": 5.0})
+                       velocities=velocities, t_end=t_end, samples={"every": 5.0})
     if order == 1:
         initial = rot_matrices(scene.model.rotations, scene.initial.groups[0].rot)
         assert brute_rotation_diameter(initial) < 1

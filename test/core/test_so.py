@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 from core_testlib import defect, rot_matrices, skew_matrices
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
@@ -169,11 +169,62 @@ def test_row_blocks_leave_every_bit_of_the_batched_forms_unchanged(monkeypatch):
 # the closed-form maps of SO(2) and SO(3) against scipy's matrix exponential and the solve
 
 #: rotation angles from exactly 0 through the series' thresholds, pi and beyond
-ANGLES = st.one_of(st.sampled_from([0.0, 1e-12, 1e-8, 1e-4, 1e-3, np.pi - 1e-9, np.pi,
-                                    np.pi + 1e-9, 2 * np.pi]),
-                   st.floats(0.0, 1e-3), st.floats(0.0, 4 * np.pi))
+SPECIAL_ANGLES = [0.0, 1e-12, 1e-8, 1e-4, 1e-3, np.pi - 1e-9, np.pi, np.pi + 1e-9, 2 * np.pi]
+ANGLES = st.one_of(st.sampled_from(SPECIAL_ANGLES), st.floats(0.0, 1e-3),
+                   st.floats(0.0, 4 * np.pi))
 AXES = st.tuples(*[st.floats(-1.0, 1.0)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3)
-CLOSED_FORMS = settings(max_examples=100, deadline=None)   # each example: up to 8 angles
+# 30 drawn examples (up to 8 angles each, ~8 ms, mostly spent drawing them), after the literal
+# bands below as explicit examples: 95 angles, every special one of ANGLES on every axis, in
+# three vectorised calls per test (100 drawn examples alone covered ~450 random angles)
+CLOSED_FORMS = settings(max_examples=30, deadline=None)
+
+#: literal axes: the coordinate axes both ways, diagonals, a generic one, and a short one
+#: (|v| = 1.2e-3, next to AXES' filter 1e-3: normalising it is what is exercised)
+BAND_AXES = [(1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 1.0), (1.0, 1.0, 0.0),
+             (-1.0, 1.0, -1.0), (0.3, -0.8, 0.5), (-0.61, 0.07, 0.93), (1e-3, -6e-4, 2e-4)]
+#: angle bands, each checked to its own round-off (_round_off of its largest angle): [0, 1e-3]
+#: (the series' side of every threshold), (1e-3, 2 pi] through pi, and (2 pi, 4 pi]; each holds
+#: the special angles in its range
+ANGLE_BANDS = [
+    [float(t) for t in sorted(set(SPECIAL_ANGLES[:5]) | set(np.logspace(-16, -3, 27)))],
+    [float(t) for t in sorted(set(SPECIAL_ANGLES[5:]) | set(np.linspace(0, 2 * np.pi, 34)[1:])
+                              | {np.pi / 2, np.pi - 1e-6, np.pi + 1e-6, 2 * np.pi - 1e-9})],
+    [float(t) for t in sorted(set(np.linspace(2 * np.pi, 4 * np.pi, 26)[1:])
+                              | {3 * np.pi, 4 * np.pi - 1e-9})],
+]
+
+
+def _band_cases(band, every_axis):
+    """A band's (axis, angle) pairs: every angle on every axis of BAND_AXES; or, for an oracle
+    that pays per matrix (scipy's expm: a LAPACK getrs each, ~10 ms with multi-threaded
+    OpenBLAS on a busy machine), the special angles on every axis and the others on one each,
+    the axes in turn."""
+    pairs = []
+    for k, t in enumerate(band):
+        axes = BAND_AXES if every_axis or t in SPECIAL_ANGLES else [BAND_AXES[k % len(BAND_AXES)]]
+        pairs += [(axis, t) for axis in axes]
+    return pairs
+
+
+def _so3_bands(*extra, every_axis=True):
+    """Every band of ANGLE_BANDS (_band_cases) as an explicit example (cases, *extra) of an
+    SO(3) test; ``extra(n)`` gives its other arguments for n cases."""
+    def decorate(test):
+        for band in ANGLE_BANDS:
+            cases = _band_cases(band, every_axis)
+            test = example(cases, *[make(len(cases)) for make in extra])(test)
+        return test
+    return decorate
+
+
+def _seed(n):
+    """The seed of the band's random rotations O (its size: one per band)."""
+    return n
+
+
+def _slopes(n):
+    """n slope axes for the inverse differentials, cycling through BAND_AXES."""
+    return [BAND_AXES[(3 * k + 1) % len(BAND_AXES)] for k in range(n)]
 
 
 def _round_off(angles):
@@ -192,6 +243,7 @@ def _so3_skews(axes, angles):
 
 
 @CLOSED_FORMS
+@_so3_bands(_seed, every_axis=False)
 @given(st.lists(st.tuples(AXES, ANGLES), min_size=1, max_size=8), st.integers(0, 2 ** 31))
 def test_so3_rodrigues_retraction_equals_scipy_expm_at_every_angle(cases, seed):
     """exp(W) O in closed form (Rodrigues, series near 0) is scipy's expm(W) O to round-off,
@@ -206,6 +258,7 @@ def test_so3_rodrigues_retraction_equals_scipy_expm_at_every_angle(cases, seed):
 
 
 @CLOSED_FORMS
+@_so3_bands(_seed)
 @given(st.lists(st.tuples(AXES, ANGLES), min_size=1, max_size=8), st.integers(0, 2 ** 31))
 def test_so3_cayley_retraction_equals_the_solve_at_every_angle(cases, seed):
     """cay(W) O in closed form is (I - W/2)^{-1} (I + W/2) O, and stays in SO(3) (Lemma 2.1)."""
@@ -219,6 +272,7 @@ def test_so3_cayley_retraction_equals_the_solve_at_every_angle(cases, seed):
 
 
 @CLOSED_FORMS
+@_so3_bands(_slopes)
 @given(st.lists(st.tuples(AXES, ANGLES), min_size=1, max_size=8), st.lists(AXES, min_size=8,
                                                                             max_size=8))
 def test_so3_inverse_differentials_equal_their_definitions(cases, slopes):
@@ -250,7 +304,19 @@ def _dexp_inv_series(w, a, terms=40):
     return out
 
 
+def _so2_bands(test):
+    """Every band of ANGLE_BANDS as an explicit example: the special angles with both signs,
+    the others with the signs in turn (scipy's expm pays per matrix: _band_cases)."""
+    for k, band in enumerate(ANGLE_BANDS):
+        signed = [(t, s) for j, t in enumerate(band)
+                  for s in ((True, False) if t in SPECIAL_ANGLES else (j % 2 == 0,))]
+        angles, signs = [t for t, _ in signed], [s for _, s in signed]
+        test = example(angles, signs, k)(test)
+    return test
+
+
 @CLOSED_FORMS
+@_so2_bands
 @given(st.lists(ANGLES, min_size=1, max_size=8), st.lists(st.booleans(), min_size=8,
                                                           max_size=8), st.integers(0, 2 ** 31))
 def test_so2_matrix_retraction_equals_scipy_expm_at_every_angle(angles, signs, seed):

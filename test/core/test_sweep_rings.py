@@ -16,14 +16,22 @@ from polymatch_ros.core.sweep.run import run_batch
 from polymatch_ros.core.sweep.scenes import Cell, cell_scenes, template, with_rotations
 
 
+def _quaternion_classes(loops):
+    """+1 / -1 per loop (B, N, 3, 3): O_0 -> ... -> O_{N-1} -> O_0 lifted to unit quaternions
+    (scipy), each step along the shorter arc (q_j . q_{j+1} > 0); -1 when it comes back as -q_0.
+    The steps go one after another, every loop at once."""
+    loops = np.asarray(loops)
+    quats = Rotation.from_matrix(loops.reshape(-1, 3, 3)).as_quat().reshape(*loops.shape[:2], 4)
+    lifted = quats[:, 0]
+    for j in list(range(1, quats.shape[1])) + [0]:
+        q = quats[:, j]
+        lifted = np.where(np.einsum("bk,bk->b", lifted, q)[:, None] > 0, q, -q)
+    return np.sign(np.einsum("bk,bk->b", lifted, quats[:, 0]))
+
+
 def _quaternion_class(mats):
-    """+1 / -1: the loop O_0 -> ... -> O_{N-1} -> O_0 lifted to unit quaternions (scipy), each
-    step along the shorter arc (q_j . q_{j+1} > 0); -1 when it comes back as -q_0."""
-    quats = Rotation.from_matrix(mats).as_quat()
-    lifted = quats[0]
-    for q in list(quats[1:]) + [quats[0]]:
-        lifted = q if np.dot(lifted, q) > 0 else -q
-    return float(np.sign(np.dot(lifted, quats[0])))
+    """The class of one loop (N, 3, 3), as _quaternion_classes."""
+    return float(_quaternion_classes(np.asarray(mats)[None])[0])
 
 
 def _random_skew(rng, d, size):
@@ -50,11 +58,11 @@ def test_winding_number_of_planar_phases():
 def test_loop_class_in_so3_is_the_quaternion_lift():
     """Random loops in SO(3) (steps below a half-turn): the Clifford lift's sign = scipy's
     quaternions carried around the loop; both classes occur."""
-    rng = np.random.default_rng(1)
-    loops = np.array([Rotation.random(5, random_state=rng).as_matrix() for _ in range(300)])
+    rng = np.random.default_rng(1)     # one draw of 300 x 5: the same as 300 draws of 5
+    loops = Rotation.random(300 * 5, random_state=rng).as_matrix().reshape(300, 5, 3, 3)
     got = ring_measures(loops)
     assert np.all(got.step_max < np.pi - 1e-6)
-    expected = np.array([_quaternion_class(m) for m in loops])
+    expected = _quaternion_classes(loops)
     np.testing.assert_array_equal(got.loop_class, expected)
     assert 50 < np.sum(expected < 0) < 250
     # the same loops inside SO(4) and SO(5) (a 3-d block): the class does not change
@@ -85,18 +93,21 @@ def test_principal_logs_are_scipy_logm():
     rng = np.random.default_rng(3)
     for d in (2, 3, 4, 5):
         a = np.array([_random_skew(rng, d, rng.uniform(0, 3.0)) for _ in range(6)])
-        logs, largest = principal_logs(np.array([expm(x) for x in a]))
-        for x, got in zip(a, logs):
-            np.testing.assert_allclose(got, logm(expm(x)).real, atol=1e-9)
+        rotations = expm(a)                          # scipy's expm of each, once
+        logs, largest = principal_logs(rotations)
+        for rot, got in zip(rotations, logs):
+            np.testing.assert_allclose(got, logm(rot).real, atol=1e-9)
         np.testing.assert_allclose(largest, np.linalg.norm(a, 2, axis=(1, 2)), atol=1e-9)
 
 
 def _ring_scenes(d, n, mats):
-    """First order on a ring of n (k = 1, kappa/deg_i), centroids together, given rotations."""
+    """First order on a ring of n (k = 1, kappa/deg_i), centroids together, given rotations.
+    dt = 1 (the ring's rates are at most 2: h lambda <= 2 < 2.78, rkmk4's limit): every run
+    leaves at the sample and with the outcome it has at dt = 0.5, at |W| < 2e-6."""
     data = template("congruent_triangles")
     data.update(time={"t_end": 600.0, "samples": {"every": 5.0}},
                 graph={"ring": 1, "normalise": "degree"},
-                integrator={"method": "rkmk4", "dt": 0.5})
+                integrator={"method": "rkmk4", "dt": 1.0})
     data["groups"][0]["centroids"] = {"box": [0.0, 0.0]}
     scenes = cell_scenes(data, Cell(dim=d, agents=n), len(mats), seed=0)
     return [with_rotations(s, m) for s, m in zip(scenes, mats)]

@@ -15,20 +15,8 @@ root namespace must match no DDS packet (the kernel's count).
 import sys
 import time
 
+import host_runs as hr
 import pytest
-from host_runs import (
-    AGENTS,
-    PEER_TIMEOUT,
-    REALTIME_SCENE,
-    TIME_SCALE,
-    check_lockstep_on_hosts,
-    realtime_argvs,
-    run_on_hosts,
-    saved_diameter,
-    status_records,
-    three_hosts,
-    wait_for_record,
-)
 from ros_harness import needs_ros
 
 from benchmarks.hosts.runs import lockstep_argvs, scene_with
@@ -47,7 +35,7 @@ DOWN_HOST, DOWN_SECONDS = 0, 5.0
 
 @pytest.fixture
 def net():
-    yield from three_hosts(("tcpdump", "nft"))
+    yield from hr.three_hosts(("tcpdump", "nft"))
 
 
 def lossy(net, index):
@@ -67,7 +55,7 @@ def _check_converged(scene_file, started, out):
     lead = started[2]
     assert lead.returncode == 0, f"the lead host's run did not converge (exit {lead.returncode})"
     tolerance = load_scene(scene_file).tolerance
-    diameter = saved_diameter(scene_file, out)
+    diameter = hr.saved_diameter(scene_file, out)
     assert diameter < tolerance, f"final matching diameter {diameter:.3e} >= {tolerance:g}"
 
 
@@ -76,8 +64,8 @@ def test_lockstep_under_ten_percent_loss_equals_the_centralised_run(net, tmp_pat
     out = tmp_path / "final.npz"
     scene_file = scene_with(tmp_path, LOCKSTEP_SCENE, LOCKSTEP_AGENTS // 2)
     argvs = lockstep_argvs(scene_file, LOCKSTEP_AGENTS, out)
-    _, texts, root, dropped = run_on_hosts(net, tmp_path, argvs, lossy(net, LOSSY_HOST))
-    check_lockstep_on_hosts(scene_file, texts, out, LOCKSTEP_AGENTS)
+    _, texts, root, dropped = hr.run_on_hosts(net, tmp_path, argvs, lossy(net, LOSSY_HOST))
+    hr.check_lockstep_on_hosts(scene_file, texts, out, LOCKSTEP_AGENTS)
     assert dropped > 20, f"the loss rule dropped {dropped} packets: too few to test repair"
     assert root.matched() == 0, "the root namespace's interfaces saw DDS packets"
     print(f"\nlockstep, {LOCKSTEP_AGENTS} agents on 3 hosts, {dropped} packets dropped into h1: "
@@ -86,15 +74,15 @@ def test_lockstep_under_ten_percent_loss_equals_the_centralised_run(net, tmp_pat
 
 def test_realtime_converges_under_loss_and_delay(net, tmp_path):
     started = time.monotonic()
-    scene_file = scene_with(tmp_path, REALTIME_SCENE, AGENTS)
+    scene_file = scene_with(tmp_path, hr.REALTIME_SCENE, hr.AGENTS)
     out = tmp_path / "final.npz"
-    argvs = realtime_argvs(scene_file, out, "--delay", 0.05)
-    started_procs, _, root, dropped = run_on_hosts(net, tmp_path, argvs, lossy(net, LOSSY_HOST))
+    argvs = hr.realtime_argvs(scene_file, out, "--delay", 0.05)
+    started_procs, _, root, dropped = hr.run_on_hosts(net, tmp_path, argvs, lossy(net, LOSSY_HOST))
     _check_converged(scene_file, started_procs, out)
     _check_clock_offsets(out)
     assert dropped > 20, f"the loss rule dropped {dropped} packets: too few to matter"
     assert root.matched() == 0, "the root namespace's interfaces saw DDS packets"
-    print(f"\nrealtime, {AGENTS} agents on 3 hosts, {LOSS}% loss ({dropped} packets), 50 ms "
+    print(f"\nrealtime, {hr.AGENTS} agents on 3 hosts, {LOSS}% loss ({dropped} packets), 50 ms "
           f"delay: {time.monotonic() - started:.1f} s")
 
 
@@ -123,19 +111,19 @@ def link_down_while_running(net):
         echo = procs.start([sys.executable, "-m", "polymatch_ros.cli", "echo",
                             "/polymatch/status", "--timeout", "150"], echo_env, 160, "echo",
                            prefix=net.prefix(2))
-        running = wait_for_record(procs, echo, lambda r: r.agents_heard == AGENTS
-                                   and r.t >= 2.0 * TIME_SCALE, 90)
+        running = hr.wait_for_record(procs, echo, lambda r: r.agents_heard == hr.AGENTS
+                                      and r.t >= 2.0 * hr.TIME_SCALE, 90)
         assert running, procs.output(echo)[-2000:]
         net.link_down(DOWN_HOST)
         down = time.monotonic()
-        time.sleep(PEER_TIMEOUT + 1.0)
-        timed_out = len(status_records(procs, echo))    # the monitor has dropped host 0
+        time.sleep(hr.PEER_TIMEOUT + 1.0)
+        timed_out = len(hr.status_records(procs, echo))    # the monitor has dropped host 0
         time.sleep(max(0.0, down + DOWN_SECONDS - time.monotonic()))
-        back = len(status_records(procs, echo))
+        back = len(hr.status_records(procs, echo))
         net.link_up(DOWN_HOST)
         for proc in started:
             proc.wait(timeout=150)
-        records = status_records(procs, echo)
+        records = hr.status_records(procs, echo)
         return records[:timed_out], records[timed_out:back], records[back:]
 
     return outage
@@ -143,19 +131,19 @@ def link_down_while_running(net):
 
 def test_realtime_link_down_then_rejoin(net, tmp_path):
     started = time.monotonic()
-    scene_file = scene_with(tmp_path, REALTIME_SCENE, AGENTS)
+    scene_file = scene_with(tmp_path, hr.REALTIME_SCENE, hr.AGENTS)
     out = tmp_path / "final.npz"
-    procs, _, root, (before, outage, after) = run_on_hosts(
-        net, tmp_path, realtime_argvs(scene_file, out), link_down_while_running(net))
-    others = AGENTS - AGENTS // 3
-    assert any(r.agents_heard == AGENTS for r in before)
+    procs, _, root, (before, outage, after) = hr.run_on_hosts(
+        net, tmp_path, hr.realtime_argvs(scene_file, out), link_down_while_running(net))
+    others = hr.AGENTS - hr.AGENTS // 3
+    assert any(r.agents_heard == hr.AGENTS for r in before)
     assert len(outage) >= 5, f"{len(outage)} monitor reports in {DOWN_SECONDS:g} s"
     assert {r.agents_heard for r in outage} == {others}, [r.agents_heard for r in outage]
-    rejoined = [i for i, r in enumerate(after) if r.agents_heard == AGENTS]
+    rejoined = [i for i, r in enumerate(after) if r.agents_heard == hr.AGENTS]
     assert rejoined, [r.agents_heard for r in after]
     # apart, the two sides each matched on a pose of their own: rejoined, they are apart
     assert after[rejoined[0]].diameter > 100 * load_scene(scene_file).tolerance
     _check_converged(scene_file, procs, out)
     assert root.matched() == 0, "the root namespace's interfaces saw DDS packets"
-    print(f"\nrealtime, {AGENTS} agents on 3 hosts, h{DOWN_HOST} down {DOWN_SECONDS:g} s: "
+    print(f"\nrealtime, {hr.AGENTS} agents on 3 hosts, h{DOWN_HOST} down {DOWN_SECONDS:g} s: "
           f"{time.monotonic() - started:.1f} s")

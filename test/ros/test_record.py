@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from core_testlib import triangles_yaml
 from ros_harness import cli_argv, needs_ros
 
 from polymatch_ros.cli import main
@@ -19,18 +20,8 @@ from polymatch_ros.ros.wire import run_records
 pytestmark = needs_ros
 
 # three triangles, first order (A-2), ten lockstep steps
-SCENE = """
-name: three_triangles
-dimension: 2
-seed: 5
-model: {order: 1, kappa: 1.0, gamma: 1.0}
-integrator: {method: lie_euler, dt: 0.05}
-time: {t_end: 0.5}
-figure: {snapshots: [0, 0.25, 0.5]}
-groups:
-  - {name: triangles, shape: triangle, size: 1.0, count: 3, centroids: {box: [-3.0, 3.0]},
-     rotations: uniform}
-"""
+SCENE = triangles_yaml("three_triangles", seed=5, count=3, method="lie_euler", dt=0.05, t_end=0.5,
+                       snapshots=[0, 0.25, 0.5])
 STEPS = 10
 TYPES = {
     "/polymatch/agent_0/pose": "geometry_msgs/msg/PoseStamped",

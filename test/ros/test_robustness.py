@@ -91,7 +91,9 @@ def test_foreign_well_formed_states_are_not_read_in_a_realtime_run_theorem_4_2(r
     run (newer than any real pose), on agent_3/pose and on agent_3/exchange with another run's
     id.  The agents and the monitor read only their run's exchange: the ensemble converges
     (Theorem 4.2) as without the writer, and agent 3's peers count the foreign states as
-    another run's.  Read, they would hold agent 3 at (50, 0) in its peers' sums."""
+    another run's.  Read, they would hold agent 3 at (50, 0) in its peers' sums.  The writer
+    also sends that run's monitor record (matched, every agent heard): the runner reads only
+    this run's records, so it neither stops the run early nor reports the other's diameter."""
     rogue = ros.start([PY, ROGUE, "polymatch", "3", "200", str(FOREIGN_STAMP)], timeout=210)
     deadline = time.monotonic() + 30
     while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
@@ -115,6 +117,9 @@ def test_foreign_well_formed_states_are_not_read_in_a_realtime_run_theorem_4_2(r
     assert peers and "unknown sender (run id)" in peers.group(1), text[-3000:]
     mon = re.search(r"^monitor: .*dropped (\d+) messages \((.*)\)$", text, re.M)
     assert mon and "unknown sender (run id)" in mon.group(2), text[-3000:]
+    ignored = re.search(r"^runner: ignored (\d+) status message\(s\) not of this run$", text,
+                        re.M)
+    assert ignored and int(ignored.group(1)) > 0, text[-3000:]
 
 
 def _refused(ros, argv):

@@ -4,20 +4,13 @@ fixed-step setting's wall time per simulated second is its rounds per step / dt 
 import json
 
 import pytest
+from core_testlib import triangles_yaml
 from ros_harness import cli_argv, needs_ros
 
 pytestmark = needs_ros
 
-TWO_TRIANGLES = """\
-name: two_triangles
-dimension: 2
-seed: 2
-model: {order: 1, kappa: 1.0, gamma: 1.0}
-integrator: {method: rkmk4, dt: 0.1}
-time: {t_end: 2.0}
-groups:
-  - {name: t, shape: triangle, count: 2, centroids: {box: [-1.0, 1.0]}, rotations: {within: 0.3}}
-"""
+TWO_TRIANGLES = triangles_yaml("two_triangles", seed=2, count=2, method="rkmk4", dt=0.1, t_end=2.0,
+                               box=1.0, rotations={"within": 0.3})
 # lockstep exchange rounds per step (one per stage), from the methods' tableaux
 ROUNDS = {"lie_euler": 1, "lie_heun": 2, "rkmk4": 4, "euler_proj": 1, "rk4_proj": 4}
 TARGET = 1e-6

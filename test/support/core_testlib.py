@@ -8,6 +8,7 @@ tests compare the core against an independent computation.
 from itertools import combinations
 
 import numpy as np
+import yaml
 from scipy.spatial.distance import pdist
 
 from benchmarks.extremes.scenes import scene_data
@@ -171,3 +172,17 @@ def agents_of_one_row(sc, method, h, steps, ensemble_for):
                         done[i] = stop.value
         states = [State(d.t, d.groups) for d in done]
     return states
+
+
+def triangles_yaml(name, *, seed, count, method, dt, t_end, box=3.0, gamma=1.0,
+                   rotations="uniform", snapshots=None):
+    """The YAML text of a first-order (A-2) scene of ``count`` congruent triangles, kappa = 1,
+    centroids uniform in [-box, box]^2: the small scenes the CLI and recording tests run."""
+    data = {"name": name, "dimension": 2, "seed": seed,
+            "model": {"order": 1, "kappa": 1.0, "gamma": gamma},
+            "integrator": {"method": method, "dt": dt}, "time": {"t_end": t_end},
+            "groups": [{"name": "triangles", "shape": "triangle", "size": 1.0, "count": count,
+                        "centroids": {"box": [-box, box]}, "rotations": rotations}]}
+    if snapshots is not None:
+        data["figure"] = {"snapshots": snapshots}
+    return yaml.safe_dump(data, sort_keys=False)

@@ -8,8 +8,10 @@ messages (``wire.exchange``) with NaN data or a foreign run id, and another run'
 on the latched ``final_exchange``.  With STAMP it sends instead, at 20 Hz, well-formed states
 of a 2-D agent far away (centroid (50, 0), rotation 0.3 rad) stamped STAMP (late in the run:
 newer than any real pose), on the agent's pose topic and on its exchange with a foreign run
-id: what another run, or a stale process of an earlier one, would send.  It is started by the
-test in the test's own ROS domain (loopback discovery) under `timeout`.
+id, and a monitor's run record of that run on the status topic: agents all heard, matched
+(diameter 0) at STAMP.  That is what another run, or a stale process of an earlier one, would
+send.  It is started by the test in the test's own ROS domain (loopback discovery) under
+`timeout`.
 """
 
 import math
@@ -20,7 +22,7 @@ import numpy as np
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 
 from polymatch_ros.core.so import SO2
 from polymatch_ros.ros import wire
@@ -28,11 +30,16 @@ from polymatch_ros.ros import wire
 FOREIGN_RUN = 12345
 FAR = (50.0, 0.0)
 ANGLE = 0.3
+AGENTS = 8              # the scene's (congruent_triangles)
 
 
-def well_formed(pose, exchange, agent, stamp):
-    """A far-away pose stamped ``stamp`` on the pose topic and on the exchange (another run's)."""
+def well_formed(pose, exchange, status, agent, stamp):
+    """A far-away pose stamped ``stamp`` on the pose topic and on the exchange, and a monitor's
+    record of a matched ensemble at ``stamp`` (another run's)."""
     grp = SO2()
+    record = wire.RunRecord(role="monitor", mode="realtime", t=stamp, diameter=0.0,
+                            agents_heard=AGENTS, reports=1, run_id=FOREIGN_RUN)
+    status.publish(String(data=record.to_json()))
     pose.publish(wire.pose_message(grp, stamp, np.array(FAR), np.array([ANGLE]), "world"))
     exchange.publish(wire.encode_exchange(Float64MultiArray(), grp, FOREIGN_RUN, agent, stamp,
                                           np.array(FAR), np.array([ANGLE])))
@@ -79,13 +86,14 @@ def main():
         ensemble, "exchange", agent), qos["pose"])
     final = node.create_publisher(Float64MultiArray, wire.full_name(
         ensemble, "final_exchange", agent), qos["latched"])
+    status = node.create_publisher(String, wire.full_name(ensemble, "status"), qos["status"])
     end = time.monotonic() + seconds
     k = 0
     while time.monotonic() < end:
         if stamp is None:
             malformed(pose, stage, exchange, final, agent, k)
         else:
-            well_formed(pose, exchange, agent, stamp)
+            well_formed(pose, exchange, status, agent, stamp)
         k += 1
         if k == 20:
             print("rogue: flooding", flush=True)           # the test starts the run after this

@@ -1,5 +1,6 @@
 """The interface of the batched SO(d) representations, and the polar factor they share."""
 
+import functools
 import math
 import sys
 import threading
@@ -261,6 +262,14 @@ def rows_product(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) ->
     return out
 
 
+@functools.lru_cache(maxsize=64)
+def constant_weights(n: int, value: float = 1.0) -> np.ndarray:
+    """A read-only (n,) array of ``value``: the weights of a plain row sum or mean, made once."""
+    w = np.full(n, value)
+    w.flags.writeable = False
+    return w
+
+
 def row_sum(a: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """sum_k w_k a[k] of a long (n, k) a, in row blocks each on one thread (``rows_product``).
 
@@ -268,7 +277,7 @@ def row_sum(a: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     busy machine.
     """
     rows = max(1, ONE_THREAD_PRODUCT // a.shape[1])
-    w = np.ones(a.shape[0]) if weights is None else np.asarray(weights, dtype=float)
+    w = constant_weights(a.shape[0]) if weights is None else np.asarray(weights, dtype=float)
     if a.shape[0] <= rows:
         return w @ a
     out = w[:rows] @ a[:rows]

@@ -233,6 +233,7 @@ class AgentBase(NodeApp):
             stage_subscriptions=self.stage_subscriptions(),
             n_agents=self.model.n_agents,
             node=self.node.get_fully_qualified_name(),
+            run_id=int(self.params["run_id"]),
         )
 
     def stage_subscriptions(self) -> int:

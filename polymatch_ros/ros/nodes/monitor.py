@@ -325,6 +325,7 @@ class MonitorNode(NodeApp):
             agents_heard=heard,
             reports=self.reports,
             dropped=dict(self.drops.counts),
+            run_id=int(self.params["run_id"]),
         )
 
     def run(self) -> int:

@@ -142,6 +142,8 @@ def _summary(plan: RunPlan, final: State, records: list[RunRecord], wall: float,
     for rec in records:  # lockstep: the monitor's last report is the final step's
         if rec.role == "monitor" and (mode == "lockstep" or rec.dropped_total):
             print(rec.describe())
+    if watcher.ignored:
+        print(f"runner: ignored {watcher.ignored} status message(s) not of this run")
     if outputs.save:
         _save(outputs.save, scene, final, watcher.pose_times())
     if mode == "lockstep" and outputs.compare:

@@ -25,12 +25,13 @@ class Watcher:
     """Lives in the ensemble's namespace (``/<ensemble>/runner``; ``runner_<first agent>`` on
     a host that runs some of the agents).
 
-    It hears the headline diameter and every process's run record (``status``: progress,
-    agents up), calls the ensemble's start and stop services (``control``), and takes each
+    It hears every process's run record (``status``: progress, agents up, and the monitor's
+    headline diameter), calls the ensemble's start and stop services (``control``), and takes each
     agent's *final* state from its latched ``final_exchange`` topic for the summary - not
     the per-step poses, so supervising a run adds no load to the lockstep rounds.  Only this
-    run's final states are taken (``run_id``, ``wire.exchange``): a latched final pose of
-    another run, or anything else on the topic, is ignored.
+    run's final states and run records are taken (``run_id``, ``wire.exchange``): a latched
+    final pose or a record of another run, or anything else on the topics, is ignored and
+    counted (``ignored``), so it can neither stop this run early nor change its result.
     """
 
     node: Node
@@ -38,7 +39,7 @@ class Watcher:
     scene: Scene
     model: Model
     grp: Any                                        # the scene's rotation group
-    diameter: float | None                          # the latest headline diameter
+    diameter: float | None                          # the monitor's latest headline diameter
     monitor: wire.RunRecord | None                  # the monitor's latest run record
     agents: dict[tuple[int, ...], wire.RunRecord]   # agents of a process -> its latest record
     poses: dict[int, tuple[float, wire.Row]]        # agent -> (t, final pose)
@@ -57,7 +58,8 @@ class Watcher:
         self.node = Node(name, namespace=wire.namespace(ensemble))
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
-        self.scene, self.model = scene, scene.model
+        self.scene, self.model, self.run_id = scene, scene.model, int(run_id)
+        self.ignored = 0  # run records of another run, or not records at all
         self.grp = self.model.rotations
         self.diameter = None
         self.monitor = None  # the monitor's latest run record
@@ -65,7 +67,6 @@ class Watcher:
         self.agents = {}  # agents tuple -> latest run record of that process
         self.poses, self.velocities = {}, {}
         node, dim = self.node, self.model.dim
-        wire.subscription(node, "diameter", self._diam)
         wire.subscription(node, "status", self._status)
         self.control = wire.publisher(node, "control")  # the 'received' handshake
         self.stop_requested_at, self.stop_sent = None, False
@@ -85,15 +86,14 @@ class Watcher:
             self.stop_requested_at = t if t is not None else min(self.agent_time().values(),
                                                                  default=0.0)
 
-    def _diam(self, msg: Any) -> None:
-        self.diameter = float(msg.data)
-
     def _status(self, msg: Any) -> None:
         rec = wire.RunRecord.from_json(msg.data)
-        if rec is None:
+        if rec is None or rec.run_id != self.run_id:
+            self.ignored += 1
             return
         if rec.role == "monitor":
             self.monitor = rec
+            self.diameter = rec.diameter
             return
         old = self.agents.get(rec.agents)
         # a process's steps never fall: fewer is a new process of these agents (restarted, or

@@ -42,6 +42,8 @@ class RunRecord:
     ``n_agents`` the ensemble's size and ``node`` the process's fully qualified node name
     (agents): what ``polymatch set`` waits for before it calls every agent node.
     ``resumed_at``: the step a restarted lockstep process resumed at (None: not restarted).
+    ``run_id``: the run the process belongs to (its ``run_id`` parameter): the runner reads only
+    its own run's records.
     """
 
     role: str
@@ -65,6 +67,7 @@ class RunRecord:
     n_agents: int = 0
     node: str = ""
     resumed_at: int | None = None
+    run_id: int = 0
 
     @property
     def dropped_total(self) -> int:
