@@ -39,7 +39,6 @@ class Watcher:
     scene: Scene
     model: Model
     grp: Any                                        # the scene's rotation group
-    diameter: float | None                          # the monitor's latest headline diameter
     monitor: wire.RunRecord | None                  # the monitor's latest run record
     agents: dict[tuple[int, ...], wire.RunRecord]   # agents of a process -> its latest record
     poses: dict[int, tuple[float, wire.Row]]        # agent -> (t, final pose)
@@ -61,7 +60,6 @@ class Watcher:
         self.scene, self.model, self.run_id = scene, scene.model, int(run_id)
         self.ignored = 0  # run records of another run, or not records at all
         self.grp = self.model.rotations
-        self.diameter = None
         self.monitor = None  # the monitor's latest run record
         self.last_known_time: float | None = None  # ``ensemble_time``'s last answer
         self.agents = {}  # agents tuple -> latest run record of that process
@@ -73,7 +71,7 @@ class Watcher:
         wire.subscription(node, "control", self._control)  # a stop someone else asked for
         self.services = ControlClient(node)  # start and stop: the ensemble's services
         for a in range(self.model.n_agents):
-            wire.subscription(node, "final_exchange", self._final(a, run_id), dim, a)
+            wire.subscription(node, "final_exchange", self._final(a), dim, a)
 
     def _control(self, msg: Any) -> None:
         """A 'stop' on the control topic that the runner did not send: the ensemble's stop
@@ -93,7 +91,6 @@ class Watcher:
             return
         if rec.role == "monitor":
             self.monitor = rec
-            self.diameter = rec.diameter
             return
         old = self.agents.get(rec.agents)
         # a process's steps never fall: fewer is a new process of these agents (restarted, or
@@ -101,13 +98,18 @@ class Watcher:
         if old is None or rec.t >= old.t or rec.steps < old.steps:
             self.agents[rec.agents] = rec
 
-    def _final(self, agent: int, run_id: int) -> Callable[[Any], None]:
+    @property
+    def diameter(self) -> float | None:
+        """The headline diameter of the monitor's latest run record (None before one)."""
+        return None if self.monitor is None else self.monitor.diameter
+
+    def _final(self, agent: int) -> Callable[[Any], None]:
         """The callback of one agent's final state: its pose and, in second order, its
         velocities, if the message is this run's and well formed."""
         second = self.model.order == 2
 
         def receive(msg: Any) -> None:
-            got, _ = wire.decode_exchange(msg, self.grp, self.model.dim, run_id, agent,
+            got, _ = wire.decode_exchange(msg, self.grp, self.model.dim, self.run_id, agent,
                                           self.scene.t_end)
             if got is None:
                 return
