@@ -326,6 +326,28 @@ def test_an_exchange_message_round_trips_and_is_accepted():
     assert reason is None and got.v is None and got.w is None
 
 
+@pytest.mark.parametrize("sender,reader", [("matrix", "angle"), ("angle", "matrix")])
+def test_an_exchange_is_read_in_the_readers_own_representation(sender, reader):
+    """A 2-D projection integrator's agents compute with matrices, the monitor and the runner
+    with angles (``core.simulate.prepare``): the exchange carries the matrix, and each side
+    reads the other's rotation as its own, to an ulp."""
+    from std_msgs.msg import Float64MultiArray
+
+    from polymatch_ros.core.so import SO2, SOn
+    from polymatch_ros.ros import wire
+
+    groups = {"angle": SO2(), "matrix": SOn(2)}
+    angle = 2.5
+    rot = groups[sender].from_matrices(SO2().to_matrices(np.array([angle])))
+    msg = wire.encode_exchange(Float64MultiArray(), groups[sender], RUN_ID, AGENT, 1.25,
+                               np.array([0.5, -1.0]), rot)
+    assert len(msg.data) == 8 + 2 + 4
+    got, reason = wire.decode_exchange(msg, groups[reader], 2, RUN_ID, AGENT, T_MAX)
+    assert reason is None
+    back = SO2().from_matrices(groups[reader].to_matrices(got.rot))
+    assert abs(back[0] - angle) <= 4e-16
+
+
 @pytest.mark.parametrize("what,index,value,reason", EXCHANGE_CASES,
                          ids=[c[0] for c in EXCHANGE_CASES])
 def test_exchange_message_is_dropped_with_its_reason(what, index, value, reason):

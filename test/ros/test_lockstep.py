@@ -25,6 +25,8 @@ CASES = [
     # scene, integrator (1 stage / 4 stages), agents per process
     ("congruent_triangles", "lie_euler", 1),
     ("congruent_triangles", "rkmk4", 1),
+    # a projection method computes with matrices in 2-D, where the monitor and runner keep angles
+    ("congruent_triangles", "rk4_proj", 2),
     ("similar_triangles", "lie_euler", 4),
     ("similar_triangles", "rkmk4", 2),
     ("mixed_triangles_tetrahedra", "lie_euler", 4),

@@ -476,9 +476,11 @@ class Supervision:
             self.watcher.received()  # the other hosts' agents may end now
         if not self.watcher.have_final():  # no summary from a partial state: an error
             missing = sorted(set(range(self.plan.n_agents)) - set(self.watcher.poses))
+            drops = self.watcher.final_drops
+            dropped = "".join(f"; dropped {n} final state(s): {why}" for why, n in drops.items())
             return 1, (
                 f"no final pose from agents {describe_agents(missing) or '(velocities)'} "
-                f"within {seconds:g} s after the agents of this host ended"
+                f"within {seconds:g} s after the agents of this host ended{dropped}"
             )
         return 0, ""
 

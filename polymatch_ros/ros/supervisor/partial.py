@@ -17,15 +17,20 @@ from .. import wire
 
 if TYPE_CHECKING:
     from ...core.scene import Scene
+    from ...core.so import RotationGroup
     from ..nodes.checkpoint import Checkpoint
 
 #: agent -> (its simulated time, its row)
 AgentRows = dict[int, tuple[float, wire.Row]]
 
 
-def checkpoint_rows(scene: Scene, agents: Sequence[int], found: Checkpoint) -> AgentRows:
-    """The poses of a process's checkpoint (its local state), by global agent index."""
+def checkpoint_rows(scene: Scene, agents: Sequence[int], found: Checkpoint,
+                    computed_in: RotationGroup | None = None) -> AgentRows:
+    """The poses of a process's checkpoint (its local state), by global agent index, in the
+    scene's representation; ``computed_in``: the agents' own, where it differs (a projection
+    integrator computes with matrices in 2-D, ``core.simulate.prepare``)."""
     model, grp = scene.model, scene.model.rotations
+    own = grp if computed_in is None else computed_in
     out: AgentRows = {}
     for gi, gs in enumerate(found.state.groups):
         g = model.groups[gi]
@@ -33,18 +38,23 @@ def checkpoint_rows(scene: Scene, agents: Sequence[int], found: Checkpoint) -> A
         if gs is None or not local:
             continue
         for r, a in enumerate(local):
-            out[a] = (found.t, wire.Row(gs.x[r].copy(), grp.take(gs.rot, [r])))
+            rot = own.take(gs.rot, [r])
+            if own.name != grp.name:
+                rot = grp.from_matrices(own.to_matrices(rot))
+            out[a] = (found.t, wire.Row(gs.x[r].copy(), rot))
     return out
 
 
 def last_state(scene: Scene, finals: Mapping[int, tuple[float, wire.Row]],
-               pieces: Sequence[tuple[Sequence[int], Checkpoint | None]]) -> tuple[State, dict]:
+               pieces: Sequence[tuple[Sequence[int], Checkpoint | None]],
+               computed_in: RotationGroup | None = None) -> tuple[State, dict]:
     """(the ensemble's poses from every agent's latest row, {agent: its time}); ``finals``
-    the final poses heard, ``pieces`` each process's agents and checkpoint."""
+    the final poses heard, ``pieces`` each process's agents and checkpoint (its rotations in
+    ``computed_in``, the agents' representation, if not the scene's)."""
     latest: AgentRows = {}
     for agents, found in pieces:
         if found is not None:
-            latest.update(checkpoint_rows(scene, agents, found))
+            latest.update(checkpoint_rows(scene, agents, found, computed_in))
     for a, (t, row) in finals.items():
         if a not in latest or t >= latest[a][0]:
             latest[a] = (t, row)

@@ -195,7 +195,8 @@ def _save_partial(plan: RunPlan, outcome: RunOutcome) -> None:
 
     assert plan.outputs.save is not None  # only called with --save
     finals = {} if outcome.watcher is None else outcome.watcher.poses
-    state, times = last_state(plan.scene, finals, outcome.checkpoints)
+    computed_in = prepare(plan.scene, plan.numerics, distributed=True).model.rotations
+    state, times = last_state(plan.scene, finals, outcome.checkpoints, computed_in)
     _save(plan.outputs.save, plan.scene, state, times, partial=True)
 
 

@@ -4,6 +4,7 @@ graph check."""
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Callable, Collection, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -59,6 +60,7 @@ class Watcher:
         self.executor.add_node(self.node)
         self.scene, self.model, self.run_id = scene, scene.model, int(run_id)
         self.ignored = 0  # run records of another run, or not records at all
+        self.final_drops: Counter[str] = Counter()  # final states dropped, by reason
         self.grp = self.model.rotations
         self.monitor = None  # the monitor's latest run record
         self.last_known_time: float | None = None  # ``ensemble_time``'s last answer
@@ -109,9 +111,10 @@ class Watcher:
         second = self.model.order == 2
 
         def receive(msg: Any) -> None:
-            got, _ = wire.decode_exchange(msg, self.grp, self.model.dim, self.run_id, agent,
-                                          self.scene.t_end)
+            got, reason = wire.decode_exchange(msg, self.grp, self.model.dim, self.run_id,
+                                               agent, self.scene.t_end)
             if got is None:
+                self.final_drops[reason or "malformed"] += 1
                 return
             self.poses[agent] = (got.t, wire.Row(got.x, got.rot))
             if second and got.v is not None and got.w is not None:

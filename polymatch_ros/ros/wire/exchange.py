@@ -11,10 +11,17 @@ again, so its peers take it back.
 
 ``agent_<i>/exchange``  ``std_msgs/Float64MultiArray``, no layout dims: data = [format 4,
                         run id, agent, 0, 0, 0, t, mask] then x (d) if mask & 1, v (d) if
-                        mask & 2, the rotation (mask & 4, always: the core's representation,
-                        as in the stage messages), W_i as a row-major d x d skew matrix
-                        (mask & 8, with v: second order).  x is the centroid relative to the
-                        scene's origin, the number the core computes with.
+                        mask & 2, the rotation O_i as a row-major d x d matrix (mask & 4,
+                        always), W_i as a row-major d x d skew matrix (mask & 8, with v:
+                        second order).  x is the centroid relative to the scene's origin, the
+                        number the core computes with.
+
+Unlike the stage messages (between agents that all compute in one representation), the
+exchange is read by nodes that may not share the agents' representation: a projection
+integrator computes with matrices in 2-D where the monitor and the runner keep angles
+(``core.simulate.prepare``).  So the rotation goes as the matrix, whatever the sender's
+representation, and each reader converts it to its own (``from_matrices``; in 2-D the angle
+comes back as atan2 of the matrix entries, to an ulp and within (-pi, pi]).
 """
 
 from __future__ import annotations
@@ -30,9 +37,6 @@ from .codec import (
     bad_rotation,
     bad_skew,
     encode_stage,
-    rot_from_values,
-    rot_size,
-    rot_values,
     stage_data,
 )
 
@@ -64,7 +68,7 @@ def encode_exchange(msg: Any, grp: RotationGroup, run_id: int, agent: int, t: fl
     """Fill a Float64MultiArray with one agent's state (``w_one``: its W_i as an algebra row,
     given with ``v``)."""
     fields: dict[str, Sequence[float]] = {"x": np.asarray(x, dtype=float).tolist(),
-                                          "rot": rot_values(grp, rot_one)}
+                                          "rot": grp.to_matrices(rot_one)[0].ravel().tolist()}
     if v is not None and w_one is not None:
         fields["v"] = np.asarray(v, dtype=float).tolist()
         fields["w"] = grp.algebra_to_skew(w_one)[0].ravel().tolist()
@@ -81,7 +85,7 @@ def decode_exchange(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: 
     if data is None or head is None:
         return None, reason
     t, mask = head[3], head[4]
-    sizes = {"x": dim, "v": dim, "rot": rot_size(grp), "w": dim * dim}
+    sizes = {"x": dim, "v": dim, "rot": dim * dim, "w": dim * dim}
     if (mask & ~15 or mask & 5 != 5 or bool(mask & 2) != bool(mask & 8)
             or len(data) != HEADER + sum(sizes[f] for f, bit in EXCHANGE_FIELDS if mask & bit)):
         return None, "malformed layout"
@@ -91,12 +95,13 @@ def decode_exchange(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: 
         if mask & bit:
             values[label] = data[pos:pos + sizes[label]].copy()
             pos += sizes[label]
-    reason = None if grp.name == "angle" else bad_rotation(values["rot"].reshape(dim, dim))
+    rot = values["rot"].reshape(1, dim, dim)
+    reason = bad_rotation(rot[0])
     if "w" in values:
         reason = reason or bad_skew(values["w"].reshape(dim, dim))
     if reason:
         return None, reason
-    out = Motion(t, int(round(t * 1e9)), values["x"], rot_from_values(grp, values["rot"]))
+    out = Motion(t, int(round(t * 1e9)), values["x"], grp.from_matrices(rot))
     if "w" in values:
         out.v, out.w = values["v"], grp.algebra_from_skew(values["w"].reshape(1, dim, dim))
     return out, None
