@@ -79,6 +79,16 @@ def rot_values(grp: RotationGroup, g: np.ndarray) -> list[float]:
     return grp.to_matrices(g)[0].ravel().tolist()
 
 
+def rot_matrix_values(grp: RotationGroup, g: np.ndarray) -> list[float]:
+    """One rotation (a one-row group array) -> its d x d matrix, row-major, as floats; in 2-D
+    straight from the angle (a tenth of the cost of building the matrix array: one agent's
+    exchange message each step)."""
+    if grp.name == "angle":
+        c, s = math.cos(g[0]), math.sin(g[0])
+        return [c, -s, s, c]
+    return grp.to_matrices(g)[0].ravel().tolist()
+
+
 def rot_size(grp: RotationGroup) -> int:
     return 1 if grp.name == "angle" else grp.dim * grp.dim
 

@@ -37,6 +37,7 @@ from .codec import (
     bad_rotation,
     bad_skew,
     encode_stage,
+    rot_matrix_values,
     stage_data,
 )
 
@@ -68,7 +69,7 @@ def encode_exchange(msg: Any, grp: RotationGroup, run_id: int, agent: int, t: fl
     """Fill a Float64MultiArray with one agent's state (``w_one``: its W_i as an algebra row,
     given with ``v``)."""
     fields: dict[str, Sequence[float]] = {"x": np.asarray(x, dtype=float).tolist(),
-                                          "rot": grp.to_matrices(rot_one)[0].ravel().tolist()}
+                                          "rot": rot_matrix_values(grp, rot_one)}
     if v is not None and w_one is not None:
         fields["v"] = np.asarray(v, dtype=float).tolist()
         fields["w"] = grp.algebra_to_skew(w_one)[0].ravel().tolist()
