@@ -139,7 +139,7 @@ def _deployed(path, env, timeout, per_process, extra=(), with_matched=False):
 def _deployed_per_process(n):
     """Agents per process for the deployed run: 1 unless runner + monitor + n processes exceed
     the participants LOCALHOST discovery reaches (then what `polymatch run` itself would pick)."""
-    from polymatch_ros.ros.supervisor.runner import fewest_agents_per_process
+    from polymatch_ros.ros.supervisor.packing import fewest_agents_per_process
 
     return fewest_agents_per_process(n, own=2)
 

@@ -47,7 +47,7 @@ def _scene_yaml(n, graph, steps, dt):
 
 def _discovery(n, per_process):
     """localhost while runner + monitor + the agent processes fit its 32 participants."""
-    from polymatch_ros.ros.supervisor.children import LOCALHOST_PARTICIPANTS
+    from polymatch_ros.ros.supervisor.packing import LOCALHOST_PARTICIPANTS
 
     return "localhost" if 2 + -(-n // per_process) <= LOCALHOST_PARTICIPANTS else "server"
 

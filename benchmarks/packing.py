@@ -7,6 +7,12 @@ and the monitor), one run of congruent triangles (first-order model, rkmk4, R ro
 its rounds/s in its run record; a run's rate is their mean. The table gives every packing's
 rate, the best one, and the packing `polymatch run` picks without -k, with its rate against
 the best: the measurement a default packing has to rest on.
+
+A second table gives what every agent's own node costs (``nodes.hosted``): at each size of
+``--node-agents`` (default 64, 256, 1024), the default packing with and without
+``--no-agent-nodes``, alternating, ``--repeats`` times each: the median rounds/s and start-up
+(the slowest process's seconds from its start until its peers matched: the wall time to its
+first round).
 """
 
 import tempfile
@@ -25,6 +31,8 @@ def add_arguments(p):
     p.add_argument("--processes", type=int_list(1), default=[1, 2, 4, 8, 16, 32],
                    metavar="P,P,...", help="numbers of agent processes (default 1,2,4,8,16,32)")
     p.add_argument("--rounds", type=at_least(8), default=200, help="rounds per run (default 200)")
+    p.add_argument("--node-agents", type=int_list(2), default=[64, 256, 1024], metavar="N,N,...",
+                   help="sizes of the agent-node cost table (default 64,256,1024)")
 
 
 def _scene_yaml(n, steps, dt):
@@ -45,14 +53,52 @@ def packings(n, processes):
     return out
 
 
-def _rate(path, env, timeout, k):
-    """Mean rounds/s of the run's agent processes, or (nan, the failure)."""
+def _rate(path, env, timeout, k, extra=()):
+    """(mean rounds/s of the run's agent processes, or nan; the failure; the slowest
+    process's seconds until its peers matched, or nan)."""
     import numpy as np
 
     from .distributed import _deployed
 
-    rates, failure = _deployed(path, env, timeout, k)
-    return (float(np.mean(rates)) if rates and not failure else float("nan")), failure
+    rates, failure, matched = _deployed(path, env, timeout, k, extra, with_matched=True)
+    rate = float(np.mean(rates)) if rates and not failure else float("nan")
+    return rate, failure, (max(matched) if matched and not failure else float("nan"))
+
+
+def _default_k(n):
+    """Agents per process of `polymatch run` in lockstep without -k (``choose_packing``)."""
+    from polymatch_ros.ros.supervisor.packing import choose_packing
+    from polymatch_ros.ros.supervisor.plan import Packing
+
+    return choose_packing(Packing(None, monitor=True), n, localhost=True).agents_per_process
+
+
+def _node_cost(sizes, repeats, rounds, workdir, env, log):
+    """Rows of the agent-node cost table and its failures: the default packing, with and
+    without an agent node each, alternating."""
+    import numpy as np
+
+    from .ros_runs import write_scene
+
+    rows, failures = [], []
+    for n in sizes:
+        path = write_scene(workdir, f"nodes_{n}.yaml", _scene_yaml(n, rounds // 4, 0.01))
+        k = _default_k(n)
+        runs = {"nodes": ([], []), "none": ([], [])}
+        for r in range(repeats):
+            for kind, extra in (("nodes", ()), ("none", ("--no-agent-nodes",))):
+                log(f"agent nodes, N = {n} (-k {k}), {kind}, repeat {r + 1}")
+                rate, failure, start = _rate(path, env, 120 + n * rounds // 50, k, extra)
+                runs[kind][0].append(rate)
+                runs[kind][1].append(start)
+                if failure:
+                    failures.append(f"agent nodes, N = {n}, {kind}: {failure}")
+        med = {kind: (float(np.median(rates)), float(np.median(starts)))
+               for kind, (rates, starts) in runs.items()}
+        rows.append([n, f"{-(-n // k)} x {k}", f"{med['nodes'][0]:.1f}",
+                     f"{med['none'][0]:.1f}", f"{med['nodes'][0] / med['none'][0]:.0%}",
+                     f"{med['nodes'][1]:.2f}", f"{med['none'][1]:.2f}"])
+    return rows, failures
 
 
 def _row(n, measured, default_k):
@@ -71,7 +117,6 @@ def _row(n, measured, default_k):
 def run(args, log):
     from domain_coordinator import domain_id
 
-    from polymatch_ros.ros.supervisor.children import fewest_agents_per_process
     from polymatch_ros.ros.supervisor.environment import private_ros_environment
 
     from .report import Report
@@ -87,17 +132,24 @@ def run(args, log):
         env = private_ros_environment(dom)
         for n in sizes:
             path = write_scene(workdir, f"packing_{n}.yaml", _scene_yaml(n, rounds // 4, 0.01))
-            default_k = max(1, fewest_agents_per_process(n, OWN))
             measured = {}
             for p, k in packings(n, processes):
                 log(f"N = {n}: {p} processes of {k}")
-                measured[(p, k)], failure = _rate(path, env, 120 + n * rounds // 50, k)
+                measured[(p, k)], failure, _ = _rate(path, env, 120 + n * rounds // 50, k)
                 if failure:
                     failures.append(f"N = {n}, -k {k}: {failure}")
-            rows.append(_row(n, measured, default_k))
+            rows.append(_row(n, measured, _default_k(n)))
+        node_rows, node_failures = _node_cost(
+            [8] if args.quick else args.node_agents, 1 if args.quick else (args.repeats or 2),
+            rounds, workdir, env, log)
     report.table(["agents", "processes x agents each: rounds/s", "fastest", "default (no -k)",
                   "default / fastest"], rows,
                  caption=f"{rounds} lockstep rounds (rkmk4: 4 a step) through `polymatch run` "
                          "with the monitor; a run's rate is the mean over its agent processes")
-    report.failures(failures)
+    report.table(["agents", "default packing", "rounds/s, agent nodes", "rounds/s, none",
+                  "with / without", "start-up s, agent nodes", "start-up s, none"], node_rows,
+                 caption="Every agent a node (`nodes.hosted`): the default packing with and "
+                         "without `--no-agent-nodes`, medians of alternating runs; start-up: "
+                         "the slowest process's seconds until its peers matched")
+    report.failures(failures + node_failures)
     return report

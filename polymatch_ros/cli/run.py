@@ -123,7 +123,7 @@ def _hosts(args: argparse.Namespace, scene: Scene, bridge: bool) -> Hosts:
             "--only: set the same ROS_DOMAIN_ID on every host (e.g. export ROS_DOMAIN_ID=17)"
         )
     lead = args.monitor or len(agents) == n
-    return Hosts(args.ensemble, agents, args.monitor, lead, spec, requested)
+    return Hosts(args.ensemble, agents, args.monitor, lead, spec, requested, args.agent_nodes)
 
 
 def check_ensemble(name: str) -> None:
@@ -145,7 +145,7 @@ def check_ensemble(name: str) -> None:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """The ``run`` subcommand."""
     p = sub.add_parser(
-        "run", help="run the distributed ROS 2 ensemble of a scene (one process per agent)"
+        "run", help="run the distributed ROS 2 ensemble of a scene (a node per agent)"
     )
     p.add_argument("scene", help="scene file or shipped scene name")
     p.add_argument("--mode", choices=MODES, default="lockstep",
@@ -160,8 +160,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=int,
         default=None,
         metavar="K",
-        help="agents per process (default 1, or the fewest that keep the processes within the 32 "
-        "DDS participants that LOCALHOST discovery reaches)",
+        help="agents per process (default: lockstep up to 256, the fastest measured packing; "
+        "realtime 1, or the fewest that keep the processes within the 32 DDS participants that "
+        "LOCALHOST discovery reaches); the first line says which and why",
+    )
+    p.add_argument(
+        "--no-agent-nodes",
+        dest="agent_nodes",
+        action="store_false",
+        help="a process hosting several agents is one node (no agent_<i> node per agent: "
+        "a lighter graph at thousands of agents)",
     )
     add_number_options(p, RUN_OPTIONS)
     p.add_argument(

@@ -144,8 +144,9 @@ def test_a_stop_on_convergence_reaches_every_agent_of_a_ring_at_the_same_step(ro
     path = tmp_path / "graph_stop.yaml"
     path.write_text(STOP_SCENE)
     records = tmp_path / "records.jsonl"
+    # a process per agent (-k 1): the stop spreads between processes, one hop a round
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", str(path), "--timeout", "150",
-                      "--records", str(records)], timeout=180)
+                      "--records", str(records), "-k", "1"], timeout=180)
     rc = ros.wait(proc, 190)
     text = ros.output(proc)
     assert rc == 0, text

@@ -27,9 +27,9 @@ from polymatch_ros.ros.nodes.params import (
 from polymatch_ros.ros.nodes.robot import ROBOT, resolve_robot
 
 AGENT_NAMES = [
-    "scene", "agent", "agents", "agents_per_process", "mode", "autostart", "integrator", "dt",
-    "t_end", "rate", "kappa", "gamma", "mass", "time_scale", "start", "start_time",
-    "peer_timeout", "delay",
+    "scene", "agent", "agents", "agents_per_process", "agent_nodes", "mode", "autostart",
+    "integrator", "dt", "t_end", "rate", "kappa", "gamma", "mass", "time_scale", "start",
+    "start_time", "peer_timeout", "delay",
     "clock_offset_warn", "hold_final", "round_timeout", "stall_timeout", "peers_restart",
     "checkpoint", "discovery_timeout",
     "pose_subscribers", "exchange_subscribers", "frame_id", "max_linear_speed",
@@ -47,6 +47,7 @@ TYPE_CASES = [
     ("agent", "agent", True, INTEGER), ("agent", "agents", 1.5, "expected a list of integers"),
     ("agent", "agents", [1, 2.5], "expected a list of integers"),
     ("agent", "agents_per_process", 2.5, INTEGER), ("agent", "mode", 1.5, STRING),
+    ("agent", "agent_nodes", 1, BOOLEAN),
     ("agent", "autostart", 1.5, BOOLEAN), ("agent", "autostart", "true", BOOLEAN),
     ("agent", "integrator", 1.5, STRING), ("agent", "dt", "abc", NUMBER),
     ("agent", "dt", True, NUMBER), ("agent", "dt", float("nan"), NUMBER),
@@ -221,7 +222,8 @@ SCENE_FILES = {
 # start_type_description_service
 LOCKSTEP_TABLE = {
     "scene": os.path.join(CONFIG, "congruent_triangles.yaml"), "agent": 0, "agents": [0],
-    "agents_per_process": 1, "mode": "lockstep", "autostart": True, "integrator": "rkmk4",
+    "agents_per_process": 1, "agent_nodes": True, "mode": "lockstep", "autostart": True,
+    "integrator": "rkmk4",
     "dt": 0.05, "t_end": 30.0, "rate": 50.0, "kappa": 1.0, "gamma": 1.0, "time_scale": 1.0,
     "peer_timeout": 1.0, "delay": 0.0, "clock_offset_warn": 0.1, "hold_final": 0.0,
     "round_timeout": 10.0, "stall_timeout": 300.0, "peers_restart": False,

@@ -50,7 +50,8 @@ def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     proc = ros.start(
         cli_argv("run", scene_path("congruent_triangles"), "--t-end", ROGUE_T_END,
                  "--integrator", "rkmk4", "--no-compare", "--save", out, "--timeout", 150, "-q",
-                 "--round-timeout", 60),  # the flood is under test, not the timeout
+                 "--round-timeout", 60,  # the flood is under test, not the timeout
+                 "-k", 1),  # a process per agent: each one reads agent 3's stage topic
         timeout=180,
     )
     t0 = time.monotonic()
@@ -245,7 +246,7 @@ def test_runner_ends_every_process_it_started(ros, how):
     policy = ["--on-failure", "stop"] if how == "child-dies" else []  # restarts: test_faults
     proc = ros.start(
         cli_argv("run", scene_path("congruent_triangles"), "--t-end", 500, "--timeout", 120,
-                 *policy),
+                 "-k", 1, *policy),
         timeout=150,
     )
     deadline = time.monotonic() + 60

@@ -1,38 +1,66 @@
-"""`polymatch run` keeps within the DDS participants that LOCALHOST discovery reaches.
+"""`polymatch run` packs its agents by measurement and keeps within the DDS participants that
+LOCALHOST discovery reaches.
 
 rmw_fastrtps probes the first 32 participant ports on 127.0.0.1; two participants beyond
 them never meet (measured: 32 agent processes + runner + monitor never finish discovery).
+Lockstep packs up to LOCKSTEP_AGENTS_PER_PROCESS agents a process (``docs/bench/packing.md``);
+realtime runs a process per agent while they fit.
 """
 
 import pytest
 
 from polymatch_ros.core.errors import PolymatchError
+from polymatch_ros.ros.supervisor.packing import (
+    LOCALHOST_PARTICIPANTS,
+    LOCKSTEP_AGENTS_PER_PROCESS,
+    choose_packing,
+)
 from polymatch_ros.ros.supervisor.plan import Packing
-from polymatch_ros.ros.supervisor.runner import LOCALHOST_PARTICIPANTS, _agents_per_process
 
 
-def _args(k=None, monitor=True):
-    return Packing(requested=k, monitor=monitor, quiet=True)
+def _k(n, k=None, monitor=True, mode="realtime", localhost=True):
+    packing = Packing(requested=k, monitor=monitor, mode=mode)
+    return choose_packing(packing, n, localhost=localhost).agents_per_process
 
 
-def test_one_agent_per_process_while_it_fits():
+def test_realtime_runs_one_agent_per_process_while_it_fits():
     # 30 + runner + monitor = 32
-    assert _agents_per_process(_args(), 30, localhost=True) == 1
-    assert _agents_per_process(_args(monitor=False), 31, localhost=True) == 1
+    assert _k(30) == 1
+    assert _k(31, monitor=False) == 1
+    assert _k(8, mode="bridge") == 1
 
 
-def test_packs_agents_when_processes_would_exceed_the_limit():
-    k = _agents_per_process(_args(), 32, localhost=True)
+def test_realtime_packs_agents_when_processes_would_exceed_the_limit():
+    k = _k(32)
     assert k == 2 and -(-32 // k) + 2 <= LOCALHOST_PARTICIPANTS
-    k = _agents_per_process(_args(), 1000, localhost=True)
+    k = _k(1000)
     assert -(-1000 // k) + 2 <= LOCALHOST_PARTICIPANTS
+
+
+@pytest.mark.parametrize("n,processes", [(2, 1), (8, 1), (256, 1), (257, 2), (1024, 4),
+                                         (4096, 16)])
+def test_lockstep_packs_by_the_measured_rule(n, processes):
+    k = _k(n, mode="lockstep")
+    assert k == min(n, LOCKSTEP_AGENTS_PER_PROCESS) and -(-n // k) == processes
+
+
+def test_lockstep_stays_within_the_limit_beyond_the_measured_sizes():
+    n = 40 * LOCKSTEP_AGENTS_PER_PROCESS
+    k = _k(n, mode="lockstep")
+    assert k > LOCKSTEP_AGENTS_PER_PROCESS and -(-n // k) + 2 <= LOCALHOST_PARTICIPANTS
+
+
+def test_the_choice_says_why():
+    packing = Packing(requested=None, monitor=True, mode="lockstep")
+    assert "docs/bench/packing.md" in choose_packing(packing, 64, True).reason
+    assert choose_packing(Packing(4, True), 64, True).reason == "-k 4 as asked"
 
 
 def test_explicit_k_beyond_the_limit_is_a_one_line_error():
     with pytest.raises(PolymatchError, match=r"34 DDS participants.*use -k 2 or more"):
-        _agents_per_process(_args(k=1), 32, localhost=True)
+        _k(32, k=1, mode="lockstep")
 
 
 def test_no_limit_without_localhost_discovery():
-    assert _agents_per_process(_args(), 100, localhost=False) == 1
-    assert _agents_per_process(_args(k=1), 100, localhost=False) == 1
+    assert _k(100, localhost=False) == 1
+    assert _k(100, k=1, localhost=False) == 1

@@ -123,7 +123,8 @@ def test_a_run_stopped_by_the_stop_service_says_so_and_exits_4(ros):
     call /polymatch/stop``) long before it converges: every process ends, and the run reports
     ``stopped by request``, not that it did not converge at t_end."""
     run = ros.start(
-        cli_argv("run", scene_path(SCENE), "--t-end", "1000", "--timeout", str(BOUND)),
+        # a process per agent (-k 1): fast enough to stop mid-run, slow enough not to converge
+        cli_argv("run", scene_path(SCENE), "--t-end", "1000", "--timeout", str(BOUND), "-k", "1"),
         timeout=BOUND + 20,
         name="runner",
     )

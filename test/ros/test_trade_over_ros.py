@@ -29,7 +29,8 @@ def test_over_ros_wall_per_simulated_second_is_rounds_over_dt_over_measured_rate
     assert rc == 0, text
     data = json.loads(text[text.index("{\n"):])
     rate, said = data["ros"], text[:text.index("{\n")]
-    assert rate["processes"] == 2 and rate["finished"], (rate, said)
+    # the packing `polymatch run` picks by default: both agents in one process
+    assert rate["processes"] == 1 and rate["finished"], (rate, said)
     assert rate["rounds"] >= 200 and rate["rounds_per_second"] > 0
     # the measured rounds cannot have been made faster than the rate says
     assert rate["rounds"] / rate["rounds_per_second"] <= rate["wall"]

@@ -22,6 +22,8 @@ from .. import wire
 from .checkpoint import CheckpointFile
 from .control import AgentControl, offer_agent_services, parse_command
 from .exchange import DropCounter, Layout
+from .hosted import HostedAgents
+from .params import RUNTIME
 from .process import NodeApp
 
 if TYPE_CHECKING:
@@ -105,24 +107,34 @@ class AgentBase(NodeApp):
 
     def _make_publishers(self) -> None:
         node, dim, local = self.node, self.model.dim, self.layout.local
-        self.pose_pubs = {a: wire.publisher(node, "pose", dim, a) for a in local}
+        self.hosted = self._host_agents()
         self.exchange_pubs = {a: wire.publisher(node, "exchange", dim, a) for a in local}
         self.final_exchange_pubs = {
             a: wire.publisher(node, "final_exchange", dim, a) for a in local
         }
-        self.final_pubs = {a: wire.publisher(node, "final_pose", dim, a) for a in local}
+
+        def on_own_node(key: str) -> dict[int, Publisher]:
+            """The people's topic ``key`` of each local agent, on the agent's own node."""
+            owner = self.hosted.nodes if self.hosted is not None else dict.fromkeys(local, node)
+            return {a: wire.publisher(owner[a], key, dim, a, resolver=node) for a in local}
+
+        self.pose_pubs, self.final_pubs = on_own_node("pose"), on_own_node("final_pose")
         second = self.model.order == 2
-        self.twist_pubs = (
-            {a: wire.publisher(node, "twist", dim, a) for a in local} if second else {}
-        )
-        self.final_twist_pubs = (
-            {a: wire.publisher(node, "final_twist", dim, a) for a in local} if second else {}
-        )
+        self.twist_pubs = on_own_node("twist") if second else {}
+        self.final_twist_pubs = on_own_node("final_twist") if second else {}
         self.diag_pub = wire.publisher(node, "diagnostics")
         self.status_pub = wire.publisher(node, "status")
         wire.subscription(node, "control", self._control)
         self.services = offer_agent_services(node, self.control, self.log)
         self._last_diag = 0.0
+
+    def _host_agents(self) -> HostedAgents | None:
+        """A node of its own for each agent of a process hosting several (``hosted``)."""
+        local = self.layout.local
+        if len(local) < 2 or not self.params["agent_nodes"]:
+            return None
+        runtime = RUNTIME if self.mode != "lockstep" else ()
+        return HostedAgents(self.node, local, self.params, self.control, runtime)
 
     # -- control: the ensemble's commands (control topic) and this process's services -------
     def _control(self, msg: Any) -> None:
@@ -347,5 +359,17 @@ class AgentBase(NodeApp):
         return self.record() if self.finished else None
 
     def release(self) -> None:
-        """What the agent built beside its node (lifecycle cleanup): its checkpoint's files."""
+        """What the agent built beside its node (lifecycle cleanup): its checkpoint's files,
+        its agents' own nodes."""
         self.checkpoint.close()
+        self._end_hosted()
+
+    def destroy(self) -> None:
+        self._end_hosted()
+        super().destroy()
+
+    def _end_hosted(self) -> None:
+        hosted: HostedAgents | None = getattr(self, "hosted", None)  # None: configure failed
+        if hosted is not None:
+            hosted.destroy()
+            self.hosted = None

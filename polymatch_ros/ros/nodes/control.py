@@ -11,7 +11,8 @@ node on a host that runs every agent and no monitor):
                                         next tick; lockstep and bridge: refused
 
 Each agent offers the same four under its own node (``/<ensemble>/agent_3/pause``) for the
-agents of its process alone.  A service is one-to-one and the ensemble is many: the
+agents of its process alone (a process hosting several agents offers them on its own node and
+on each agent's, ``hosted``).  A service is one-to-one and the ensemble is many: the
 ensemble's services broadcast one command on the ``control`` topic (std_msgs/String,
 RELIABLE; ``start <epoch>``, ``stop``, ``pause <epoch>``, ``resume <epoch>``,
 ``reset <epoch>``), so that one wall-clock epoch reaches every agent.  The topic is the
@@ -151,16 +152,17 @@ def _set_bool(handler: Callable[[bool], Answer]) -> Callable[[Any, Any], Any]:
 
 
 def offer_agent_services(
-    node: Node, control: AgentControl, log: RcutilsLogger
+    node: Node, control: AgentControl, log: RcutilsLogger, scope: str = ""
 ) -> list[Service]:
     """``~/start``, ``~/stop``, ``~/reset`` (Trigger) and ``~/pause`` (SetBool) of one agent
-    process, applied to it alone at once."""
+    process, applied to it alone at once; ``scope``, if given, ends each answer (a hosted
+    agent's node says that its whole process applies it, ``hosted``)."""
     from std_srvs.srv import SetBool, Trigger
 
     def call(verb: str, epoch: float | None = None) -> Answer:
         ok, message = control.command(verb, epoch)
         log.info(f"service {verb}: {message}")
-        return ok, message
+        return ok, f"{message} ({scope})" if scope else message
 
     return [
         node.create_service(Trigger, "~/start", _trigger(lambda: call("start", time.time()))),

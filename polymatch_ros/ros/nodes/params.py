@@ -83,6 +83,8 @@ AGENT = (
         "K of the runner's partition: process p hosts agents [pK, (p+1)K)",
         (1, 1_000_000),
     ),
+    Param("agent_nodes", True, "a process hosting several agents gives each its own lean node "
+          "agent_<i> (its pose topics, services, parameters); false: the process node alone"),
     Param("mode", "lockstep", "lockstep | realtime | bridge", choices=MODES),
     Param("autostart", True, "configure and activate the (lifecycle) agent by itself; false: "
           "wait for the lifecycle transitions (`ros2 lifecycle set`)"),
@@ -356,6 +358,11 @@ def _descriptor(p: Param, runtime: bool = False, provisional: bool = False) -> A
             IntegerRange(from_value=int(p.bounds[0]), to_value=int(p.bounds[1]), step=1)
         ]
     return desc
+
+
+def read_only_descriptor(p: Param) -> Any:
+    """``p``'s descriptor, read-only (a hosted agent's node mirrors its process's values)."""
+    return _descriptor(p)
 
 
 def given_values(node: Node, spec: Sequence[Param]) -> dict[str, Any]:

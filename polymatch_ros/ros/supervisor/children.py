@@ -1,5 +1,5 @@
-"""The runner's processes: supervised children, the partition of agents into processes, and
-the DDS participant limit of LOCALHOST discovery."""
+"""The runner's processes: supervised children and the partition of agents into processes
+(how many agents a process hosts: ``packing``)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,6 @@ import contextlib
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections import deque
@@ -15,10 +14,10 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from ...console import Progress
-from ...core.errors import ParameterError, PolymatchError
+from ...core.errors import ParameterError
 from .. import wire
 from ..nodes.teardown import EXIT_GRACE, TEARDOWN_SECONDS, hung_in_teardown
-from .plan import Packing, RunPlan
+from .plan import RunPlan
 from .recovery import Recovery
 
 if TYPE_CHECKING:
@@ -233,41 +232,6 @@ def describe_agents(agents: Sequence[int]) -> str:
             runs.append(f"{start}" if start == agent else f"{start}-{agent}")
             start = None
     return ",".join(runs)
-
-
-# rmw_fastrtps, under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, probes the first 32 participant
-# ports on 127.0.0.1 (its UDP maxInitialPeersRange): two participants beyond that never meet.
-LOCALHOST_PARTICIPANTS = 32
-
-
-def fewest_agents_per_process(n_agents: int, own: int) -> int:
-    """Agents per process that keep ``own`` + the agent processes within LOCALHOST_PARTICIPANTS."""
-    return -(-n_agents // (LOCALHOST_PARTICIPANTS - own))
-
-
-def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> int:
-    """-k as given (checked against the participant limit), else 1 if it fits, else the fewest."""
-    own = 1 + int(packing.monitor) + int(packing.recorder)  # the runner, monitor, recorder
-    need = fewest_agents_per_process(n_agents, own)
-    if packing.requested is None:
-        if localhost and need > 1:
-            if not packing.quiet:
-                print(
-                    f"polymatch run: {n_agents} agents + {own} own processes exceed the "
-                    f"{LOCALHOST_PARTICIPANTS} DDS participants LOCALHOST discovery reaches: "
-                    f"{need} agents per process (-k {need})",
-                    file=sys.stderr,
-                )
-            return need
-        return 1
-    procs = -(-n_agents // packing.requested)
-    if localhost and procs + own > LOCALHOST_PARTICIPANTS:
-        raise PolymatchError(
-            f"{procs} agent processes + {own} own = {procs + own} DDS participants, but LOCALHOST "
-            f"discovery reaches {LOCALHOST_PARTICIPANTS} per domain (rmw_fastrtps' initial-peer "
-            f"range); use -k {need} or more"
-        )
-    return packing.requested
 
 
 MONITOR_GRACE_SECONDS = 10.0

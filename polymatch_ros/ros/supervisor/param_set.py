@@ -3,9 +3,10 @@
     polymatch set kappa 2.0                 # every agent node in /polymatch
     polymatch set max_linear_speed 0.3 --ensemble team_b
 
-It finds the agent nodes of the ensemble (``agent_<i>``, ``agents_<first>_<last>``) in the ROS
-graph and calls each one's ``set_parameters`` service (``rcl_interfaces/srv/SetParameters``),
-as ``ros2 param set`` would one at a time.  The value is checked against the parameter's range
+It finds the agent processes' nodes of the ensemble (``agent_<i>``, ``agents_<first>_<last>``;
+not the nodes a packed process gives each of its agents) in the ROS graph and calls each
+one's ``set_parameters`` service (``rcl_interfaces/srv/SetParameters``), as ``ros2 param set``
+would one at a time.  The value is checked against the parameter's range
 here first (``params.check_value``; a bad one is a one-line error, exit 2, nothing sent);
 each agent checks it again and applies it at its next tick (``runtime_params``).  One line per
 agent node, with the value it reads back (``get_parameters``, as ``ros2 param get``); exit 0
@@ -92,7 +93,11 @@ def _discover(node: Node, executor: Executor, namespace: str, deadline: float) -
         if seen and time.monotonic() - since >= SETTLE_SECONDS and set(records) <= set(seen):
             break
     node.destroy_subscription(sub)
-    return seen
+    # a packed process's agents have nodes of their own (``nodes.hosted``), read-only: its
+    # runtime parameters are set on the process node, which steps them
+    hosted = {f"agent_{a}" for name, rec in records.items() for a in rec.agents
+              if name != f"agent_{a}"}
+    return [name for name in seen if name not in hosted]
 
 
 def _not_found(records: dict[str, wire.RunRecord], names: list[str]) -> list[int]:

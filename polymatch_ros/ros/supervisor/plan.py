@@ -31,6 +31,7 @@ class Hosts:
     lead: bool                         # this host runs the monitor or every agent
     discovery: DiscoverySpec           # how the DDS participants find each other
     agents_per_process: int | None     # -k as asked (bridge mode: 1); None: choose
+    agent_nodes: bool = True           # a packed process gives each agent its node (``hosted``)
 
 
 @dataclass(frozen=True)
@@ -76,10 +77,10 @@ class BridgeOptions:
 class Packing:
     """What decides the agents per process: -k as asked and this host's own participants."""
 
-    requested: int | None      # -k; None: 1, or the fewest that fit LOCALHOST discovery
+    requested: int | None      # -k; None: the mode's default (``packing.choose_packing``)
     monitor: bool              # the monitor is one more participant on this host
-    quiet: bool = False        # no note on stderr when the agents are packed
     recorder: bool = False     # --record: the recorder is one more
+    mode: str = "lockstep"     # lockstep | realtime | bridge
 
 
 @dataclass(frozen=True)
@@ -114,5 +115,5 @@ class RunPlan:
     @property
     def packing(self) -> Packing:
         """What decides this host's agents per process."""
-        return Packing(self.hosts.agents_per_process, self.hosts.monitor, self.outputs.quiet,
-                       self.outputs.record is not None)
+        return Packing(self.hosts.agents_per_process, self.hosts.monitor,
+                       self.outputs.record is not None, self.mode)

@@ -30,7 +30,8 @@ from typing import IO
 from ...core.errors import PolymatchError
 from ...core.integrators import METHODS
 from ..wire import run_records
-from .children import LOCALHOST_PARTICIPANTS, fewest_agents_per_process
+from .packing import choose_packing
+from .plan import Packing
 
 __all__ = ["DEFAULT_ROUNDS", "RoundRate", "estimate_seconds", "main", "measure_round_rate"]
 
@@ -65,9 +66,9 @@ class RoundRate:
 
 
 def _processes(n_agents: int) -> int:
-    """Agent processes `polymatch run --no-monitor` starts (packed beyond LOCALHOST's limit)."""
-    k = fewest_agents_per_process(n_agents, 1)
-    return -(-n_agents // k) if n_agents + 1 > LOCALHOST_PARTICIPANTS else n_agents
+    """Agent processes `polymatch run --no-monitor` starts in lockstep (its default packing)."""
+    k = choose_packing(Packing(None, monitor=False), n_agents, localhost=True).agents_per_process
+    return -(-n_agents // k)
 
 
 def estimate_seconds(n_agents: int, rounds: int = DEFAULT_ROUNDS) -> float:

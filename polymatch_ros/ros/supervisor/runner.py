@@ -29,13 +29,10 @@ from ..nodes.checkpoint import Checkpoint, CheckpointFile
 from ..nodes.teardown import teardown_watchdog
 from . import bridge_run
 from .children import (  # noqa: F401 (API)
-    LOCALHOST_PARTICIPANTS,
     REMOTE_FINAL_POSE_SECONDS,
     Child,
     Supervision,
-    _agents_per_process,
     describe_agents,
-    fewest_agents_per_process,
     parse_only,
     partition,
     stop_all,
@@ -48,6 +45,7 @@ from .discovery import (
     start_discovery_server,
 )
 from .environment import reserved_domain_id, ros_environment
+from .packing import PackingChoice, choose_packing
 from .plan import RunPlan
 from .recording import report_recording, start_recorder
 from .summary import RunOutcome, report, verdict
@@ -63,10 +61,14 @@ class RunContext:
     env: dict[str, str]                   # every process's environment (LOCALHOST discovery)
     domain: int                           # ROS_DOMAIN_ID
     envs: DiscoveryEnvironments | None    # client/super-client/server overlays, --discovery
-    agents_per_process: int               # -k as given, or chosen (``_agents_per_process``)
+    packing: PackingChoice                # -k as given, or chosen (``choose_packing``)
     shared_domain: bool                   # the user's ROS_DOMAIN_ID, or discovery beyond loopback
     directory: str                        # the run's private temporary directory
     run_id: int                           # the stage messages' and checkpoints' run id
+
+    @property
+    def agents_per_process(self) -> int:
+        return self.packing.agents_per_process
 
     def checkpoint_path(self, name: str) -> str:
         """The checkpoint of the agent process ``name`` (a bridge agent's holds the measured
@@ -104,7 +106,7 @@ def run(plan: RunPlan) -> int:
         env = ros_environment(domain)
         spec = plan.hosts.discovery
         envs = None if spec.kind == "localhost" else discovery_environments(spec, directory)
-        packing = _agents_per_process(
+        packing = choose_packing(
             plan.packing, len(plan.hosts.agents), envs is None and _localhost(env)
         )
         context = RunContext(plan, env, domain, envs, packing, shared, directory,
@@ -129,8 +131,11 @@ def _node_names(context: RunContext, runner: str) -> list[str]:
     plan = context.plan
     names = [runner] + (["monitor"] if plan.hosts.monitor else [])
     names += ["recorder"] if plan.outputs.record is not None else []
-    return names + [_process_name(a)
-                    for a in partition(plan.hosts.agents, context.agents_per_process)]
+    for agents in partition(plan.hosts.agents, context.agents_per_process):
+        names.append(_process_name(agents))
+        if len(agents) > 1 and plan.hosts.agent_nodes:  # each agent's own node (``hosted``)
+            names += [f"agent_{a}" for a in agents]
+    return names
 
 
 def _process_name(agents: Sequence[int]) -> str:
@@ -205,6 +210,8 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
         f"run_id:={context.run_id}",
         "-p",
         f"agents_per_process:={k}",
+        "-p",
+        f"agent_nodes:={'true' if plan.hosts.agent_nodes else 'false'}",
         # the recorder (--record) reads every pose, the monitor every state of the exchange
         "-p",
         f"pose_subscribers:={int(plan.outputs.record is not None)}",
@@ -312,9 +319,13 @@ def _announce(context: RunContext) -> None:
     which = f"{n} agents" if here == n else (
         f"{here} of {n} agents ({describe_agents(plan.hosts.agents)})")
     discovery = context.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] if envs is None else envs.spec
+    k = context.agents_per_process
+    processes = len(partition(plan.hosts.agents, k))
+    packed = (f"{processes} processes" if k == 1 else
+              f"{processes} process{'es' if processes > 1 else ''} of up to {k}")
     print(
-        f"polymatch run: {which} in {len(partition(here, context.agents_per_process))} "
-        f"processes, {plan.mode}, integrator {plan.numerics.name}, dt {plan.numerics.dt:g}, "
+        f"polymatch run: {which} in {packed} ({context.packing.reason}), "
+        f"{plan.mode}, integrator {plan.numerics.name}, dt {plan.numerics.dt:g}, "
         f"ROS_DOMAIN_ID={context.domain}, discovery {discovery}, "
         f"ensemble {wire.namespace(plan.hosts.ensemble)}",
         file=sys.stderr, flush=True,

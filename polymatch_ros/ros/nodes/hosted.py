@@ -1,0 +1,109 @@
+"""Every agent a node: the lean ``agent_<i>`` node of each agent a packed process hosts.
+
+A process that hosts K > 1 agents (``-k K``) is one node, ``agents_<first>_<last>``: it steps
+its agents together and carries the block exchange.  So that the ROS graph shows each agent as
+its own node at any packing, the process also makes one lean node per agent, ``agent_<i>``, in
+its own context (still one DDS participant per process).  Each one has
+
+- the agent's pose topics for people and tools (``agent_<i>/pose``, ``/twist``,
+  ``/final_pose``, ``/final_twist``);
+- its services ``~/start``, ``~/stop``, ``~/reset`` and ``~/pause``, applied to the process
+  that hosts it (its agents step together), which its answer names;
+- the process's fixed parameters, read-only, with ``agent`` its own index and ``host_node``
+  the process node, whose runtime parameters (realtime) apply to it.
+
+It has no rosout publisher and no type-description service.  Its own executor serves the
+hosted nodes in a thread of their own, which sleeps in the middleware's wait until a request
+comes: rclpy rebuilds a wait set from every entity of an executor's nodes at each spin, and
+hundreds of agents' services in the process's executor would slow every round.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Collection, Iterable, Mapping
+from typing import TYPE_CHECKING, Any
+
+from .control import AgentControl, offer_agent_services
+from .params import AGENT, read_only_descriptor
+
+if TYPE_CHECKING:
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.service import Service
+
+
+def hosted_name(agent: int) -> str:
+    """The node name of one agent, hosted or alone in its process."""
+    return f"agent_{agent}"
+
+
+def _lean_agent_node(agent: int, namespace: str) -> Node:
+    """``agent_<i>`` with parameter services, without rosout and the type-description service.
+
+    It ignores the process's remap rules (``-r __node:=`` names the process node); its topic
+    names are resolved by the process node (``wire.publisher(..., resolver=...)``), so the
+    user's topic remaps apply to them as to every other topic of the process."""
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    return Node(
+        hosted_name(agent),
+        namespace=namespace,
+        use_global_arguments=False,
+        enable_rosout=False,
+        parameter_overrides=[Parameter("start_type_description_service", value=False)],
+    )
+
+
+class HostedAgents:
+    """The lean node of each agent of a packed process, and the executor that serves them."""
+
+    def __init__(self, host: Node, agents: Iterable[int], params: Mapping[str, Any],
+                 control: AgentControl, runtime: Collection[str] = ()) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.host = host
+        namespace = host.get_namespace()
+        self.nodes: dict[int, Node] = {a: _lean_agent_node(a, namespace) for a in agents}
+        self.executor: SingleThreadedExecutor = SingleThreadedExecutor()
+        self.services: list[Service] = []
+        scope = (f"applied by its process {host.get_fully_qualified_name()} to the "
+                 f"{len(self.nodes)} agents it hosts")
+        for agent, node in self.nodes.items():
+            self.executor.add_node(node)
+            _mirror_parameters(node, agent, params, runtime, host.get_fully_qualified_name())
+            self.services += offer_agent_services(node, control, host.get_logger(), scope)
+        self.thread = threading.Thread(target=self._serve, name="hosted_agents", daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        """The thread's loop: answer requests as they come, until the executor shuts down."""
+        from rclpy.executors import ExternalShutdownException
+
+        try:
+            self.executor.spin()
+        except (ExternalShutdownException, RuntimeError):  # the context or executor ended
+            pass
+
+    def destroy(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.thread.join(timeout=1.0)
+        for node in self.nodes.values():
+            node.destroy_node()
+        self.nodes = {}
+
+
+def _mirror_parameters(node: Node, agent: int, params: Mapping[str, Any],
+                       runtime: Collection[str], host: str) -> None:
+    """The process's fixed parameters on an agent's node, read-only; ``agent`` its own."""
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    for p in AGENT:
+        value = agent if p.name == "agent" else params.get(p.name)
+        if value is None or p.name in runtime:
+            continue
+        node.declare_parameter(p.name, value, read_only_descriptor(p))
+    node.declare_parameter("host_node", host, ParameterDescriptor(
+        description="the process node that hosts this agent: its runtime parameters apply "
+        "to this agent, and its services act on every agent it hosts", read_only=True))

@@ -1,0 +1,65 @@
+"""How many agents each process hosts: ``-k`` as asked, else what was measured fastest.
+
+Lockstep (``python -m benchmarks packing``, ``docs/bench/packing.md``, 2 cores): a round
+costs each process its share of the numerics plus one DDS exchange with every other process,
+and the exchange dominates; one process for up to 256 agents, then processes of 256, was the
+fastest packing or within 20% of it at every measured size (8 ... 1024 agents).  Realtime and
+bridge runs step at a fixed rate, so speed does not choose: one process per agent, so that a
+crash costs one agent and per-agent faults stay per agent, while the processes fit the
+participants LOCALHOST discovery reaches.  Every agent is its own node at any packing
+(``nodes.hosted``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ...core.errors import PolymatchError
+from .plan import Packing
+
+# rmw_fastrtps, under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, probes the first 32 participant
+# ports on 127.0.0.1 (its UDP maxInitialPeersRange): two participants beyond that never meet.
+LOCALHOST_PARTICIPANTS = 32
+
+#: lockstep: the most agents one process hosts unless -k says otherwise (measured, above)
+LOCKSTEP_AGENTS_PER_PROCESS = 256
+
+
+@dataclass(frozen=True)
+class PackingChoice:
+    """Agents per process for this host, and why (the run's first line says it)."""
+
+    agents_per_process: int
+    reason: str
+
+
+def fewest_agents_per_process(n_agents: int, own: int) -> int:
+    """Agents per process that keep ``own`` + the agent processes within LOCALHOST_PARTICIPANTS."""
+    return -(-n_agents // (LOCALHOST_PARTICIPANTS - own))
+
+
+def choose_packing(packing: Packing, n_agents: int, localhost: bool) -> PackingChoice:
+    """-k as given (checked against the participant limit); else lockstep's measured rule, or
+    one process per agent in realtime and bridge modes while the processes fit."""
+    own = 1 + int(packing.monitor) + int(packing.recorder)  # the runner, monitor, recorder
+    need = fewest_agents_per_process(n_agents, own) if localhost else 1
+    if packing.requested is not None:
+        procs = -(-n_agents // packing.requested)
+        if localhost and procs + own > LOCALHOST_PARTICIPANTS:
+            raise PolymatchError(
+                f"{procs} agent processes + {own} own = {procs + own} DDS participants, but "
+                f"LOCALHOST discovery reaches {LOCALHOST_PARTICIPANTS} per domain (rmw_fastrtps' "
+                f"initial-peer range); use -k {need} or more"
+            )
+        return PackingChoice(packing.requested, f"-k {packing.requested} as asked")
+    if packing.mode == "lockstep":
+        k = max(need, min(n_agents, LOCKSTEP_AGENTS_PER_PROCESS))
+        return PackingChoice(k, f"lockstep's fastest measured packing, up to "
+                                f"{LOCKSTEP_AGENTS_PER_PROCESS} agents a process "
+                                f"(docs/bench/packing.md); -k 1: a process per agent")
+    if need > 1:
+        return PackingChoice(need, f"{n_agents} agents + {own} own processes exceed the "
+                                   f"{LOCALHOST_PARTICIPANTS} DDS participants LOCALHOST "
+                                   f"discovery reaches: the fewest agents a process that fit")
+    return PackingChoice(1, f"{packing.mode}: a process per agent, so that a crash costs one "
+                            f"agent")
