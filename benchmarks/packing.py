@@ -9,10 +9,10 @@ rate, the best one, and the packing `polymatch run` picks without -k, with its r
 the best: the measurement a default packing has to rest on.
 
 A second table gives what every agent's own node costs (``nodes.hosted``): at each size of
-``--node-agents`` (default 64, 256, 1024), the default packing with and without
-``--no-agent-nodes``, alternating, ``--repeats`` times each: the median rounds/s and start-up
-(the slowest process's seconds from its start until its peers matched: the wall time to its
-first round).
+``--node-agents`` (default 64, 256, 1024), the default packing at each ``--agent-nodes``
+level (full up to 256 agents), alternating, ``--repeats`` times each: the median rounds/s and
+start-up (the slowest process's seconds from its start until its peers matched: the wall time
+to its first round).
 """
 
 import tempfile
@@ -73,10 +73,18 @@ def _default_k(n):
     return choose_packing(Packing(None, monitor=True), n, localhost=True).agents_per_process
 
 
+#: --agent-nodes levels measured; full only up to this size (its start-up grows with the
+#: square of a process's endpoints: minutes at 1024 agents a process)
+LEVELS = ("full", "lean", "none")
+FULL_UP_TO = 256
+
+
 def _node_cost(sizes, repeats, rounds, workdir, env, log):
-    """Rows of the agent-node cost table and its failures: the default packing, with and
-    without an agent node each, alternating."""
+    """Rows of the agent-node cost table and its failures: the default packing with each
+    --agent-nodes level, alternating; each level's median rounds/s and start-up."""
     import numpy as np
+
+    from polymatch_ros.ros.supervisor.packing import agent_nodes
 
     from .ros_runs import write_scene
 
@@ -84,21 +92,29 @@ def _node_cost(sizes, repeats, rounds, workdir, env, log):
     for n in sizes:
         path = write_scene(workdir, f"nodes_{n}.yaml", _scene_yaml(n, rounds // 4, 0.01))
         k = _default_k(n)
-        runs = {"nodes": ([], []), "none": ([], [])}
+        levels = [lv for lv in LEVELS if lv != "full" or n <= FULL_UP_TO]
+        runs = {lv: ([], []) for lv in levels}
         for r in range(repeats):
-            for kind, extra in (("nodes", ()), ("none", ("--no-agent-nodes",))):
-                log(f"agent nodes, N = {n} (-k {k}), {kind}, repeat {r + 1}")
-                rate, failure, start = _rate(path, env, 120 + n * rounds // 50, k, extra)
-                runs[kind][0].append(rate)
-                runs[kind][1].append(start)
+            for lv in levels:
+                log(f"agent nodes, N = {n} (-k {k}), {lv}, repeat {r + 1}")
+                rate, failure, start = _rate(path, env, 120 + n * rounds // 50, k,
+                                             ("--agent-nodes", lv))
+                runs[lv][0].append(rate)
+                runs[lv][1].append(start)
                 if failure:
-                    failures.append(f"agent nodes, N = {n}, {kind}: {failure}")
-        med = {kind: (float(np.median(rates)), float(np.median(starts)))
-               for kind, (rates, starts) in runs.items()}
-        rows.append([n, f"{-(-n // k)} x {k}", f"{med['nodes'][0]:.1f}",
-                     f"{med['none'][0]:.1f}", f"{med['nodes'][0] / med['none'][0]:.0%}",
-                     f"{med['nodes'][1]:.2f}", f"{med['none'][1]:.2f}"])
+                    failures.append(f"agent nodes, N = {n}, {lv}: {failure}")
+        med = {lv: (float(np.median(rates)), float(np.median(starts)))
+               for lv, (rates, starts) in runs.items()}
+        auto = agent_nodes("auto", k)
+        rows.append([n, f"{-(-n // k)} x {k}", auto, _by_level(med, 0, ".1f"),
+                     _by_level(med, 1, ".2f"),
+                     f"{med[auto][0] / med['none'][0]:.0%}" if auto in med else "-"])
     return rows, failures
+
+
+def _by_level(med, i, fmt):
+    """'full 1.0; lean 2.0; none 3.0': figure ``i`` of each level measured ('-' if not)."""
+    return "; ".join(f"{lv} {med[lv][i]:{fmt}}" if lv in med else f"{lv} -" for lv in LEVELS)
 
 
 def _row(n, measured, default_k):
@@ -146,10 +162,10 @@ def run(args, log):
                   "default / fastest"], rows,
                  caption=f"{rounds} lockstep rounds (rkmk4: 4 a step) through `polymatch run` "
                          "with the monitor; a run's rate is the mean over its agent processes")
-    report.table(["agents", "default packing", "rounds/s, agent nodes", "rounds/s, none",
-                  "with / without", "start-up s, agent nodes", "start-up s, none"], node_rows,
-                 caption="Every agent a node (`nodes.hosted`): the default packing with and "
-                         "without `--no-agent-nodes`, medians of alternating runs; start-up: "
-                         "the slowest process's seconds until its peers matched")
+    report.table(["agents", "default packing", "auto", "rounds/s by --agent-nodes",
+                  "start-up s by --agent-nodes", "auto / none rounds/s"], node_rows,
+                 caption="Every agent a node (`nodes.hosted`): the default packing at each "
+                         "`--agent-nodes` level, medians of alternating runs; start-up: the "
+                         "slowest process's seconds from its start until its peers matched")
     report.failures(failures + node_failures)
     return report

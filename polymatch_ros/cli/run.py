@@ -74,11 +74,23 @@ def build_plan(args: argparse.Namespace) -> RunPlan:
         verbose=args.verbose,
         compare=args.compare,
         record=writable_output(args.record, ".mcap") if args.record else None,
+        logs=_log_directory(args.logs) if args.logs else None,
     )
     hosts = _hosts(args, scene, bridge is not None)
     on_failure = RestartPolicy(restart=args.on_failure == "restart")
     return RunPlan(scene_path, scene, numerics, args.mode, hosts, timing, outputs, bridge,
                    on_failure)
+
+
+def _log_directory(path: str) -> str:
+    """``--logs DIR``, made if it is not there; one line if it cannot be written."""
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        raise ParameterError(f"--logs: cannot make {path!r}: {exc.strerror}") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise ParameterError(f"--logs: {path!r} is not writable")
+    return os.path.abspath(path)
 
 
 def _timing(args: argparse.Namespace, bridge: bool) -> Timing:
@@ -165,11 +177,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "LOCALHOST discovery reaches); the first line says which and why",
     )
     p.add_argument(
-        "--no-agent-nodes",
-        dest="agent_nodes",
-        action="store_false",
-        help="a process hosting several agents is one node (no agent_<i> node per agent: "
-        "a lighter graph at thousands of agents)",
+        "--agent-nodes",
+        choices=("auto", "full", "lean", "none"),
+        default="auto",
+        help="what a process hosting several agents gives each: a node with its pose topics, "
+        "services and parameters (full), with its pose topics (lean), none; auto: full "
+        "up to 32 agents a process, lean beyond (full nodes slow a large process's start-up)",
     )
     add_number_options(p, RUN_OPTIONS)
     p.add_argument(
@@ -184,6 +197,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
     p.add_argument("--records", metavar="JSONL",
                    help="write every process's run record (JSON, one a line) to this file")
+    p.add_argument("--logs", metavar="DIR",
+                   help="write each process's whole output (its ROS log lines, its errors) to "
+                   "DIR/<node>.log, a restarted process's after its predecessor's")
     p.set_defaults(func=cmd_run)
 
 

@@ -104,6 +104,15 @@ def test_writable_output_helper_appends_suffix_and_refuses_missing_directory(tmp
         writable_output(tmp_path, "")
 
 
+def test_run_logs_into_a_file_is_one_line_and_exit_2_before_anything_starts(tmp_path):
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    for bad in (afile, afile / "below"):
+        code, out, err = run_main(["run", "congruent_triangles", "--logs", str(bad)], 60)
+        assert code == 2 and err.startswith("polymatch: error: --logs: cannot make "), err
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+
+
 SUBPROCESS_CASES = [
     ("binary", bytes(range(256)) * 64, []),
     ("billion_laughs", bomb(), []),

@@ -43,10 +43,12 @@ def _probe(ros, argv, name):
     return ros.output(proc)
 
 
-def test_every_agent_of_a_packed_process_is_a_node_with_its_topics_services_and_parameters(ros):
+def test_every_agent_of_a_packed_process_is_a_node_with_its_topics_services_and_parameters(
+        ros, tmp_path):
+    logs = tmp_path / "logs"
     run = ros.start(cli_argv("run", scene_path("congruent_triangles"), "--mode", "realtime",
                              "--rate", "20", "-k", "4", "--t-end", "30", "--timeout", "120",
-                             "--no-compare"), timeout=140, name="run")
+                             "--no-compare", "--logs", logs), timeout=140, name="run")
     text = _probe(ros, [PY, "-c", GRAPH], "graph")
     graph = json.loads(re.search(r"^GRAPH (.*)$", text, re.M).group(1))
     names = set(graph["names"])
@@ -74,3 +76,13 @@ def test_every_agent_of_a_packed_process_is_a_node_with_its_topics_services_and_
 
     assert ros.wait(run, 130) == 0, ros.output(run)[-3000:]
     assert "converged" in ros.output(run)
+    if not os.environ.get("POLYMATCH_KEEP_LOGS"):  # else the harness gave it a --logs of its own
+        _assert_logs(logs)
+
+
+def _assert_logs(logs):
+    """--logs: each process's whole output, its pause and its final run record among it."""
+    assert sorted(p.name for p in logs.iterdir()) == ["agents_0_3.log", "agents_4_7.log",
+                                                       "monitor.log"]
+    text = (logs / "agents_4_7.log").read_text()
+    assert "service pause: paused" in text and '"role": "agent"' in text, text[-2000:]

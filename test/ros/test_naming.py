@@ -36,7 +36,7 @@ def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
         "/polymatch/monitor",
         "/polymatch/runner",
     ]
-    # packed 4 a process: each agent is its own node too (``nodes/hosted.py``)
+    # packed 4 a process: each agent is its own node too, here a lean one (``nodes/hosted.py``)
     second = ["/second/agents_0_3", "/second/agents_4_7", "/second/monitor", "/second/runner"]
     second += [f"/second/agent_{i}" for i in range(8)]
     probe = ros.start([PY, "-c", PROBE, json.dumps(first + second)], timeout=200)
@@ -60,10 +60,12 @@ def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
                 "60",
                 "--t-end",  # naming is under test: a few steps, not the whole convergence
                 "3",
+                "--agent-nodes",
+                nodes,
             ],
             timeout=200,
         )  # two ensembles on 2 cores
-        for name, k in (("polymatch", "1"), ("second", "4"))
+        for name, k, nodes in (("polymatch", "1", "auto"), ("second", "4", "lean"))
     ]
     for run in runs:
         rc = ros.wait(run, 210)

@@ -47,7 +47,7 @@ TYPE_CASES = [
     ("agent", "agent", True, INTEGER), ("agent", "agents", 1.5, "expected a list of integers"),
     ("agent", "agents", [1, 2.5], "expected a list of integers"),
     ("agent", "agents_per_process", 2.5, INTEGER), ("agent", "mode", 1.5, STRING),
-    ("agent", "agent_nodes", 1, BOOLEAN),
+    ("agent", "agent_nodes", 1, STRING),
     ("agent", "autostart", 1.5, BOOLEAN), ("agent", "autostart", "true", BOOLEAN),
     ("agent", "integrator", 1.5, STRING), ("agent", "dt", "abc", NUMBER),
     ("agent", "dt", True, NUMBER), ("agent", "dt", float("nan"), NUMBER),
@@ -110,6 +110,7 @@ RANGE_CASES = [
 # (spec, parameter, the allowed values)
 CHOICE_CASES = [
     ("agent", "mode", ("lockstep", "realtime", "bridge")),
+    ("agent", "agent_nodes", ("full", "lean", "none")),
     ("agent", "start", ("now", "control", "at")),
     ("agent", "pose_type", ("pose", "odometry")),
     ("agent", "cmd_type", ("twist", "twist_stamped")),
@@ -222,7 +223,7 @@ SCENE_FILES = {
 # start_type_description_service
 LOCKSTEP_TABLE = {
     "scene": os.path.join(CONFIG, "congruent_triangles.yaml"), "agent": 0, "agents": [0],
-    "agents_per_process": 1, "agent_nodes": True, "mode": "lockstep", "autostart": True,
+    "agents_per_process": 1, "agent_nodes": "full", "mode": "lockstep", "autostart": True,
     "integrator": "rkmk4",
     "dt": 0.05, "t_end": 30.0, "rate": 50.0, "kappa": 1.0, "gamma": 1.0, "time_scale": 1.0,
     "peer_timeout": 1.0, "delay": 0.0, "clock_offset_warn": 0.1, "hold_final": 0.0,

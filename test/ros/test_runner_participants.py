@@ -11,6 +11,7 @@ import pytest
 
 from polymatch_ros.core.errors import PolymatchError
 from polymatch_ros.ros.supervisor.packing import (
+    FULL_AGENT_NODES,
     LOCALHOST_PARTICIPANTS,
     LOCKSTEP_AGENTS_PER_PROCESS,
     choose_packing,
@@ -64,3 +65,14 @@ def test_explicit_k_beyond_the_limit_is_a_one_line_error():
 def test_no_limit_without_localhost_discovery():
     assert _k(100, localhost=False) == 1
     assert _k(100, k=1, localhost=False) == 1
+
+
+@pytest.mark.parametrize("n,k,asked,level", [
+    (8, None, "auto", "full"), (FULL_AGENT_NODES, None, "auto", "full"),
+    (FULL_AGENT_NODES + 1, None, "auto", "lean"), (1024, None, "auto", "lean"),
+    (1024, None, "full", "full"), (64, None, "none", "none"), (8, 1, "auto", "none"),
+    (8, 1, "full", "none"),  # a process of one agent is that agent's node
+])
+def test_every_agent_gets_a_node_full_while_a_process_is_small_lean_beyond(n, k, asked, level):
+    packing = Packing(requested=k, monitor=True, mode="lockstep", agent_nodes=asked)
+    assert choose_packing(packing, n, True).agent_nodes == level

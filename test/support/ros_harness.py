@@ -14,6 +14,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -66,7 +67,13 @@ class Ros:
         self.shm_before = set(glob.glob("/dev/shm/fastrtps_*"))
 
     def start(self, argv, timeout, name=""):
-        """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file."""
+        """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file.
+        With POLYMATCH_KEEP_LOGS, a `polymatch run` also writes its processes' output
+        (``--logs``), kept beside its own when the test fails."""
+        argv, run_logs = list(map(str, argv)), None
+        if os.environ.get("POLYMATCH_KEEP_LOGS") and argv[2:4] == ["polymatch_ros.cli", "run"]:
+            run_logs = tempfile.mkdtemp(prefix="polymatch_run_logs_")
+            argv += ["--logs", run_logs]
         log = open(
             os.path.join(
                 os.environ.get("TMPDIR", "/tmp"),
@@ -82,7 +89,7 @@ class Ros:
             stdin=subprocess.DEVNULL,
             cwd=REPO,
         )
-        proc.log, proc.name = log, name
+        proc.log, proc.name, proc.run_logs = log, name, run_logs
         self.procs.append(proc)
         return proc
 
@@ -137,11 +144,13 @@ class Ros:
             proc.log.close()
             if keep_logs:
                 os.makedirs(keep_logs, exist_ok=True)
-                label = (proc.name or "process").replace(" ", "_")
-                shutil.copy(
-                    proc.log.name,
-                    os.path.join(keep_logs, f"{self.procs.index(proc):02d}_{label}.log"),
-                )
+                name = (proc.name or "process").replace(" ", "_")
+                label = f"{self.procs.index(proc):02d}_{name}"
+                shutil.copy(proc.log.name, os.path.join(keep_logs, f"{label}.log"))
+                if proc.run_logs:  # the output of each process the run started
+                    shutil.copytree(proc.run_logs, os.path.join(keep_logs, label))
+            if proc.run_logs:
+                shutil.rmtree(proc.run_logs, ignore_errors=True)
             with contextlib.suppress(OSError):
                 os.unlink(proc.log.name)
         held = _mapped_shm()

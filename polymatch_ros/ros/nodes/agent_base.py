@@ -130,11 +130,12 @@ class AgentBase(NodeApp):
 
     def _host_agents(self) -> HostedAgents | None:
         """A node of its own for each agent of a process hosting several (``hosted``)."""
-        local = self.layout.local
-        if len(local) < 2 or not self.params["agent_nodes"]:
+        local, level = self.layout.local, self.params["agent_nodes"]
+        if len(local) < 2 or level == "none":
             return None
         runtime = RUNTIME if self.mode != "lockstep" else ()
-        return HostedAgents(self.node, local, self.params, self.control, runtime)
+        return HostedAgents(self.node, local, self.params, self.control, runtime,
+                            full=level == "full")
 
     # -- control: the ensemble's commands (control topic) and this process's services -------
     def _control(self, msg: Any) -> None:

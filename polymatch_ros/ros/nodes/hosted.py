@@ -1,9 +1,9 @@
-"""Every agent a node: the lean ``agent_<i>`` node of each agent a packed process hosts.
+"""Every agent a node: the ``agent_<i>`` node of each agent a packed process hosts.
 
 A process that hosts K > 1 agents (``-k K``) is one node, ``agents_<first>_<last>``: it steps
 its agents together and carries the block exchange.  So that the ROS graph shows each agent as
-its own node at any packing, the process also makes one lean node per agent, ``agent_<i>``, in
-its own context (still one DDS participant per process).  Each one has
+its own node at any packing, the process also makes one node per agent, ``agent_<i>``, in its
+own context (still one DDS participant per process).  A full one (``agent_nodes:=full``) has
 
 - the agent's pose topics for people and tools (``agent_<i>/pose``, ``/twist``,
   ``/final_pose``, ``/final_twist``);
@@ -12,10 +12,17 @@ its own context (still one DDS participant per process).  Each one has
 - the process's fixed parameters, read-only, with ``agent`` its own index and ``host_node``
   the process node, whose runtime parameters (realtime) apply to it.
 
-It has no rosout publisher and no type-description service.  Its own executor serves the
-hosted nodes in a thread of their own, which sleeps in the middleware's wait until a request
-comes: rclpy rebuilds a wait set from every entity of an executor's nodes at each spin, and
-hundreds of agents' services in the process's executor would slow every round.
+A lean one (``agent_nodes:=lean``) has the pose topics alone; the services and parameters are
+the process node's.  What decides: every entity a process creates makes rmw_fastrtps publish
+the participant's whole graph (``ros_discovery_info``) to every participant again, so a
+process's start-up grows with the square of its entities.  A full node has about 24 (six
+parameter services and four control services of two endpoints each, its writers), a lean one
+3 (``polymatch run`` chooses by the agents a process hosts, ``supervisor.packing``).
+
+No agent node has rosout or the type-description service.  A thread of their own serves the
+full nodes, asleep in the middleware's wait until a request comes: rclpy rebuilds a wait set
+from every entity of an executor's nodes at each spin, and hundreds of agents' services in
+the process's executor would slow every round.
 """
 
 from __future__ import annotations
@@ -38,8 +45,9 @@ def hosted_name(agent: int) -> str:
     return f"agent_{agent}"
 
 
-def _lean_agent_node(agent: int, namespace: str) -> Node:
-    """``agent_<i>`` with parameter services, without rosout and the type-description service.
+def _agent_node(agent: int, namespace: str, full: bool) -> Node:
+    """``agent_<i>`` without rosout and the type-description service; ``full``: with
+    parameter services.
 
     It ignores the process's remap rules (``-r __node:=`` names the process node); its topic
     names are resolved by the process node (``wire.publisher(..., resolver=...)``), so the
@@ -52,6 +60,7 @@ def _lean_agent_node(agent: int, namespace: str) -> Node:
         namespace=namespace,
         use_global_arguments=False,
         enable_rosout=False,
+        start_parameter_services=full,
         parameter_overrides=[Parameter("start_type_description_service", value=False)],
     )
 
@@ -60,22 +69,25 @@ class HostedAgents:
     """The lean node of each agent of a packed process, and the executor that serves them."""
 
     def __init__(self, host: Node, agents: Iterable[int], params: Mapping[str, Any],
-                 control: AgentControl, runtime: Collection[str] = ()) -> None:
+                 control: AgentControl, runtime: Collection[str] = (),
+                 full: bool = True) -> None:
         from rclpy.executors import SingleThreadedExecutor
 
         self.host = host
         namespace = host.get_namespace()
-        self.nodes: dict[int, Node] = {a: _lean_agent_node(a, namespace) for a in agents}
+        self.nodes: dict[int, Node] = {a: _agent_node(a, namespace, full) for a in agents}
         self.executor: SingleThreadedExecutor = SingleThreadedExecutor()
         self.services: list[Service] = []
         scope = (f"applied by its process {host.get_fully_qualified_name()} to the "
                  f"{len(self.nodes)} agents it hosts")
         for agent, node in self.nodes.items():
             self.executor.add_node(node)
-            _mirror_parameters(node, agent, params, runtime, host.get_fully_qualified_name())
-            self.services += offer_agent_services(node, control, host.get_logger(), scope)
+            if full:
+                _mirror_parameters(node, agent, params, runtime, host.get_fully_qualified_name())
+                self.services += offer_agent_services(node, control, host.get_logger(), scope)
         self.thread = threading.Thread(target=self._serve, name="hosted_agents", daemon=True)
-        self.thread.start()
+        if full:  # a lean node has nothing to serve
+            self.thread.start()
 
     def _serve(self) -> None:
         """The thread's loop: answer requests as they come, until the executor shuts down."""
@@ -88,7 +100,8 @@ class HostedAgents:
 
     def destroy(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
-        self.thread.join(timeout=1.0)
+        if self.thread.is_alive():
+            self.thread.join(timeout=1.0)
         for node in self.nodes.values():
             node.destroy_node()
         self.nodes = {}

@@ -31,6 +31,8 @@ if TYPE_CHECKING:
     from ...core.model import Model
 
 MODES = ("lockstep", "realtime", "bridge")
+#: what a packed process gives each of its agents (``hosted``)
+AGENT_NODES = ("full", "lean", "none")  # not "off": a YAML boolean in -p
 MONITOR_MODES = ("lockstep", "realtime")
 #: how a realtime or bridge agent fixes its t = 0: when it starts, on the ensemble's 'start'
 #: (control topic, ``/polymatch/start``), or at the given ``start_time``
@@ -83,8 +85,9 @@ AGENT = (
         "K of the runner's partition: process p hosts agents [pK, (p+1)K)",
         (1, 1_000_000),
     ),
-    Param("agent_nodes", True, "a process hosting several agents gives each its own lean node "
-          "agent_<i> (its pose topics, services, parameters); false: the process node alone"),
+    Param("agent_nodes", "full", "a process hosting several agents gives each a node agent_<i>: "
+          "full (its pose topics, services and parameters), lean (its pose topics), none (the "
+          "process node alone)", choices=AGENT_NODES),
     Param("mode", "lockstep", "lockstep | realtime | bridge", choices=MODES),
     Param("autostart", True, "configure and activate the (lifecycle) agent by itself; false: "
           "wait for the lifecycle transitions (`ros2 lifecycle set`)"),

@@ -95,5 +95,5 @@ def robots(plan: RunPlan, env: dict[str, str]) -> list[Child]:
             argv += ["-p", "pose_type:=odometry"]
         if bridge.robot_log is not None:
             argv += ["-p", f"pose_log:={robot_log(bridge.robot_log, a)}"]
-        out.append(Child(f"robot_{a}", argv, env))
+        out.append(Child(f"robot_{a}", argv, env, log_dir=plan.outputs.logs))
     return out

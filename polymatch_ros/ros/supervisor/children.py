@@ -66,11 +66,15 @@ class Child:
     thread: threading.Thread
 
     def __init__(self, name: str, argv: Sequence[str], env: Mapping[str, str] | None,
-                 agents: Sequence[int] = ()) -> None:
+                 agents: Sequence[int] = (), log_dir: str | None = None) -> None:
         self.name, self.argv = name, list(argv)
         self.env = None if env is None else dict(env)  # None: the runner's own
         self.agents = tuple(agents)  # the agents it hosts (none: the monitor)
         self.lines = deque(maxlen=200)
+        # --logs: every line it prints, its restarts' after (line-buffered: a crash keeps them)
+        self.log = (None if log_dir is None else
+                    open(os.path.join(log_dir, name + ".log"), "a", buffering=1,  # noqa: SIM115
+                         encoding="utf-8"))
         self._launch()
 
     def _launch(self) -> None:
@@ -97,6 +101,8 @@ class Child:
         self.thread.join(timeout=1.0)
         self.lines.append(f"--- {self.name} restarted (pid {self.proc.pid} ended with code "
                           f"{self.proc.poll()}) ---")
+        if self.log is not None:
+            self.log.write(self.lines[-1] + "\n")
         self._launch()
 
     def _read(self, proc: subprocess.Popen[str]) -> None:
@@ -104,6 +110,8 @@ class Child:
         for line in proc.stdout:
             line = line.rstrip("\n")
             self.lines.append(line)
+            if self.log is not None:
+                self.log.write(f"[{time.time():.3f}] {line}\n")
             if self.reported_at is None and line.startswith("{"):
                 rec = wire.RunRecord.from_json(line)
                 if rec is not None and rec.finished:

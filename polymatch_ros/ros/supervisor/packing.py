@@ -6,8 +6,12 @@ and the exchange dominates; one process for up to 256 agents, then processes of 
 fastest packing or within 20% of it at every measured size (8 ... 1024 agents).  Realtime and
 bridge runs step at a fixed rate, so speed does not choose: one process per agent, so that a
 crash costs one agent and per-agent faults stay per agent, while the processes fit the
-participants LOCALHOST discovery reaches.  Every agent is its own node at any packing
-(``nodes.hosted``).
+participants LOCALHOST discovery reaches.
+
+Every agent is its own node at any packing (``nodes.hosted``): a full node (its services and
+parameters too) while a process hosts up to ``FULL_AGENT_NODES`` agents, a lean one (its pose
+topics) beyond, where the full nodes' endpoints would make a process's start-up take many
+times as long (``python -m benchmarks packing``: the agent-node table).
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ LOCALHOST_PARTICIPANTS = 32
 
 #: lockstep: the most agents one process hosts unless -k says otherwise (measured, above)
 LOCKSTEP_AGENTS_PER_PROCESS = 256
+#: --agent-nodes auto: full agent nodes in a process of up to this many agents, lean beyond
+FULL_AGENT_NODES = 32
 
 
 @dataclass(frozen=True)
@@ -31,6 +37,7 @@ class PackingChoice:
 
     agents_per_process: int
     reason: str
+    agent_nodes: str = "none"  # what a packed process gives each agent: full | lean | none
 
 
 def fewest_agents_per_process(n_agents: int, own: int) -> int:
@@ -40,7 +47,24 @@ def fewest_agents_per_process(n_agents: int, own: int) -> int:
 
 def choose_packing(packing: Packing, n_agents: int, localhost: bool) -> PackingChoice:
     """-k as given (checked against the participant limit); else lockstep's measured rule, or
-    one process per agent in realtime and bridge modes while the processes fit."""
+    one process per agent in realtime and bridge modes while the processes fit; with the agent
+    nodes for that packing (``agent_nodes``)."""
+    choice = _agents_per_process(packing, n_agents, localhost)
+    k = choice.agents_per_process
+    return PackingChoice(k, choice.reason, agent_nodes(packing.agent_nodes, min(k, n_agents)))
+
+
+def agent_nodes(asked: str, k: int) -> str:
+    """What each agent of a process hosting ``k`` gets: as asked, or by ``FULL_AGENT_NODES``
+    (``auto``); a process of one agent is the agent's node itself ("none")."""
+    if k < 2:
+        return "none"
+    if asked != "auto":
+        return asked
+    return "full" if k <= FULL_AGENT_NODES else "lean"
+
+
+def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> PackingChoice:
     own = 1 + int(packing.monitor) + int(packing.recorder)  # the runner, monitor, recorder
     need = fewest_agents_per_process(n_agents, own) if localhost else 1
     if packing.requested is not None:

@@ -31,7 +31,7 @@ class Hosts:
     lead: bool                         # this host runs the monitor or every agent
     discovery: DiscoverySpec           # how the DDS participants find each other
     agents_per_process: int | None     # -k as asked (bridge mode: 1); None: choose
-    agent_nodes: bool = True           # a packed process gives each agent its node (``hosted``)
+    agent_nodes: str = "auto"          # --agent-nodes: auto | full | lean | off (``hosted``)
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,7 @@ class Outputs:
     verbose: bool          # every agent's final line
     compare: bool          # lockstep: compare with the centralised simulation
     record: str | None = None  # MCAP file of the run's topics (checked writable, suffix appended)
+    logs: str | None = None    # a directory: each process's whole output in <name>.log
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,7 @@ class Packing:
     monitor: bool              # the monitor is one more participant on this host
     recorder: bool = False     # --record: the recorder is one more
     mode: str = "lockstep"     # lockstep | realtime | bridge
+    agent_nodes: str = "auto"  # --agent-nodes as asked
 
 
 @dataclass(frozen=True)
@@ -116,4 +118,4 @@ class RunPlan:
     def packing(self) -> Packing:
         """What decides this host's agents per process."""
         return Packing(self.hosts.agents_per_process, self.hosts.monitor,
-                       self.outputs.record is not None, self.mode)
+                       self.outputs.record is not None, self.mode, self.hosts.agent_nodes)

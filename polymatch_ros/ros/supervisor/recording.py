@@ -61,7 +61,8 @@ def start_recorder(plan: RunPlan, env: dict[str, str], envs: DiscoveryEnvironmen
     if plan.outputs.record is None:
         return []
     child = Child("recorder", recorder_argv(plan, directory),
-                  env if envs is None else envs.for_role("super_client", env))
+                  env if envs is None else envs.for_role("super_client", env),
+                  log_dir=plan.outputs.logs)
     child.stop_grace = RECORDER_GRACE_SECONDS
     return [child]
 

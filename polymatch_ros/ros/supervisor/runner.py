@@ -133,7 +133,7 @@ def _node_names(context: RunContext, runner: str) -> list[str]:
     names += ["recorder"] if plan.outputs.record is not None else []
     for agents in partition(plan.hosts.agents, context.agents_per_process):
         names.append(_process_name(agents))
-        if len(agents) > 1 and plan.hosts.agent_nodes:  # each agent's own node (``hosted``)
+        if len(agents) > 1 and context.packing.agent_nodes != "none":  # ``nodes.hosted``
             names += [f"agent_{a}" for a in agents]
     return names
 
@@ -211,7 +211,7 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
         "-p",
         f"agents_per_process:={k}",
         "-p",
-        f"agent_nodes:={'true' if plan.hosts.agent_nodes else 'false'}",
+        f"agent_nodes:={context.packing.agent_nodes}",
         # the recorder (--record) reads every pose, the monitor every state of the exchange
         "-p",
         f"pose_subscribers:={int(plan.outputs.record is not None)}",
@@ -284,6 +284,7 @@ def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
             + mon_args
             + ["-r", "__node:=monitor"],
             monitor_env,
+            log_dir=plan.outputs.logs,
         )
     children = []
     for agents in partition(plan.hosts.agents, context.agents_per_process):
@@ -305,6 +306,7 @@ def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
                 + ["-r", f"__node:={name}"],
                 agent_env,
                 agents,
+                plan.outputs.logs,
             )
         )
     return monitor, children
@@ -322,7 +324,8 @@ def _announce(context: RunContext) -> None:
     k = context.agents_per_process
     processes = len(partition(plan.hosts.agents, k))
     packed = (f"{processes} processes" if k == 1 else
-              f"{processes} process{'es' if processes > 1 else ''} of up to {k}")
+              f"{processes} process{'es' if processes > 1 else ''} of up to {k}, agent nodes "
+              f"{context.packing.agent_nodes}")
     print(
         f"polymatch run: {which} in {packed} ({context.packing.reason}), "
         f"{plan.mode}, integrator {plan.numerics.name}, dt {plan.numerics.dt:g}, "
