@@ -2,8 +2,9 @@
 
 Lockstep (``python -m benchmarks packing``, ``docs/bench/packing.md``, 2 cores): a round
 costs each process its share of the numerics plus one DDS exchange with every other process,
-and the exchange dominates; one process for up to 256 agents, then processes of 256, was the
-fastest packing or within 20% of it at every measured size (8 ... 1024 agents).  Realtime and
+and the exchange dominates; one process for up to 256 agents was the fastest packing or within
+5% of it at 8, 32, 64 and 256 agents, and processes of 256 were the fastest at 1024 in an
+earlier, loaded run (``docs/guide/speed-and-accuracy.md``).  Realtime and
 bridge runs step at a fixed rate, so speed does not choose: one process per agent, so that a
 crash costs one agent and per-agent faults stay per agent, while the processes fit the
 participants LOCALHOST discovery reaches.
