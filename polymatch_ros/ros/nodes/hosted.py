@@ -40,11 +40,6 @@ if TYPE_CHECKING:
     from rclpy.service import Service
 
 
-def hosted_name(agent: int) -> str:
-    """The node name of one agent, hosted or alone in its process."""
-    return f"agent_{agent}"
-
-
 def _agent_node(agent: int, namespace: str, full: bool) -> Node:
     """``agent_<i>`` without rosout and the type-description service; ``full``: with
     parameter services.
@@ -56,7 +51,7 @@ def _agent_node(agent: int, namespace: str, full: bool) -> Node:
     from rclpy.parameter import Parameter
 
     return Node(
-        hosted_name(agent),
+        f"agent_{agent}",
         namespace=namespace,
         use_global_arguments=False,
         enable_rosout=False,
@@ -66,7 +61,8 @@ def _agent_node(agent: int, namespace: str, full: bool) -> Node:
 
 
 class HostedAgents:
-    """The lean node of each agent of a packed process, and the executor that serves them."""
+    """The node of each agent of a packed process (full or lean), and the executor that serves
+    the full ones."""
 
     def __init__(self, host: Node, agents: Iterable[int], params: Mapping[str, Any],
                  control: AgentControl, runtime: Collection[str] = (),

@@ -31,7 +31,7 @@ class Hosts:
     lead: bool                         # this host runs the monitor or every agent
     discovery: DiscoverySpec           # how the DDS participants find each other
     agents_per_process: int | None     # -k as asked (bridge mode: 1); None: choose
-    agent_nodes: str = "auto"          # --agent-nodes: auto | full | lean | off (``hosted``)
+    agent_nodes: str = "auto"          # --agent-nodes: auto | full | lean | none (``hosted``)
 
 
 @dataclass(frozen=True)
