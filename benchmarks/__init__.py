@@ -6,6 +6,7 @@
     python -m benchmarks precision    work-precision: every integrator and scipy, error vs cost
     python -m benchmarks longhorizon  orthogonality defect and energy drift after 10^5 steps
     python -m benchmarks packing      lockstep rounds/s of `polymatch run`: N agents in P processes
+    python -m benchmarks scaling      lockstep at 8 ... 4096 agents: rounds/s, start-up, memory
     python -m benchmarks lossy        three namespace hosts: realtime error, lockstep rate vs loss
     python -m benchmarks bridge       simulated robots in the loop: error vs pose noise and lag
     python -m benchmarks faults       process deaths: a realtime soak with kills, lockstep resumes
@@ -55,6 +56,7 @@ FAMILIES = {
     "longhorizon": "benchmarks.longhorizon",
     "distributed": "benchmarks.distributed",
     "packing": "benchmarks.packing",
+    "scaling": "benchmarks.scaling",
     "sweep": "benchmarks.sweep",
     "basins": "benchmarks.basins",
     "graphs": "benchmarks.graphs",

@@ -19,8 +19,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 #: the families, in report order (stated here, not read from the package)
 FAMILY_NAMES = ["step", "meanfield", "dop853", "precision", "extremes", "longhorizon",
-                "distributed", "packing", "sweep", "basins", "graphs", "lossy", "trade", "bridge",
-                "realtime", "reductions", "faults"]
+                "distributed", "packing", "scaling", "sweep", "basins", "graphs", "lossy", "trade",
+                "bridge", "realtime", "reductions", "faults"]
 
 # headers every family must print
 EXPECTED = {
@@ -50,6 +50,9 @@ EXPECTED = {
     "packing": ["| agents", "processes x agents each: rounds/s", "| fastest", "default (no -k)",
                 "default / fastest", "1 x 8:", "2 x 4:", "rounds/s by --agent-nodes",
                 "start-up s by --agent-nodes", "auto / none rounds/s"],
+    "scaling": ["| agents", "processes x agents each", "rounds/s", "first round after (s)",
+                "peak memory per process (MB)", "ms per round: publish / wait / other",
+                "transport share", "| 8 "],
     "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
               "injected delay"],
     "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
@@ -76,8 +79,8 @@ def test_family_table_is_the_stated_list_in_report_order():
 #: the families that start ROS processes: they take one of the suite's ROS slots; the others
 #: are numerics, run beside the ROS tests as test/core is (their timings are printed, never
 #: asserted)
-ROS_FAMILIES = {"distributed", "packing", "graphs", "lossy", "trade", "bridge", "realtime",
-                "faults"}
+ROS_FAMILIES = {"distributed", "packing", "scaling", "graphs", "lossy", "trade", "bridge",
+                "realtime", "faults"}
 
 
 def test_ros_families_are_families():

@@ -379,15 +379,15 @@ def test_block_messages_are_accepted_valid_or_dropped(dim, angle, header, agents
     msg.data = header + [v for row in rows for v in row]
     counter = Counter()
 
-    def check(stages):
-        assert 1 <= len(stages) <= K
-        assert len({s.agent for s in stages}) == len(stages)
-        for s in stages:
-            assert BLOCK * K <= s.agent < (BLOCK + 1) * K and s.step >= 0 and s.stage >= 0
-            assert 0.0 <= s.t <= T_MAX + wire.STAMP_SLACK
-            for v in (s.x, s.v):
-                assert v is None or (v.shape == (dim,) and np.all(np.isfinite(v)))
-            _check_rotation(grp, s.rot)
+    def check(rows):
+        agents = rows.agents.tolist()
+        assert 1 <= len(agents) <= K and len(set(agents)) == len(agents)
+        assert all(BLOCK * K <= a < (BLOCK + 1) * K for a in agents)
+        assert rows.step >= 0 and rows.stage >= 0 and 0.0 <= rows.t <= T_MAX + wire.STAMP_SLACK
+        for v in (rows.x, rows.v):
+            assert v is None or (v.shape == (len(agents), dim) and np.all(np.isfinite(v)))
+        for r in range(len(agents)):
+            _check_rotation(grp, grp.take(rows.rot, [r]))
 
     _accepted_or_counted(
         wire.decode_block(msg, grp, dim, RUN_ID, BLOCK, K, wire.ROTATION_TOL, T_MAX), counter,
@@ -414,14 +414,15 @@ def test_a_block_round_trips_every_row_bit_for_bit():
         agents = [9, 10, 11]
         msg = wire.encode_block(Float64MultiArray(), RUN_ID, BLOCK, 5, 2, 1, 0.75, agents,
                                 {"x": x, "v": v, "rot": values})
-        stages, reason = wire.decode_block(msg, grp, dim, RUN_ID, BLOCK, K,
-                                           wire.ROTATION_TOL, T_MAX)
+        rows, reason = wire.decode_block(msg, grp, dim, RUN_ID, BLOCK, K,
+                                         wire.ROTATION_TOL, T_MAX)
         assert reason is None, reason
-        for r, s in enumerate(stages):
-            assert (s.agent, s.step, s.stage, s.flags, s.t) == (agents[r], 5, 2, 1, 0.75)
-            assert np.array_equal(s.x, x[r]) and np.array_equal(s.v, v[r])
+        assert (rows.step, rows.stage, rows.flags, rows.t) == (5, 2, 1, 0.75)
+        assert rows.agents.tolist() == agents
+        for r in range(n):
+            assert np.array_equal(rows.x[r], x[r]) and np.array_equal(rows.v[r], v[r])
             one = wire.rot_from_values(grp, wire.rot_values(grp, grp.take(rot, [r])))
-            assert np.array_equal(s.rot, one)
+            assert np.array_equal(grp.take(rows.rot, [r]), one)
         _, reason = wire.decode_block(msg, grp, dim, RUN_ID, BLOCK + 1, K)
         assert reason == "unknown sender (agent index)"
         _, reason = wire.decode_block(msg, grp, dim, RUN_ID, BLOCK, 2)

@@ -115,8 +115,8 @@ def _decode_block(msg):
 def test_the_unchanged_stage_and_block_messages_are_accepted():
     stage, reason = _decode_stage(_array_msg(_stage_data()))
     assert reason is None and (stage.agent, stage.step, stage.stage, stage.t) == (3, 4, 1, 1.25)
-    stages, reason = _decode_block(_array_msg(_block_data()))
-    assert reason is None and [s.agent for s in stages] == [8, 9]
+    rows, reason = _decode_block(_array_msg(_block_data()))
+    assert reason is None and rows.agents.tolist() == [8, 9] and rows.x.shape == (2, 3)
     edge = _set(_stage_data(), 6, T_MAX + 1e-7)            # within STAMP_SLACK of t_end
     assert _decode_stage(_array_msg(edge))[1] is None
 
@@ -362,3 +362,73 @@ def test_an_exchange_with_a_reflection_or_the_wrong_length_is_dropped():
     for msg in (_array_msg(full[:-1]), _array_msg(full + [0.0]), _array_msg(full[:7]),
                 _array_msg(full, dims=[("t", 1)])):
         assert _decode_exchange(msg) == (None, "malformed layout")
+
+
+# -- the exchange of a packed lockstep process (one message a block and step) -----------------
+
+
+def _exchange_block_data():
+    """A valid second-order exchange block: agents 8 and 9 of block 2, each row as agent 3's
+    exchange above (x, v, rot, W; mask 15)."""
+    row = _exchange_data()[HEADER_LEN:]
+    return [5.0, RUN_ID, BLOCK, 0.0, 0.0, 0.0, 1.25, 15.0] + [8.0] + row + [9.0] + row
+
+
+HEADER_LEN, ROW = 8, 1 + 3 + 3 + 9 + 9  # a row: agent, x, v, rot, W
+EXCHANGE_BLOCK_CASES = HEADER_CASES + [
+    ("an exchange's format", 0, 4.0, "unknown format"),
+    ("block index", 2, BLOCK + 1.0, "unknown sender (agent index)"),
+    ("agent past the block", HEADER_LEN + ROW, 12.0, "unknown sender (agent index)"),
+    ("agent twice", HEADER_LEN + ROW, 8.0, "unknown sender (agent index)"),
+    ("NaN in the second row's x", HEADER_LEN + ROW + 1, math.nan, "non-finite value"),
+    ("mask v without W", 7, 7.0, "malformed layout"),
+    ("second row's rotation not orthogonal", HEADER_LEN + ROW + 7, 1.001,
+     "rotation not in SO(d)"),
+    ("second row's W not skew", HEADER_LEN + ROW + 16, 0.5, "angular velocity not skew"),
+]
+
+
+def _decode_exchange_block(msg):
+    from polymatch_ros.ros import wire
+
+    return wire.decode_exchange_block(msg, _group(3), 3, RUN_ID, BLOCK, K, T_MAX)
+
+
+def test_an_exchange_block_reads_as_its_agents_own_exchanges():
+    """What a packed process publishes (encode_exchange_block) gives the monitor, row by row,
+    the numbers each agent's own exchange message would give: bit for bit."""
+    from std_msgs.msg import Float64MultiArray
+
+    from polymatch_ros.ros import wire
+
+    grp = _group(3)
+    msg = wire.encode_exchange_block(
+        Float64MultiArray(), grp, RUN_ID, BLOCK, 1.25, [8, 9], np.array([[0.5, -1.0, 2.0]] * 2),
+        grp.from_matrices(np.stack([np.eye(3)] * 2)), np.array([[0.1, 0.2, -0.3]] * 2),
+        grp.algebra_from_skew(np.array([SPIN] * 2)))
+    assert list(msg.data) == _exchange_block_data()
+    rows, reason = _decode_exchange_block(msg)
+    one, _ = _decode_exchange(_array_msg(_exchange_data()))
+    assert reason is None and [a for a, _ in rows] == [8, 9]
+    for _, got in rows:
+        assert (got.t, got.key) == (one.t, one.key)
+        for field in ("x", "rot", "v", "w"):
+            assert np.array_equal(getattr(got, field), getattr(one, field))
+
+
+@pytest.mark.parametrize("what,index,value,reason", EXCHANGE_BLOCK_CASES,
+                         ids=[c[0] for c in EXCHANGE_BLOCK_CASES])
+def test_exchange_block_is_dropped_whole_with_its_reason(what, index, value, reason):
+    data = _set(_exchange_block_data(), index, value)
+    assert _decode_exchange_block(_array_msg(data)) == (None, reason)
+
+
+def test_an_exchange_block_with_a_reflection_or_the_wrong_length_is_dropped():
+    reflection = _exchange_block_data()
+    start = HEADER_LEN + ROW + 7
+    reflection[start:start + 9] = np.diag([-1.0, 1.0, 1.0]).ravel().tolist()
+    assert _decode_exchange_block(_array_msg(reflection)) == (None, "rotation not in SO(d)")
+    full = _exchange_block_data()
+    for msg in (_array_msg(full[:-1]), _array_msg(full[:HEADER_LEN]), _array_msg(full[:7]),
+                _array_msg(full, dims=[("t", 1)])):
+        assert _decode_exchange_block(msg) == (None, "malformed layout")

@@ -34,7 +34,7 @@ def test_monitor_grants_certificate_mid_run_and_a_late_echo_gets_it_thm_4_2(ros,
     path.write_text(yaml.safe_dump(SCENE))
     scene = load_scene(str(path))
     assert not certify(scene.model, scene.initial, scene.tolerance).certified
-    ros.monitor(str(path), timeout=120)
+    ros.monitor(str(path), timeout=120, agents_per_process=N)  # the agents send one block
     # one process hosts the three agents (as `polymatch run -k 3` does): fewer starts
     agents = ros.start(node_argv("nodes.agent", str(path), agents=list(range(N)),
                                  agents_per_process=N, exchange_subscribers=1)

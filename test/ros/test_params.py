@@ -37,7 +37,7 @@ AGENT_NAMES = [
     "cmd_type", "command_frame", "run_id",
 ]
 MONITOR_NAMES = ["scene", "mode", "rate", "report_rate", "peer_timeout", "frame_id", "markers",
-                 "t_end", "run_id", "report_readers"]
+                 "t_end", "run_id", "agents_per_process", "report_readers"]
 
 STRING, BOOLEAN, INTEGER, NUMBER = ("expected a string", "expected a boolean",
                                     "expected an integer", "expected a number")
@@ -62,6 +62,7 @@ TYPE_CASES = [
     ("agent", "checkpoint", 1.5, STRING), ("agent", "discovery_timeout", "abc", NUMBER),
     ("agent", "pose_subscribers", 2.5, INTEGER), ("agent", "frame_id", 1.5, STRING),
     ("agent", "exchange_subscribers", 2.5, INTEGER), ("monitor", "run_id", 2.5, INTEGER),
+    ("monitor", "agents_per_process", 1.5, INTEGER),
     ("agent", "max_linear_speed", "abc", NUMBER), ("agent", "max_angular_speed", "abc", NUMBER),
     ("agent", "max_linear_accel", "abc", NUMBER), ("agent", "max_angular_accel", "abc", NUMBER),
     ("agent", "pose_timeout", "abc", NUMBER), ("agent", "pose_type", 1.5, STRING),
@@ -77,6 +78,7 @@ TYPE_CASES = [
 RANGE_CASES = [
     ("agent", "agent", 0, 1_000_000, -1, 1_000_001, "[0, 1e+06]"),
     ("agent", "agents_per_process", 1, 1_000_000, 0, 1_000_001, "[1, 1e+06]"),
+    ("monitor", "agents_per_process", 1, 1_000_000, 0, 1_000_001, "[1, 1e+06]"),
     ("agent", "dt", 1e-12, 1e6, 0.0, 1.000001e6, "[1e-12, 1e+06]"),
     ("agent", "t_end", 1e-12, 1e12, 0.0, 1.000001e12, "[1e-12, 1e+12]"),
     ("agent", "rate", 0.01, 1e5, 0.0099, 100000.1, "[0.01, 100000]"),
@@ -423,7 +425,8 @@ def test_parameters_read_back_what_the_nodes_use_and_a_runtime_set_is_used(ros):
     assert before < start_time < time.time(), text  # declared once t = 0 was fixed
     assert got[2] == dict(scene=scene_path("congruent_triangles"), mode="lockstep", rate=10.0,
                           report_rate=20.0, peer_timeout=1.0, frame_id="world", markers=True,
-                          t_end=12.5, run_id=0, report_readers=0, **RCLPY_OWN), text
+                          t_end=12.5, run_id=0, agents_per_process=1, report_readers=0,
+                          **RCLPY_OWN), text
     assert got[3:] == [{"kappa": 3.0}, {"mass": 0.5, "t_end": 50.0}, {"kappa": 1.0}], text
     sets = re.findall(r"^SET (\S+) (\S+) (True|False) ?(.*)$", text, re.M)
     assert [s[:3] for s in sets] == [(real, "kappa", "True"), (real, "mass", "False"),

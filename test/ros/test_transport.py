@@ -6,6 +6,7 @@ FASTDDS_BUILTIN_TRANSPORTS variable does not remove it, so the shipped profile n
 itself.  A participant that listens on a shared-memory port has a ``dds.shm.<port>`` thread.
 """
 
+import ast
 import re
 import textwrap
 
@@ -64,3 +65,35 @@ def test_the_wheels_fast_dds_has_no_security_plugins():
     assert b"but security is disabled" in data
     for plugin in (b"PKI-DH", b"Access-Permissions", b"AES-GCM-GMAC"):
         assert plugin not in data, plugin
+
+
+EVENTS = textwrap.dedent("""
+    import rclpy
+    from polymatch_ros.ros import wire
+    rclpy.init()
+    node = rclpy.create_node("events_probe")
+    bare = len(list(node.waitables))  # the node's own rosout and parameter-event writers'
+    per_agent = [wire.publisher(node, "exchange", 2, 0), wire.publisher(node, "pose", 2, 0),
+                 wire.subscription(node, "final_exchange", print, 2, 0)]
+    own = [wire.publisher(node, "status"), wire.subscription(node, "control", print)]
+    print("EVENTS", [len(e.event_handlers) for e in per_agent],
+          [len(e.event_handlers) for e in own], len(list(node.waitables)) - bare,
+          flush=True)
+    node.destroy_node()
+    rclpy.shutdown()
+""")
+
+
+def test_per_agent_topics_carry_no_qos_event_handlers(ros):
+    """rclpy's executor walks every event handler of a node's endpoints on each spin, with a
+    list-membership test per handler: a process of 256 agents spent a quarter of its time there.
+    Per-agent topics get none; a process's own topics keep rclpy's QoS warnings."""
+    proc = ros.start([PY, "-c", EVENTS], timeout=60, name="events")
+    assert ros.wait(proc, 70) == 0, ros.output(proc)
+    line = re.search(r"^EVENTS (\[.*?\]) (\[.*?\]) (\d+)$", ros.output(proc), re.M)
+    assert line, ros.output(proc)
+    per_agent, own = ast.literal_eval(line.group(1)), ast.literal_eval(line.group(2))
+    waitables = int(line.group(3))
+    assert per_agent == [0, 0, 0] and min(own) > 0, line.group(0)
+    assert waitables == sum(own), line.group(0)  # what the executor walks: the own topics'
+

@@ -11,9 +11,12 @@ What both need is here: scene and layout, publishers, the control topic and serv
 
 from __future__ import annotations
 
+import resource
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from ...core.errors import ParameterError, PolymatchError
 from ...core.model import GroupState, State, System
@@ -100,6 +103,7 @@ class AgentBase(NodeApp):
         self.rounds = self.steps = self.late_ticks = 0
         self.round_time = 0.0  # wall seconds of the timed rounds (all but ``untimed_rounds``)
         self.untimed_rounds = 0  # lockstep: the first round, which waits for every peer's start
+        self.first_round_at: float | None = None  # wall-clock time the first round completed
         self.finished = False
 
     def step_size(self, p: dict[str, Any]) -> float | None:
@@ -108,7 +112,14 @@ class AgentBase(NodeApp):
     def _make_publishers(self) -> None:
         node, dim, local = self.node, self.model.dim, self.layout.local
         self.hosted = self._host_agents()
-        self.exchange_pubs = {a: wire.publisher(node, "exchange", dim, a) for a in local}
+        # lockstep's packed processes send their agents' states in one message a block and step
+        self.exchange_blocks = self.layout.local_blocks() if (
+            self.mode == "lockstep" and self.layout.blocks) else None
+        self.exchange_pubs = (
+            {b: wire.publisher(node, "exchange_block", dim, b) for b in self.exchange_blocks}
+            if self.exchange_blocks is not None
+            else {a: wire.publisher(node, "exchange", dim, a) for a in local}
+        )
         self.final_exchange_pubs = {
             a: wire.publisher(node, "final_exchange", dim, a) for a in local
         }
@@ -175,7 +186,10 @@ class AgentBase(NodeApp):
             self._publish_rows(self.final_pubs, self.final_twist_pubs)
         else:
             if any(p.get_subscription_count() for p in self.exchange_pubs.values()):
-                self._publish_exchange(self.exchange_pubs)
+                if self.exchange_blocks is not None:
+                    self._publish_exchange_blocks(self.exchange_blocks)
+                else:
+                    self._publish_exchange(self.exchange_pubs)
             if any(p.get_subscription_count() for p in self.pose_pubs.values()):
                 self._publish_rows(self.pose_pubs, self.twist_pubs)
         self._maybe_diagnostics()
@@ -196,6 +210,31 @@ class AgentBase(NodeApp):
                 pubs[a].publish(wire.encode_exchange(
                     Float64MultiArray(), grp, run_id, a, st.t, gs.x[r], grp.take(gs.rot, [r]),
                     v, w))
+
+    def _publish_exchange_blocks(self, blocks: dict[int, list[int]]) -> None:
+        """Every local agent's state with the run's id, one message per block
+        (``wire.encode_exchange_block``)."""
+        from std_msgs.msg import Float64MultiArray
+
+        st, grp, model, local = self.state, self.grp, self.model, self.layout.local_groups
+        parts = [gs for gi in local if (gs := st.groups[gi]) is not None]  # every local group
+        agents = [model.groups[gi].start + r for gi in local for r in self.layout.rows[gi]]
+        x = np.concatenate([gs.x for gs in parts])
+        rot = grp.concat([gs.rot for gs in parts])
+        v: np.ndarray | None = None
+        w: np.ndarray | None = None
+        vs = [gs.v for gs in parts if gs.v is not None]
+        ws = [gs.w for gs in parts if gs.w is not None]
+        if len(vs) == len(ws) == len(parts):  # second order
+            v, w = np.concatenate(vs), grp.algebra_concat(ws)
+        where = {a: r for r, a in enumerate(agents)}
+        for b, members in blocks.items():
+            rows = [where[a] for a in members]
+            msg = wire.encode_exchange_block(
+                Float64MultiArray(), grp, self.params["run_id"], b, st.t, members, x[rows],
+                grp.take(rot, rows), None if v is None else v[rows],
+                None if w is None else grp.algebra_take(w, rows))
+            self.exchange_pubs[b].publish(msg)
 
     def _publish_rows(
         self, pose_pubs: dict[int, Publisher], twist_pubs: dict[int, Publisher]
@@ -247,6 +286,8 @@ class AgentBase(NodeApp):
             n_agents=self.model.n_agents,
             node=self.node.get_fully_qualified_name(),
             run_id=int(self.params["run_id"]),
+            first_round_at=self.first_round_at,
+            max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         )
 
     def stage_subscriptions(self) -> int:

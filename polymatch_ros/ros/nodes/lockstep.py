@@ -78,16 +78,18 @@ class LockstepExchange:
         self.resends = 0  # rounds re-sent because a peer's message did not come
         self.repeats = 0  # peers' messages of rounds already taken (their resends)
         self.taken: dict[int, Round] = {}  # peer -> the last round of it this process has taken
-        # agent -> {(step, stage): Stage}
-        self.inbox: defaultdict[int, dict[Round, wire.Stage]] = defaultdict(dict)
+        # round -> {the first agent of a message: its rows}: a message of one peer or a block
+        self.inbox: defaultdict[Round, dict[int, wire.StageRows]] = defaultdict(dict)
+        self.heard: defaultdict[Round, set[int]] = defaultdict(set)  # round -> peers heard
         self.current: Round = (0, 0)
+        self.assembled: Round = (-1, -1)  # the last round taken out of the inbox
         self.stop_step: int | None = None  # graph runs: the step after which every agent stops
         # the agent serves its control topic and answers this
         self.paused: Callable[[], bool] = lambda: False
         grp, dim = self.grp, self.model.dim
         self.links: AgentLinks | BlockLinks
         if layout.blocks:
-            def decode_rows(msg: Any, block: int) -> tuple[list[wire.Stage] | None, str | None]:
+            def decode_rows(msg: Any, block: int) -> tuple[wire.StageRows | None, str | None]:
                 return wire.decode_block(msg, grp, dim, self.run_id, block, layout.k,
                                          rot_tol, t_max)
 
@@ -104,16 +106,18 @@ class LockstepExchange:
         self.publish_time = 0.0  # seconds spent publishing stages (for the diagnostics)
         self.wait_time = 0.0  # seconds spent waiting for (and taking) the peers' stages
 
-    def _take(self, stage: wire.Stage) -> None:
-        """A peer's decoded stage row: into the inbox, unless its round is past."""
-        agent, key = stage.agent, (stage.step, stage.stage)
-        if key < self.current:
-            if key <= self.taken.get(agent, (-1, -1)):
+    def _take(self, rows: wire.StageRows) -> None:
+        """A peer's decoded stage message (its rows): into the inbox, unless its round is past.
+        A message heard twice (a resend) is kept once: its first agent names it."""
+        first, key = int(rows.agents[0]), (rows.step, rows.stage)
+        if key < self.current or key <= self.assembled:
+            if key <= self.taken.get(first, (-1, -1)):
                 self.repeats += 1  # a resend of a round already taken: not a drop
             else:
-                self.drops(f"agent {agent}", "stale round (a stamp from the past)")
+                self.drops(f"agent {first}", "stale round (a stamp from the past)")
             return
-        self.inbox[agent][key] = stage
+        self.inbox[key][first] = rows
+        self.heard[key].update(rows.agents.tolist())
 
     def resume_at(self, step: int) -> None:
         """A restarted process begins with step ``step``: the peers' resends of earlier rounds
@@ -141,10 +145,9 @@ class LockstepExchange:
         True from that step on."""
         step = key[0]
         targets = [step + self.model.n_agents + 1] if stop_flag else []
-        for a in self.layout.peers:
-            flags = self.inbox[a][key].flags
-            if flags & wire.FLAG_STOP:
-                targets.append(flags >> 1)
+        for rows in self.inbox[key].values():
+            if rows.flags & wire.FLAG_STOP:
+                targets.append(rows.flags >> 1)
         if self.stop_step is not None:
             targets.append(self.stop_step)
         self.stop_step = min(targets, default=None)
@@ -179,7 +182,8 @@ class LockstepExchange:
         self.publish(step, stage, request, stop_flag)
         t1 = time.perf_counter()
         self.publish_time += t1 - t0
-        waiting = [a for a in self.layout.peers if key not in self.inbox[a]]
+        heard = self.heard[key]
+        waiting = [a for a in self.layout.peers if a not in heard]
         resend_at, paused_for = RESEND_AFTER, 0.0
         while waiting:
             waited = time.perf_counter() - t1
@@ -194,13 +198,13 @@ class LockstepExchange:
                 self._give_up_if_gone(key, timeout, waiting, waited - paused_for)
             wait = min(resend_at - waited, 0.5)
             self.executor.spin_once(timeout_sec=min(wait, left) if left > 0 else wait)
-            waiting = [a for a in waiting if key not in self.inbox[a]]
+            waiting = [a for a in waiting if a not in heard]
         self.wait_time += time.perf_counter() - t1
         if self.layout.sparse:
             stop = self._agree_stop(key, stop_flag)
         else:
             stop = stop_flag or any(
-                self.inbox[a][key].flags & wire.FLAG_STOP for a in self.layout.peers
+                rows.flags & wire.FLAG_STOP for rows in self.inbox[key].values()
             )
         return self._assemble(key, request), stop
 
@@ -225,8 +229,12 @@ class LockstepExchange:
         )
 
     def _assemble(self, key: Round, request: Request) -> Ensemble:
-        """Per group the peers' stage rows and the local ones (None for groups not needed)."""
+        """Per group the peers' stage rows and the local ones (None for groups not needed),
+        array by array (``wire.assemble_rows``); the round leaves the inbox."""
         model = self.model
+        messages = self.inbox.pop(key, {})
+        self.heard.pop(key, None)
+        self.assembled = key
         out: list[SimpleNamespace | None] = []
         with_v = "v" in request.fields and model.order == 2
         for gi, g in enumerate(model.groups):
@@ -234,20 +242,14 @@ class LockstepExchange:
                 out.append(None)
                 continue
             own = gi in self.layout.local_groups  # other groups: only centroids are used (F-2)
-            rows = {
-                a - g.start: wire.Row(m.x if m.x is not None else 0.0, m.rot, m.v)
-                for a in g.indices
-                if (m := self.inbox[a].get(key)) is not None
-            }
             local = (self.layout.rows[gi], request.stage.groups[gi]) if own else None
             # on a graph only the in-neighbours' rows are present (``index`` names them)
-            full = not self.layout.sparse
-            e = wire.assemble(
-                self.grp, model.dim, rows, local, with_rot=own, with_v=with_v, full=full
-            )
-            out.append(e)
-        for a in self.layout.peers:
-            if self.inbox[a].pop(key, None) is not None:
+            out.append(wire.assemble_rows(
+                self.grp, model.dim, g.start, g.size, messages.values(), local, with_rot=own,
+                with_v=with_v, full=not self.layout.sparse,
+            ))
+        for rows in messages.values():
+            for a in rows.agents.tolist():
                 self.taken[a] = key
         return tuple(out)
 
@@ -353,6 +355,7 @@ class LockstepAgent(AgentBase):
                 if self.rounds == 1:  # it waited for the last peer to start: rates count after it
                     nonlocal start
                     start, self.untimed_rounds = time.monotonic(), 1
+                    self.first_round_at = time.time()
                     self.exchange.publish_time = self.exchange.wait_time = 0.0
                 return ensemble
 

@@ -131,8 +131,15 @@ class MonitorNode(NodeApp):
         self.marker_pub = wire.publisher(node, "markers") if self.params["markers"] else None
         self._wait_for_report_readers()
         self.readers = LeanReaders(node, "_poses")
-        for a in range(self.n):
-            self.readers.subscribe("exchange", self._receiver(a), dim, a, self.params["mode"])
+        k = self.params["agents_per_process"]
+        if self.lockstep and k > 1:  # packed lockstep processes: a message per block and step
+            for b in range(-(-self.n // k)):
+                self.readers.subscribe("exchange_block", self._block_receiver(b, k), dim, b,
+                                       "lockstep")
+        else:
+            for a in range(self.n):
+                self.readers.subscribe("exchange", self._receiver(a), dim, a,
+                                       self.params["mode"])
         self.control = EnsembleControl(node, self.params["mode"])
 
     def _wait_for_report_readers(self) -> None:
@@ -166,10 +173,7 @@ class MonitorNode(NodeApp):
 
     def _receiver(self, agent: int) -> Callable[[Any, MessageInfo], None]:
         """The callback of one agent's exchange topic (``wire.exchange``: only this run's
-        messages are read, anything else is dropped and counted): the latest state of each
-        agent, and in lockstep the pending report of its stamp (a Row, and in second order
-        the velocities (v, W))."""
-        second = self.model.order == 2
+        messages are read, anything else is dropped and counted)."""
         run_id = self.params["run_id"]
 
         def receive(msg: Any, info: MessageInfo) -> None:
@@ -178,19 +182,44 @@ class MonitorNode(NodeApp):
             if got is None:
                 self.drops(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
                 return
-            row = wire.Row(got.x, got.rot)
-            self.latest[agent] = (got.key, row, received_at(info)[1])
-            velocity: Velocity | None = None
-            if second and got.v is not None and got.w is not None:  # decoded together
-                velocity = (got.v, got.w)
-                self.velocity[agent] = (got.key, *velocity)
-            if self.lockstep and self._fresh(agent, got.key, self.pending):
-                self.pending.setdefault(got.key, {})[agent] = row
-                if velocity is not None:
-                    self.pending_v.setdefault(got.key, {})[agent] = velocity
+            if self._take(agent, got, received_at(info)[1]):
                 self._collect_completed()
 
         return receive
+
+    def _block_receiver(self, block: int, k: int) -> Callable[[Any, MessageInfo], None]:
+        """The callback of one block's exchange topic (lockstep, K agents per process): each
+        row as one agent's message; a malformed row drops the whole message."""
+        run_id = self.params["run_id"]
+
+        def receive(msg: Any, info: MessageInfo) -> None:
+            got, reason = wire.decode_exchange_block(msg, self.grp, self.model.dim, run_id,
+                                                     block, k, self.scene.t_end)
+            if got is None:
+                self.drops(f"block {block}", reason)  # type: ignore[arg-type]  # with None
+                return
+            heard = received_at(info)[1]
+            if any([self._take(agent, motion, heard) for agent, motion in got]):
+                self._collect_completed()
+
+        return receive
+
+    def _take(self, agent: int, got: wire.Motion, heard: float) -> bool:
+        """One agent's state, heard at monotonic time ``heard``: its latest, and in lockstep
+        the pending report of its stamp (a Row, and in second order the velocities (v, W)).
+        True if it is pending (a step still to complete)."""
+        row = wire.Row(got.x, got.rot)
+        self.latest[agent] = (got.key, row, heard)
+        velocity: Velocity | None = None
+        if self.model.order == 2 and got.v is not None and got.w is not None:  # decoded together
+            velocity = (got.v, got.w)
+            self.velocity[agent] = (got.key, *velocity)
+        if not (self.lockstep and self._fresh(agent, got.key, self.pending)):
+            return False
+        self.pending.setdefault(got.key, {})[agent] = row
+        if velocity is not None:
+            self.pending_v.setdefault(got.key, {})[agent] = velocity
+        return True
 
     # -- reporting --------------------------------------------------------------------------
     def _state_from(

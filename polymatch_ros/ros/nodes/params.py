@@ -257,6 +257,13 @@ MONITOR = (
     Param("run_id", 0, "the run's id, as its agents': exchange messages with another are "
           "dropped", (0, 2**31 - 1)),
     Param(
+        "agents_per_process",
+        1,
+        "lockstep: K of the agents' partition; with K > 1 each process sends its agents' "
+        "states in one message a step (exchanges/block_<b>), and the monitor reads those",
+        (1, 1_000_000),
+    ),
+    Param(
         "report_readers",
         0,
         "read no pose before this many readers listen to every report topic (a run's "

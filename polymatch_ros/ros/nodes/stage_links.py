@@ -10,8 +10,9 @@ on a graph those are the in-neighbours' blocks only.
 
 Both keep the messages of their last ``keep`` rounds for ``resend`` (two, or a step and two
 rounds where a restarted peer may resume: ``checkpoint``) and give the exchange the
-same view: which peers are matched, which have gone, and the decoded ``wire.Stage`` of
-every row that arrives (``on_stage``), or a drop (``on_drop``).
+same view: which peers are matched, which have gone, and the decoded rows of every
+message that arrives (``on_stage``: ``wire.StageRows``, one row or a block's), or a drop
+(``on_drop``).
 """
 
 from __future__ import annotations
@@ -37,8 +38,8 @@ if TYPE_CHECKING:
 
 #: the kept rounds as data: (turn, ((writer key: agent or block, message data), ...)), ...
 Kept = tuple[tuple[int, tuple[tuple[int, bytes], ...]], ...]
-#: the decoded stage of a peer's row, and a dropped message (source, reason)
-OnStage = Callable[[wire.Stage], None]
+#: a peer's decoded stage message (its rows), and a dropped message (source, reason)
+OnStage = Callable[[wire.StageRows], None]
 OnDrop = Callable[[str, str], None]
 
 
@@ -160,7 +161,7 @@ class AgentLinks(_Links):
                 if stage is None:
                     on_drop(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
                 else:
-                    on_stage(stage)
+                    on_stage(wire.StageRows.of(stage))
 
             return receive
 
@@ -184,7 +185,7 @@ class BlockLinks(_Links):
     """One stage topic per block of K agents (packed processes)."""
 
     def __init__(self, node: Node, resolver: Node, layout: Layout,
-                 decode_block: Callable[[Any, int], tuple[list[wire.Stage] | None, str | None]],
+                 decode_block: Callable[[Any, int], tuple[wire.StageRows | None, str | None]],
                  on_stage: OnStage, on_drop: OnDrop, keep: int = 2) -> None:
         super().__init__(node, resolver, layout, keep)
         from std_msgs.msg import Float64MultiArray
@@ -194,17 +195,19 @@ class BlockLinks(_Links):
         self.expected = layout.expected_block_subscribers
         self._out = {b: tuple(Float64MultiArray() for _ in range(self.keep))
                      for b in self.local_blocks}
-        peers = set(layout.peers)
+        peers = np.array(layout.peers, dtype=int)
 
         def receiver(block: int) -> Callable[[Any], None]:
             def receive(msg: Any) -> None:
-                stages, reason = decode_block(msg, block)
-                if stages is None:
+                rows, reason = decode_block(msg, block)
+                if rows is None:
                     on_drop(f"block {block}", reason)  # type: ignore[arg-type]  # with None
                     return
-                for s in stages:  # on a graph a block also carries rows nobody here needs
-                    if s.agent in peers:
-                        on_stage(s)
+                needed = np.isin(rows.agents, peers)  # on a graph a block also carries rows
+                if needed.all():                       # nobody here needs
+                    on_stage(rows)
+                elif needed.any():
+                    on_stage(rows.select(layout.model.rotations, needed))
 
             return receive
 

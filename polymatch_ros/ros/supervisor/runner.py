@@ -241,6 +241,7 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
     monitor_mode = "realtime" if plan.realtime else "lockstep"
     monitor = common + ["-p", f"mode:={monitor_mode}"]
     monitor += ["-p", f"peer_timeout:={timing.peer_timeout!r}", "-p", f"run_id:={context.run_id}"]
+    monitor += ["-p", f"agents_per_process:={k}"]  # lockstep: how the agents' states come
     # the recorder (--record) hears every report, the first too (``report_readers``)
     monitor += ["-p", f"report_readers:={int(plan.outputs.record is not None)}"]
     if plan.realtime:

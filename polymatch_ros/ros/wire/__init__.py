@@ -14,6 +14,7 @@ from .codec import (
     STAGE_FORMAT,
     STAMP_SLACK,
     Stage,
+    StageRows,
     decode_block,
     decode_stage,
     encode_block,
@@ -25,8 +26,16 @@ from .codec import (
     stamp_of,
     time_key,
 )
-from .ensemble import Row, assemble  # noqa: F401
-from .exchange import EXCHANGE_FORMAT, Motion, decode_exchange, encode_exchange
+from .ensemble import Row, assemble, assemble_rows  # noqa: F401
+from .exchange import (
+    EXCHANGE_BLOCK_FORMAT,
+    EXCHANGE_FORMAT,
+    Motion,
+    decode_exchange,
+    decode_exchange_block,
+    encode_exchange,
+    encode_exchange_block,
+)
 from .motion import (
     MOTIONS,
     Received,

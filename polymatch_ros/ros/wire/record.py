@@ -42,6 +42,8 @@ class RunRecord:
     ``n_agents`` the ensemble's size and ``node`` the process's fully qualified node name
     (agents): what ``polymatch set`` waits for before it calls every agent node.
     ``resumed_at``: the step a restarted lockstep process resumed at (None: not restarted).
+    ``first_round_at``: wall-clock time (s since the epoch) the process's first lockstep round
+    completed (None before); ``max_rss_mb``: the process's peak resident memory (MB).
     ``run_id``: the run the process belongs to (its ``run_id`` parameter): the runner reads only
     its own run's records.
     """
@@ -68,6 +70,8 @@ class RunRecord:
     node: str = ""
     resumed_at: int | None = None
     run_id: int = 0
+    first_round_at: float | None = None
+    max_rss_mb: float = 0.0
 
     @property
     def dropped_total(self) -> int:

@@ -40,6 +40,8 @@ TOPICS = {
     # the run's own exchange (wire.exchange): each state with the run's id, for the peers and
     # the monitor; the pose and twist topics above are for people and tools
     "exchange": Topic("agent_{agent}/exchange", "array", "pose", realtime_reader_qos="latest"),
+    # lockstep with K agents per process: the states of block b's agents, one message a step
+    "exchange_block": Topic("exchanges/block_{agent}", "array", "pose"),
     # the final state, latched, for people and tools
     "final_pose": Topic("agent_{agent}/final_pose", "pose", "latched"),
     "final_twist": Topic("agent_{agent}/final_twist", "twist", "latched"),
@@ -116,9 +118,26 @@ def _resolve(node: Node, name: str, resolver: Node | None) -> str:
     return name if resolver is None else resolver.resolve_topic_name(name)
 
 
+def _per_agent_events(agent: int | None, kwargs: dict[str, Any], kind: str) -> None:
+    """A per-agent topic gets no QoS event handlers unless asked (``event_callbacks``).
+
+    rclpy gives every publisher and subscription default event handlers (incompatible QoS
+    and type warnings), each a waitable that every spin of the node's executor walks through,
+    with a list-membership test per waitable: a process hosting 256 agents (six per-agent
+    topics each) spent 25% of its time there, and the runner, reading 1024 agents' final
+    states, 55% (py-spy, 1024 agents in 4 processes).  A process's own topics keep them."""
+    if agent is None or "event_callbacks" in kwargs:
+        return
+    from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+
+    events = PublisherEventCallbacks if kind == "publisher" else SubscriptionEventCallbacks
+    kwargs["event_callbacks"] = events(use_default_callbacks=False)
+
+
 def publisher(node: Node, key: str, dim: int | None = None, agent: int | None = None,
               resolver: Node | None = None, **kwargs: Any) -> Publisher:
     t = TOPICS[key]
+    _per_agent_events(agent, kwargs, "publisher")
     return node.create_publisher(
         message_type(t.kind, dim),
         _resolve(node, topic_name(key, agent), resolver),
@@ -131,6 +150,7 @@ def subscription(node: Node, key: str, callback: Callable[..., None], dim: int |
                  agent: int | None = None, mode: str = "lockstep", resolver: Node | None = None,
                  **kwargs: Any) -> Subscription:
     t = TOPICS[key]
+    _per_agent_events(agent, kwargs, "subscription")
     qos = t.reader_qos or (t.realtime_reader_qos if mode == "realtime" else None) or t.qos
     return node.create_subscription(
         message_type(t.kind, dim),
