@@ -1,8 +1,9 @@
 """Lockstep at scale: `polymatch run` with its default packing, N = 8 ... 4096 agents.
 
-For each N (congruent triangles, first-order model, rkmk4: 4 rounds a step, R rounds), one run
-through `polymatch run` with the monitor, as a user starts it, and from its agents' run
-records (``--records``):
+For each N (congruent triangles, first-order model, rkmk4: 4 rounds a step, R rounds), a run
+through `polymatch run` with the monitor, as a user starts it, with its default packing and
+with the agents split over P processes (``--split``, default 4: the transport's cost), and
+from its agents' run records (``--records``):
 
   rounds/s        the mean over the agent processes (after the first round);
   first round     seconds from the command's start until the last process completed its
@@ -30,6 +31,8 @@ def add_arguments(p):
     p.add_argument("--agents", type=int_list(2), default=[8, 64, 256, 1024, 4096],
                    metavar="N,N,...", help="numbers of agents (default 8,64,256,1024,4096)")
     p.add_argument("--rounds", type=at_least(8), default=200, help="rounds per run (default 200)")
+    p.add_argument("--split", type=at_least(2), default=4, metavar="P",
+                   help="also run the agents in P processes (default 4)")
 
 
 def _scene_yaml(n, steps, dt):
@@ -38,8 +41,9 @@ def _scene_yaml(n, steps, dt):
             f"groups:\n  - {{name: triangles, shape: triangle, count: {n}}}\n")
 
 
-def _measure(n, rounds, workdir, env):
-    """One default-packing run of N agents: (row of the table, failure or None)."""
+def _measure(n, rounds, workdir, env, k=None):
+    """One run of N agents, K a process (None: the default packing): (row of the table,
+    failure or None)."""
     import numpy as np
 
     from .packing import _default_k
@@ -48,11 +52,12 @@ def _measure(n, rounds, workdir, env):
     path = write_scene(workdir, f"scaling_{n}.yaml", _scene_yaml(n, rounds // 4, 0.01))
     records, timeout = path + ".records.jsonl", 180 + n * rounds // 50
     started = time.time()
+    asked = [] if k is None else ["-k", str(k)]
     out = run_cli(env, ["run", path, "--no-compare", "--hold", "1e9", "--timeout",
-                        str(timeout - 10), "-q", "--records", records], timeout)
+                        str(timeout - 10), "-q", "--records", records, *asked], timeout)
     wall = time.time() - started
     done = [r for r in agent_records(records) if r.finished]
-    k = _default_k(n)
+    k = _default_k(n) if k is None else k
     errors = [line for line in out.stderr.splitlines() if line.startswith("polymatch: error:")]
     if out.returncode not in (0, 3) or not done:  # 3: ran to t_end without matching yet
         return [n, f"{-(-n // k)} x {k}"] + ["-"] * 6, (
@@ -82,16 +87,17 @@ def run(args, log):
     with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
         env = private_ros_environment(dom)
         for n in sizes:
-            log(f"N = {n}")
-            row, failure = _measure(n, rounds, workdir, env)
-            rows.append(row)
-            if failure:
-                failures.append(f"N = {n}: {failure}")
+            for k in (None, -(-n // args.split)):
+                log(f"N = {n}, " + ("the default packing" if k is None else f"-k {k}"))
+                row, failure = _measure(n, rounds, workdir, env, k)
+                rows.append(row)
+                if failure:
+                    failures.append(f"N = {n}, -k {k or 'default'}: {failure}")
     report.table(["agents", "processes x agents each", "rounds/s", "first round after (s)",
                   "wall time (s)", "peak memory per process (MB)",
                   "ms per round: publish / wait / other", "transport share"], rows,
                  caption=f"{rounds} lockstep rounds (rkmk4: 4 a step) through `polymatch run` "
-                         "with the monitor and its default packing and agent nodes; one run "
-                         "per size")
+                         "with the monitor and its default agent nodes: the default packing, "
+                         f"then the agents in {args.split} processes; one run each")
     report.failures(failures)
     return report

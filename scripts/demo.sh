@@ -4,4 +4,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-exec .venv/bin/polymatch run config/congruent_triangles.yaml "$@"
+exec .venv/bin/polymatch run config/congruent_triangles.yaml -k 1 "$@"

@@ -172,7 +172,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=int,
         default=None,
         metavar="K",
-        help="agents per process (default: lockstep up to 256, the fastest measured packing; "
+        help="agents per process (default: lockstep up to 4096, the fastest measured packing; "
         "realtime 1, or the fewest that keep the processes within the 32 DDS participants that "
         "LOCALHOST discovery reaches); the first line says which and why",
     )

@@ -38,8 +38,8 @@ def test_realtime_packs_agents_when_processes_would_exceed_the_limit():
     assert -(-1000 // k) + 2 <= LOCALHOST_PARTICIPANTS
 
 
-@pytest.mark.parametrize("n,processes", [(2, 1), (8, 1), (256, 1), (257, 2), (1024, 4),
-                                         (4096, 16)])
+@pytest.mark.parametrize("n,processes", [(2, 1), (8, 1), (256, 1), (1024, 1), (4096, 1),
+                                         (4097, 2), (3 * 4096, 3)])
 def test_lockstep_packs_by_the_measured_rule(n, processes):
     k = _k(n, mode="lockstep")
     assert k == min(n, LOCKSTEP_AGENTS_PER_PROCESS) and -(-n // k) == processes

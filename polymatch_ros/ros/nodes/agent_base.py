@@ -115,14 +115,12 @@ class AgentBase(NodeApp):
         # lockstep's packed processes send their agents' states in one message a block and step
         self.exchange_blocks = self.layout.local_blocks() if (
             self.mode == "lockstep" and self.layout.blocks) else None
-        self.exchange_pubs = (
-            {b: wire.publisher(node, "exchange_block", dim, b) for b in self.exchange_blocks}
-            if self.exchange_blocks is not None
-            else {a: wire.publisher(node, "exchange", dim, a) for a in local}
-        )
-        self.final_exchange_pubs = {
-            a: wire.publisher(node, "final_exchange", dim, a) for a in local
-        }
+        # writers by agent, or by block: (key of the per-step topic, of the final one), indices
+        keys, by = ("exchange", "final_exchange"), local
+        if self.exchange_blocks is not None:
+            keys, by = ("exchange_block", "final_exchange_block"), list(self.exchange_blocks)
+        self.exchange_pubs = {i: wire.publisher(node, keys[0], dim, i) for i in by}
+        self.final_exchange_pubs = {i: wire.publisher(node, keys[1], dim, i) for i in by}
 
         def on_own_node(key: str) -> dict[int, Publisher]:
             """The people's topic ``key`` of each local agent, on the agent's own node."""
@@ -182,12 +180,15 @@ class AgentBase(NodeApp):
         Per-step messages nobody subscribes to are not even built (the lockstep hot loop).
         """
         if final:
-            self._publish_exchange(self.final_exchange_pubs)
+            if self.exchange_blocks is not None:
+                self._publish_exchange_blocks(self.exchange_blocks, self.final_exchange_pubs)
+            else:
+                self._publish_exchange(self.final_exchange_pubs)
             self._publish_rows(self.final_pubs, self.final_twist_pubs)
         else:
             if any(p.get_subscription_count() for p in self.exchange_pubs.values()):
                 if self.exchange_blocks is not None:
-                    self._publish_exchange_blocks(self.exchange_blocks)
+                    self._publish_exchange_blocks(self.exchange_blocks, self.exchange_pubs)
                 else:
                     self._publish_exchange(self.exchange_pubs)
             if any(p.get_subscription_count() for p in self.pose_pubs.values()):
@@ -211,8 +212,9 @@ class AgentBase(NodeApp):
                     Float64MultiArray(), grp, run_id, a, st.t, gs.x[r], grp.take(gs.rot, [r]),
                     v, w))
 
-    def _publish_exchange_blocks(self, blocks: dict[int, list[int]]) -> None:
-        """Every local agent's state with the run's id, one message per block
+    def _publish_exchange_blocks(self, blocks: dict[int, list[int]],
+                                 pubs: dict[int, Publisher]) -> None:
+        """Every local agent's state with the run's id, one message per block on ``pubs``
         (``wire.encode_exchange_block``)."""
         from std_msgs.msg import Float64MultiArray
 
@@ -234,7 +236,7 @@ class AgentBase(NodeApp):
                 Float64MultiArray(), grp, self.params["run_id"], b, st.t, members, x[rows],
                 grp.take(rot, rows), None if v is None else v[rows],
                 None if w is None else grp.algebra_take(w, rows))
-            self.exchange_pubs[b].publish(msg)
+            pubs[b].publish(msg)
 
     def _publish_rows(
         self, pose_pubs: dict[int, Publisher], twist_pubs: dict[int, Publisher]

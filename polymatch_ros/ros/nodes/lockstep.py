@@ -102,6 +102,7 @@ class LockstepExchange:
             self.links = AgentLinks(self.node, resolver, layout, decode, self._take, drops,
                                     patience.keep_rounds)
         self.pubs, self.writers = self.links.pubs, self.links.writers
+        self.unheard = self.links.unheard()  # no process needs our rows: nothing to publish
         self.patience = patience
         self.publish_time = 0.0  # seconds spent publishing stages (for the diagnostics)
         self.wait_time = 0.0  # seconds spent waiting for (and taking) the peers' stages
@@ -154,6 +155,8 @@ class LockstepExchange:
         return self.stop_step is not None and step >= self.stop_step
 
     def publish(self, step: int, stage: int, request: Request, stop_flag: bool) -> None:
+        if self.unheard:
+            return
         agents, fields = local_fields(self.grp, request, self.layout)
         flags = self._stop_flags(stop_flag)
         self.links.publish(self.run_id, step, stage, flags, request.stage.t, agents, fields)

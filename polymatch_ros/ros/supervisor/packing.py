@@ -1,10 +1,10 @@
 """How many agents each process hosts: ``-k`` as asked, else what was measured fastest.
 
-Lockstep (``python -m benchmarks packing``, ``docs/bench/packing.md``, 2 cores): a round
+Lockstep (``python -m benchmarks packing`` and ``scaling``, ``docs/bench/``, 2 cores): a round
 costs each process its share of the numerics plus one DDS exchange with every other process,
-and the exchange dominates; one process for up to 256 agents was the fastest packing or within
-5% of it at 8, 32, 64 and 256 agents, and processes of 256 were the fastest at 1024 in an
-earlier, loaded run (``docs/guide/speed-and-accuracy.md``).  Realtime and
+and the exchange dominates; one process was the fastest packing at 8, 32, 64, 256 and 1024
+agents (at 1024: 423 rounds/s against 70 in 4 processes of 256), and at 4096 (96 rounds/s
+against 51 in 4 of 1024 and 4 in 16 of 256; ``docs/guide/speed-and-accuracy.md``).  Realtime and
 bridge runs step at a fixed rate, so speed does not choose: one process per agent, so that a
 crash costs one agent and per-agent faults stay per agent, while the processes fit the
 participants LOCALHOST discovery reaches.
@@ -27,7 +27,7 @@ from .plan import Packing
 LOCALHOST_PARTICIPANTS = 32
 
 #: lockstep: the most agents one process hosts unless -k says otherwise (measured, above)
-LOCKSTEP_AGENTS_PER_PROCESS = 256
+LOCKSTEP_AGENTS_PER_PROCESS = 4096
 #: --agent-nodes auto: full agent nodes in a process of up to this many agents, lean beyond
 FULL_AGENT_NODES = 32
 

@@ -70,6 +70,12 @@ class RunContext:
     def agents_per_process(self) -> int:
         return self.packing.agents_per_process
 
+    @property
+    def exchange_blocks(self) -> int | None:
+        """K where the agents send their states a block of K at a time (packed lockstep)."""
+        k = self.agents_per_process
+        return k if k > 1 and self.plan.mode == "lockstep" else None
+
     def checkpoint_path(self, name: str) -> str:
         """The checkpoint of the agent process ``name`` (a bridge agent's holds the measured
         pose it relayed last: for ``--save`` of a run that ends early; restarted, it takes its
@@ -359,7 +365,8 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
     progress = Progress(plan.scene.t_end, plan.outputs.quiet)
     try:
         name = "runner" if plan.every_agent_here else f"runner_{plan.hosts.agents[0]}"
-        watcher = Watcher(plan.scene, plan.hosts.ensemble, name, context.run_id)
+        watcher = Watcher(plan.scene, plan.hosts.ensemble, name, context.run_id,
+                          context.exchange_blocks)
         if context.shared_domain:
             watcher.refuse_names_in_use(_node_names(context, name), GRAPH_LISTEN_SECONDS)
         if plan.hosts.lead and not plan.hosts.monitor:

@@ -59,7 +59,7 @@ class Watcher:
     stop_sent: bool                                 # the runner called the stop service
 
     def __init__(self, scene: Scene, ensemble: str, name: str = "runner",
-                 run_id: int = 0) -> None:
+                 run_id: int = 0, blocks_of: int | None = None) -> None:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
@@ -83,10 +83,17 @@ class Watcher:
         # the final states on a lean node of their own, taken a few times a second: an rclpy
         # spin rebuilds its wait set from every reader, and 1024 of them made every 50 ms spin
         # of the runner's loop cost half a core (py-spy, 1024 agents in 4 processes)
+        # (lockstep with K = ``blocks_of`` agents a process: a message per block, whose one
+        # reader per agent made the runner miss final states at 4096 agents)
         self.finals = LeanReaders(node, "_finals")
         self._finals_taken_at = -math.inf
-        for a in range(self.model.n_agents):
-            self.finals.subscribe("final_exchange", self._final(a), dim, a, "lockstep")
+        if blocks_of is not None:
+            for b in range(-(-self.model.n_agents // blocks_of)):
+                self.finals.subscribe("final_exchange_block", self._final_block(b, blocks_of),
+                                      dim, b, "lockstep")
+        else:
+            for a in range(self.model.n_agents):
+                self.finals.subscribe("final_exchange", self._final(a), dim, a, "lockstep")
 
     def _control(self, msg: Any) -> None:
         """A 'stop' on the control topic that the runner did not send: the ensemble's stop
@@ -121,7 +128,6 @@ class Watcher:
     def _final(self, agent: int) -> Callable[[Any, Any], None]:
         """The callback of one agent's final state: its pose and, in second order, its
         velocities, if the message is this run's and well formed."""
-        second = self.model.order == 2
 
         def receive(msg: Any, _info: Any) -> None:
             got, reason = wire.decode_exchange(msg, self.grp, self.model.dim, self.run_id,
@@ -129,11 +135,29 @@ class Watcher:
             if got is None:
                 self.final_drops[reason or "malformed"] += 1
                 return
-            self.poses[agent] = (got.t, wire.Row(got.x, got.rot))
-            if second and got.v is not None and got.w is not None:
-                self.velocities[agent] = (got.v, got.w)
+            self._take_final(agent, got)
 
         return receive
+
+    def _final_block(self, block: int, k: int) -> Callable[[Any, Any], None]:
+        """The callback of one block's final states (``wire.decode_exchange_block``)."""
+
+        def receive(msg: Any, _info: Any) -> None:
+            got, reason = wire.decode_exchange_block(msg, self.grp, self.model.dim, self.run_id,
+                                                     block, k, self.scene.t_end)
+            if got is None:
+                self.final_drops[reason or "malformed"] += 1
+                return
+            for agent, motion in got:
+                self._take_final(agent, motion)
+
+        return receive
+
+    def _take_final(self, agent: int, got: wire.Motion) -> None:
+        """An agent's final pose and, in second order, its velocities."""
+        self.poses[agent] = (got.t, wire.Row(got.x, got.rot))
+        if self.model.order == 2 and got.v is not None and got.w is not None:
+            self.velocities[agent] = (got.v, got.w)
 
     def spin(self, timeout: float) -> None:
         """Serve the runner's node for up to ``timeout`` s, and take the agents' final states

@@ -48,6 +48,9 @@ TOPICS = {
     # the final state on the run's exchange (with the run's id): what the runner summarises
     "final_exchange": Topic("agent_{agent}/final_exchange", "array", "latched",
                             reader_qos="final_in"),
+    # lockstep with K agents per process: the final states of block b's agents, latched
+    "final_exchange_block": Topic("exchanges/final_block_{agent}", "array", "latched",
+                                  reader_qos="final_in"),
     "stage": Topic("agent_{agent}/stage", "array", "stage", reader_qos="stage_in"),
     # lockstep with K agents per process: the rows of block b (agents bK .. bK + K - 1)
     "stage_block": Topic("stages/block_{agent}", "array", "stage", reader_qos="stage_in"),
