@@ -180,17 +180,11 @@ class AgentBase(NodeApp):
         Per-step messages nobody subscribes to are not even built (the lockstep hot loop).
         """
         if final:
-            if self.exchange_blocks is not None:
-                self._publish_exchange_blocks(self.exchange_blocks, self.final_exchange_pubs)
-            else:
-                self._publish_exchange(self.final_exchange_pubs)
+            self._send_states(self.final_exchange_pubs)
             self._publish_rows(self.final_pubs, self.final_twist_pubs)
         else:
             if any(p.get_subscription_count() for p in self.exchange_pubs.values()):
-                if self.exchange_blocks is not None:
-                    self._publish_exchange_blocks(self.exchange_blocks, self.exchange_pubs)
-                else:
-                    self._publish_exchange(self.exchange_pubs)
+                self._send_states(self.exchange_pubs)
             if any(p.get_subscription_count() for p in self.pose_pubs.values()):
                 self._publish_rows(self.pose_pubs, self.twist_pubs)
         self._maybe_diagnostics()
@@ -211,6 +205,14 @@ class AgentBase(NodeApp):
                 pubs[a].publish(wire.encode_exchange(
                     Float64MultiArray(), grp, run_id, a, st.t, gs.x[r], grp.take(gs.rot, [r]),
                     v, w))
+
+    def _send_states(self, pubs: dict[int, Publisher]) -> None:
+        """Every local agent's state on the run's exchange writers ``pubs``: a message per
+        block (packed lockstep) or per agent."""
+        if self.exchange_blocks is not None:
+            self._publish_exchange_blocks(self.exchange_blocks, pubs)
+        else:
+            self._publish_exchange(pubs)
 
     def _publish_exchange_blocks(self, blocks: dict[int, list[int]],
                                  pubs: dict[int, Publisher]) -> None:

@@ -112,8 +112,9 @@ class MonitorNode(NodeApp):
 
     def _wire_up(self) -> None:
         """Readers of every agent's state on the run's exchange (``wire.exchange``: pose and
-        velocities with the run's id); the headline, diagnostics, status and marker writers;
-        the ensemble's services.
+        velocities with the run's id; a reader per agent, or per block where packed lockstep
+        processes send their agents' states together); the headline, diagnostics, status and
+        marker writers; the ensemble's services.
 
         The readers live on a lean node of their own (``exchange.LeanReaders``), and each report
         takes what they hold first (``_drain``), so the poses do not wake the monitor between
@@ -198,7 +199,7 @@ class MonitorNode(NodeApp):
             if got is None:
                 self.drops(f"block {block}", reason)  # type: ignore[arg-type]  # with None
                 return
-            heard = received_at(info)[1]
+            heard = received_at(info)[1]  # a list, not a generator: every row is taken
             if any([self._take(agent, motion, heard) for agent, motion in got]):
                 self._collect_completed()
 

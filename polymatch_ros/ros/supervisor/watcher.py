@@ -36,7 +36,8 @@ class Watcher:
 
     It hears every process's run record (``status``: progress, agents up, and the monitor's
     headline diameter), calls the ensemble's start and stop services (``control``), and takes each
-    agent's *final* state from its latched ``final_exchange`` topic for the summary - not
+    agent's *final* state from its latched ``final_exchange`` topic (packed lockstep processes:
+    its block's ``final_exchange_block``) for the summary - not
     the per-step poses, so supervising a run adds no load to the lockstep rounds.  Only this
     run's final states and run records are taken (``run_id``, ``wire.exchange``): a latched
     final pose or a record of another run, or anything else on the topics, is ignored and
@@ -80,11 +81,11 @@ class Watcher:
         self.stop_requested_at, self.stop_sent = None, False
         wire.subscription(node, "control", self._control)  # a stop someone else asked for
         self.services = ControlClient(node)  # start and stop: the ensemble's services
-        # the final states on a lean node of their own, taken a few times a second: an rclpy
+        # The final states on a lean node of their own, taken a few times a second: an rclpy
         # spin rebuilds its wait set from every reader, and 1024 of them made every 50 ms spin
-        # of the runner's loop cost half a core (py-spy, 1024 agents in 4 processes)
-        # (lockstep with K = ``blocks_of`` agents a process: a message per block, whose one
-        # reader per agent made the runner miss final states at 4096 agents)
+        # of the runner's loop cost half a core (py-spy, 1024 agents in 4 processes).  Packed
+        # lockstep processes (K = ``blocks_of``) send them a block at a time: with a reader per
+        # agent the runner missed final states at 4096 agents.
         self.finals = LeanReaders(node, "_finals")
         self._finals_taken_at = -math.inf
         if blocks_of is not None:
