@@ -15,7 +15,6 @@ start-up (the slowest process's seconds from its start until its peers matched: 
 to its first round).
 """
 
-import tempfile
 
 NAME = "packing"
 HELP = "lockstep rounds/s of `polymatch run` by packing: N agents in P processes"
@@ -131,12 +130,8 @@ def _row(n, measured, default_k):
 
 
 def run(args, log):
-    from domain_coordinator import domain_id
-
-    from polymatch_ros.ros.supervisor.environment import private_ros_environment
-
     from .report import Report
-    from .ros_runs import write_scene
+    from .ros_runs import private_runs, write_scene
 
     sizes = [8] if args.quick else args.agents
     processes = [1, 2] if args.quick else args.processes
@@ -144,8 +139,7 @@ def run(args, log):
     report = Report(NAME, "Lockstep by packing: N agents in P processes "
                           "(`python -m benchmarks packing`)")
     rows, failures = [], []
-    with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
-        env = private_ros_environment(dom)
+    with private_runs() as (workdir, env):
         for n in sizes:
             path = write_scene(workdir, f"packing_{n}.yaml", _scene_yaml(n, rounds // 4, 0.01))
             measured = {}

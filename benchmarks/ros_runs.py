@@ -2,9 +2,23 @@
 graphs): a scene file in the run's directory, the command under ``timeout``, and the agents'
 run records it wrote."""
 
+import contextlib
 import os
 import subprocess
 import sys
+import tempfile
+
+
+@contextlib.contextmanager
+def private_runs():
+    """(a temporary directory, the ROS environment of a domain reserved for as long as the
+    runs last): where a family writes its scenes and how it starts `polymatch`."""
+    from domain_coordinator import domain_id
+
+    from polymatch_ros.ros.supervisor.environment import private_ros_environment
+
+    with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
+        yield workdir, private_ros_environment(dom)
 
 
 def write_scene(directory, name, text):

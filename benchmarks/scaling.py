@@ -19,7 +19,6 @@ moves P (P - 1) block messages of K rows each (P processes of K agents), and eac
 numerics are the mean field of (A-2), O(N) per process.
 """
 
-import tempfile
 import time
 
 NAME = "scaling"
@@ -73,19 +72,14 @@ def _measure(n, rounds, workdir, env, k=None):
 
 
 def run(args, log):
-    from domain_coordinator import domain_id
-
-    from polymatch_ros.ros.supervisor.environment import private_ros_environment
-
     from .report import Report
+    from .ros_runs import private_runs
 
-    sizes = [8] if args.quick else args.agents
-    rounds = 40 if args.quick else args.rounds
+    sizes, rounds = ([8], 40) if args.quick else (args.agents, args.rounds)
     report = Report(NAME, "Lockstep at scale: the default packing (`python -m benchmarks "
                           "scaling`)")
     rows, failures = [], []
-    with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
-        env = private_ros_environment(dom)
+    with private_runs() as (workdir, env):
         for n in sizes:
             for k in (None, -(-n // args.split)):
                 log(f"N = {n}, " + ("the default packing" if k is None else f"-k {k}"))

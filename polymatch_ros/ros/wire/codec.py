@@ -315,25 +315,27 @@ def block_members(agents: np.ndarray, block: int, k: int) -> bool:
     )
 
 
-def _block_rows(
-    data: np.ndarray, grp: RotationGroup, dim: int, block: int, k: int, mask: int
-) -> tuple[list[int], dict[str, np.ndarray]] | tuple[None, str]:
-    """The rows of a block message as (agents, {label: values}), or (None, reason)."""
-    sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
-    width = 1 + sum(sizes[f] for f, bit in FIELDS if mask & bit)
+def block_rows(
+    data: np.ndarray, block: int, k: int, mask: int, sizes: Mapping[str, int],
+    order: Sequence[tuple[str, int]], mask_ok: bool,
+) -> tuple[np.ndarray, dict[str, np.ndarray]] | tuple[None, str]:
+    """The rows of a block message (stages or states) as (agent indices, {label: values}) for
+    the fields of ``order`` that ``mask`` names, each ``sizes[label]`` wide, or (None, reason);
+    ``mask_ok``: the mask is one the message kind allows."""
+    width = 1 + sum(sizes[f] for f, bit in order if mask & bit)
     body = data[HEADER:]
-    if mask & ~7 or not mask & 4 or not body.size or body.size % width:
+    if not mask_ok or not body.size or body.size % width:
         return None, "malformed layout"
     rows = body.reshape(-1, width)
     if not block_members(rows[:, 0], block, k):
         return None, "unknown sender (agent index)"
     out: dict[str, np.ndarray] = {}
     pos = 1
-    for label, bit in FIELDS:
+    for label, bit in order:
         if mask & bit:
             out[label] = rows[:, pos : pos + sizes[label]]
             pos += sizes[label]
-    return [int(a) for a in rows[:, 0]], out
+    return rows[:, 0].astype(int), out
 
 
 def decode_block(msg: Any, grp: RotationGroup, dim: int, run_id: int, block: int, k: int,
@@ -350,7 +352,8 @@ def decode_block(msg: Any, grp: RotationGroup, dim: int, run_id: int, block: int
     if data is None or head is None:
         return None, reason
     step, stage, flags, t, mask = head
-    rows = _block_rows(data, grp, dim, block, k, mask)
+    sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
+    rows = block_rows(data, block, k, mask, sizes, FIELDS, not (mask & ~7 or not mask & 4))
     if rows[0] is None:
         return None, rows[1]
     agents, fields = rows
@@ -363,5 +366,5 @@ def decode_block(msg: Any, grp: RotationGroup, dim: int, run_id: int, block: int
             return None, "rotation not orthogonal"
         rot = grp.from_matrices(mats)
     x, v = fields.get("x"), fields.get("v")
-    return StageRows(np.asarray(agents, dtype=int), step, stage, flags, t, rot,
+    return StageRows(agents, step, stage, flags, t, rot,
                      None if x is None else x.copy(), None if v is None else v.copy()), None

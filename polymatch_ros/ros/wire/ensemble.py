@@ -40,14 +40,7 @@ def assemble(grp: RotationGroup, dim: int, rows: Mapping[int, Row],
     local_rows = [] if local is None else [int(r) for r in local[0]]
     index = np.array(sorted(set(rows) | set(local_rows)), dtype=int)
     pos = {row: k for k, row in enumerate(index.tolist())}
-    n = len(index)
-    out = SimpleNamespace(
-        x=np.zeros((n, dim)),
-        rot=grp.identity(n) if with_rot else None,
-        v=np.zeros((n, dim)) if with_v else None,
-        w=None,
-        index=None if full else index,
-    )
+    out = _group_arrays(grp, dim, index, with_rot, with_v, full)
     for row, rec in rows.items():
         k = pos[row]
         out.x[k] = rec.x
@@ -56,14 +49,7 @@ def assemble(grp: RotationGroup, dim: int, rows: Mapping[int, Row],
         if with_v and rec.v is not None:
             out.v[k] = rec.v
     if local is not None and local_rows:
-        gs = local[1]
-        assert gs is not None  # a stage holds the rows of every local group
-        at = [pos[r] for r in local_rows]
-        out.x[at] = gs.x
-        if with_v:
-            out.v[at] = gs.v
-        if with_rot:
-            grp.put(out.rot, at, gs.rot)
+        _put_local(grp, out, [pos[r] for r in local_rows], local[1], with_rot, with_v)
     if with_w:
         out.w = grp.algebra_concat([rows[r].w for r in index.tolist()])  # type: ignore[misc]
     return out
@@ -90,14 +76,7 @@ def assemble_rows(grp: RotationGroup, dim: int, start: int, size: int,
             parts.append((rows[inside], m.select(grp, inside)))
     local_rows = np.zeros(0, dtype=int) if local is None else np.asarray(local[0], dtype=int)
     index = np.unique(np.concatenate([rows for rows, _ in parts] + [local_rows]))
-    n = len(index)
-    out = SimpleNamespace(
-        x=np.zeros((n, dim)),
-        rot=grp.identity(n) if with_rot else None,
-        v=np.zeros((n, dim)) if with_v else None,
-        w=None,
-        index=None if full else index,
-    )
+    out = _group_arrays(grp, dim, index, with_rot, with_v, full)
     for rows, m in parts:
         at = np.searchsorted(index, rows)
         if m.x is not None:
@@ -107,12 +86,29 @@ def assemble_rows(grp: RotationGroup, dim: int, start: int, size: int,
         if with_v and m.v is not None:
             out.v[at] = m.v
     if local is not None and len(local_rows):
-        gs = local[1]
-        assert gs is not None  # a stage holds the rows of every local group
-        at = np.searchsorted(index, local_rows)
-        out.x[at] = gs.x
-        if with_v:
-            out.v[at] = gs.v
-        if with_rot:
-            grp.put(out.rot, at, gs.rot)
+        _put_local(grp, out, np.searchsorted(index, local_rows), local[1], with_rot, with_v)
     return out
+
+
+def _group_arrays(grp: RotationGroup, dim: int, index: np.ndarray, with_rot: bool,
+                  with_v: bool, full: bool) -> SimpleNamespace:
+    """Zero centroids and velocities, identity rotations, for the group rows ``index``."""
+    n = len(index)
+    return SimpleNamespace(
+        x=np.zeros((n, dim)),
+        rot=grp.identity(n) if with_rot else None,
+        v=np.zeros((n, dim)) if with_v else None,
+        w=None,
+        index=None if full else index,
+    )
+
+
+def _put_local(grp: RotationGroup, out: SimpleNamespace, at: Sequence[int] | np.ndarray,
+               gs: GroupState | None, with_rot: bool, with_v: bool) -> None:
+    """The process's own rows (their current stage values) at positions ``at`` of ``out``."""
+    assert gs is not None  # a stage holds the rows of every local group
+    out.x[at] = gs.x
+    if with_v:
+        out.v[at] = gs.v
+    if with_rot:
+        grp.put(out.rot, at, gs.rot)

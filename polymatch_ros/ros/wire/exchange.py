@@ -45,7 +45,7 @@ from .codec import (
     ROTATION_TOL,
     bad_rotation,
     bad_skew,
-    block_members,
+    block_rows,
     encode_stage,
     orthogonality,
     rot_matrix_values,
@@ -153,21 +153,13 @@ def decode_exchange_block(
         return None, reason
     t, mask = head[3], head[4]
     sizes = {"x": dim, "v": dim, "rot": dim * dim, "w": dim * dim}
-    width = 1 + sum(sizes[f] for f, bit in EXCHANGE_FIELDS if mask & bit)
-    body = data[HEADER:]
-    if (mask & ~15 or mask & 5 != 5 or bool(mask & 2) != bool(mask & 8)
-            or not body.size or body.size % width):
-        return None, "malformed layout"
-    rows = body.reshape(-1, width)
-    if not block_members(rows[:, 0], block, k):
-        return None, "unknown sender (agent index)"
-    values: dict[str, np.ndarray] = {}
-    pos = 1
-    for label, bit in EXCHANGE_FIELDS:
-        if mask & bit:
-            values[label] = rows[:, pos:pos + sizes[label]].copy()
-            pos += sizes[label]
-    n = len(rows)
+    valid = not (mask & ~15 or mask & 5 != 5 or bool(mask & 2) != bool(mask & 8))
+    rows = block_rows(data, block, k, mask, sizes, EXCHANGE_FIELDS, valid)
+    if rows[0] is None:
+        return None, rows[1]
+    agents, fields = rows
+    values = {label: v.copy() for label, v in fields.items()}
+    n = len(agents)
     mats = values["rot"].reshape(n, dim, dim)
     if orthogonality(mats) > ROTATION_TOL or np.any(np.linalg.det(mats) < 0):
         return None, "rotation not in SO(d)"
@@ -180,7 +172,7 @@ def decode_exchange_block(
     rot, key = grp.from_matrices(mats), int(round(t * 1e9))
     w = None if skews is None else grp.algebra_from_skew(skews)
     out = []
-    for r, a in enumerate(rows[:, 0].astype(int).tolist()):
+    for r, a in enumerate(agents.tolist()):
         motion = Motion(t, key, values["x"][r], grp.take(rot, [r]))
         if w is not None:
             motion.v, motion.w = values["v"][r], grp.algebra_take(w, [r])
