@@ -251,9 +251,8 @@ class LockstepExchange:
                 self.grp, model.dim, g.start, g.size, messages.values(), local, with_rot=own,
                 with_v=with_v, full=not self.layout.sparse,
             ))
-        for rows in messages.values():
-            for a in rows.agents.tolist():
-                self.taken[a] = key
+        for first in messages:  # a resend is told by its first agent (``_take``)
+            self.taken[first] = key
         return tuple(out)
 
     def flush(self, timeout: float = 5.0) -> None:

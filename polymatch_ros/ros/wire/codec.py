@@ -106,15 +106,18 @@ def orthogonality(mat: np.ndarray) -> float:
 
 
 def bad_rotation(mat: np.ndarray) -> str | None:
-    """The reason a d x d matrix on the wire is no rotation in SO(d), or None."""
-    if orthogonality(mat) > ROTATION_TOL or np.linalg.det(mat) < 0:
+    """The reason a d x d matrix on the wire (or one of a stack of them) is no rotation in
+    SO(d), or None."""
+    if orthogonality(mat) > ROTATION_TOL or np.any(np.linalg.det(mat) < 0):
         return "rotation not in SO(d)"
     return None
 
 
 def bad_skew(mat: np.ndarray) -> str | None:
-    """The reason a d x d matrix on the wire is no angular velocity (skew), or None."""
-    if np.max(np.abs(mat + mat.T)) > ROTATION_TOL * max(1.0, float(np.max(np.abs(mat)))):
+    """The reason a d x d matrix on the wire (or one of a stack of them, each against its own
+    scale) is no angular velocity (skew), or None."""
+    asym = np.max(np.abs(mat + np.swapaxes(mat, -1, -2)), axis=(-2, -1))
+    if np.any(asym > ROTATION_TOL * np.maximum(1.0, np.max(np.abs(mat), axis=(-2, -1)))):
         return "angular velocity not skew"
     return None
 
