@@ -33,6 +33,9 @@ FAILURE = re.compile(r"^  (\S+) \(pid (\d+)\) (killed by \w+|exit code -?\d+|hun
                      r"before the ensemble's clock started); restarted after \S+ s as pid (\d+), "
                      r"back after \S+ s", re.M)
 
+AFTER_RUN = re.compile(r"^  (\S+) \(pid (\d+)\) killed by SIGKILL at t = (\S+) after its run "
+                       r"had ended, its final states in; not restarted$", re.M)
+
 
 def _pid_where(run, wanted, what):
     """The PID of the first process below ``run`` whose command line ``wanted`` accepts."""
@@ -136,6 +139,33 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     assert len(steps) == 2 and all(40 <= s < 300 for s in steps), out[-3000:]
     assert "failures: 3 process death(s), 3 restarted" in out
     assert _gone(before + [int(f[4]) for f in failures])
+
+
+def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_4_2(ros):
+    """Lockstep, four processes, the monitor stopped (SIGSTOP) before the end: no agent is
+    told 'received', so each holds its final poses.  SIGKILL of one of them once the runner
+    has every final state: it is listed, not restarted (a restarted one would begin a step
+    its peers have ended), the monitor is not waited for, and the run ends as it would have:
+    equal to the centralised run, exit 3 (t_end 6 is before matching), nothing left over."""
+    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2")
+    _until(ros, 0.3, run)
+    monitor = _process(run, "monitor")
+    os.kill(monitor, signal.SIGSTOP)
+    try:
+        _until(ros, 5.99, run)
+        time.sleep(2)  # the runner takes the final states every 0.2 s once a process finished
+        victim = _process(run, "agents_2_3")
+        before = descendants(run.pid)
+        os.kill(victim, signal.SIGKILL)
+        time.sleep(1)
+    finally:
+        os.kill(monitor, signal.SIGCONT)
+    rc, out = _finish(ros, run)
+    assert rc == 3 and "did not converge" in out, out[-3000:]
+    assert float(DEVIATION.search(out).group(1)) <= 1e-9, out[-3000:]
+    assert AFTER_RUN.findall(out) == [("agents_2_3", str(victim), "6")], out[-3000:]
+    assert "failures: 1 process death(s), 0 restarted" in out, out[-3000:]
+    assert _gone(before)
 
 
 def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_path):

@@ -98,6 +98,21 @@ def test_on_failure_stop_ends_the_run_at_the_first_death():
         "agent_0 (pid 1000) killed by SIGTERM at t = 1; not restarted")
 
 
+def test_a_process_that_died_after_its_run_is_listed_not_restarted():
+    """``Supervision.failure`` hands over a process whose final states are in: a death on
+    record, no restart due, and the run not ended by it."""
+    recovery = Recovery(RestartPolicy())
+    child = DeadProcess("agents_2_3", -9, ["{\"finished\": true}"])
+    recovery.ended(child, 3.0)
+    assert not recovery.pending(child) and recovery.restart_due([child]) == []
+    assert child.starts == 0
+    (failure,) = recovery.failures
+    assert failure.after_run and failure.restarted is None
+    assert failure.describe() == ("agents_2_3 (pid 1000) killed by SIGKILL at t = 3 after its "
+                                  "run had ended, its final states in; not restarted")
+    assert json.loads(failure.to_json())["after_run"] is True
+
+
 def test_a_failure_is_one_records_line_that_run_record_readers_skip():
     from polymatch_ros.ros.wire import run_records
 
@@ -107,7 +122,8 @@ def test_a_failure_is_one_records_line_that_run_record_readers_skip():
     data = json.loads(line)
     assert data == {FAILURE_KEY: 1, "process": "agent_3", "pid": 77, "code": -9, "t": 2.5,
                     "last_line": "last words", "new_pid": 78, "resumed_at": 12,
-                    "hung_for": None, "restarted_after": 0.5, "back_after": 3.0}
+                    "hung_for": None, "after_run": False, "restarted_after": 0.5,
+                    "back_after": 3.0}
     assert run_records([line]) == []
 
 

@@ -18,8 +18,8 @@ SCRIPT = os.path.join(REPO, "test", "support", "lost_stage.py")
 STEPS = 3  # 12 rounds of rkmk4; the message of step 1, stage 2 is lost
 
 
-def _run(ros, *extra):
-    proc = ros.start([PY, SCRIPT, scene_path("congruent_triangles"), str(STEPS), *extra],
+def _run(ros, *extra, script=SCRIPT):
+    proc = ros.start([PY, script, scene_path("congruent_triangles"), str(STEPS), *extra],
                      timeout=60)
     assert ros.wait(proc, 70) == 0, ros.output(proc)
     lines = [line for line in ros.output(proc).splitlines() if line.startswith("{")]
@@ -39,3 +39,23 @@ def test_without_resends_the_same_loss_stalls_the_round(ros):
     got = _run(ros, "--no-resend")
     assert got["lost"] == 1, got
     assert any(e and "present but silent" in e for e in got["errors"]), got
+
+
+REPLAY = os.path.join(REPO, "test", "support", "replayed_step.py")
+
+
+def test_a_process_restarted_after_its_last_step_replays_it_with_a_holding_peer_theorem_4_2(ros):
+    """A lockstep process that died after its last step, before the runner had its final
+    state, is restarted and resumes at that step; its peer, holding its final poses, answers
+    the replay with its kept rounds, and the replayed step ends where the centralised run
+    does."""
+    got = _run(ros, script=REPLAY)
+    assert got["errors"] == [None, None], got
+    assert got["deviation"][0] <= 1e-12, got  # the replayed step: still the centralised run
+    assert got["resends"][1] >= 1 and got["repeats"][1] >= 1, got  # the holder answered
+    assert got["drops"] == [0, 0], got
+
+
+def test_a_holding_peer_that_does_not_answer_stalls_the_replay(ros):
+    got = _run(ros, "--no-answer", script=REPLAY)
+    assert got["errors"][0] and "present but silent" in got["errors"][0], got

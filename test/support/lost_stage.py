@@ -52,14 +52,15 @@ def swallow_first(publisher, block, step, stage):
 class Side:
     """One simulated agent process: its node, layout, state and exchange."""
 
-    def __init__(self, scene, the_plan, local, run_id):
+    def __init__(self, scene, the_plan, local, run_id, patience=None):
         self.node = Node(f"agents_{local[0]}_{local[-1]}", namespace="/polymatch")
         self.layout = Layout(scene.model, local, len(local))
         self.system = System(scene.model, self.layout.rows)
         self.state = local_state(scene, self.layout)
         self.exchange = lockstep.LockstepExchange(
             self.node, self.layout, run_id, wire.ROTATION_TOL,
-            DropCounter(self.node.get_logger()), scene.t_end, lockstep.Patience(STALL))
+            DropCounter(self.node.get_logger()), scene.t_end,
+            patience or lockstep.Patience(STALL))
         self.scene, self.plan, self.error = scene, the_plan, None
 
     def run(self, steps):
@@ -102,11 +103,16 @@ def main(argv):
         thread.start()
     for thread in threads:
         thread.join()
+    return report(scene, steps, sides, lost=len(lost))
+
+
+def report(scene, steps, sides, **extra):
+    """Print the JSON line of ``sides`` after ``steps`` steps (``extra`` first), end them."""
     t_end = steps * DT
     reference = simulate(replace(scene, t_end=t_end), "rkmk4", DT, samples=[t_end],
                          metrics=False).final
     print(json.dumps({
-        "lost": len(lost),
+        **extra,
         "errors": [side.error for side in sides],
         "deviation": [None if side.error else side.deviation(reference) for side in sides],
         "resends": [side.exchange.resends for side in sides],
@@ -118,7 +124,6 @@ def main(argv):
         side.node.destroy_node()
     rclpy.shutdown()
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

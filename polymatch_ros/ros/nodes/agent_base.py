@@ -392,14 +392,16 @@ class AgentBase(NodeApp):
         self.flush_poses()
         self.hold_final_poses()
 
-    def hold_final_poses(self) -> None:
+    def hold_final_poses(self, meanwhile: Callable[[], None] | None = None) -> None:
         """On a host without the summary: keep the latched final poses alive (this process)
-        until the host with it says 'received', at most ``hold_final`` s.  Its runner may match
-        our final-pose writers only after we published: a writer that ended by then is gone
-        with its sample."""
+        until the host with it says 'received', at most ``hold_final`` s, calling ``meanwhile``
+        between spins.  Its runner may match our final-pose writers only after we published: a
+        writer that ended by then is gone with its sample."""
         deadline = time.monotonic() + self.params["hold_final"]
         while not self.control.final_received and time.monotonic() < deadline:
             self.spin_once(0.05)
+            if meanwhile is not None:
+                meanwhile()
 
     def final_record(self) -> wire.RunRecord | None:
         return self.record() if self.finished else None

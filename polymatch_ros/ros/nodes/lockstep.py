@@ -77,6 +77,7 @@ class LockstepExchange:
         self.rot_tol, self.t_max = rot_tol, t_max
         self.resends = 0  # rounds re-sent because a peer's message did not come
         self.repeats = 0  # peers' messages of rounds already taken (their resends)
+        self.answered = (0, 0.0)  # after the last round: repeats answered, and when (``answer``)
         self.taken: dict[int, Round] = {}  # peer -> the last round of it this process has taken
         # round -> {the first agent of a message: its rows}: a message of one peer or a block
         self.inbox: defaultdict[Round, dict[int, wire.StageRows]] = defaultdict(dict)
@@ -174,6 +175,20 @@ class LockstepExchange:
 
     def spin_once(self, timeout: float) -> None:
         self.executor.spin_once(timeout_sec=timeout)
+
+    def answer_replays(self, timeout: float) -> None:
+        """After the last round, while the final poses are held: a peer's messages of rounds
+        already taken come from a peer that replays them (one restarted after its last step,
+        before the runner had its final state, resumes at that step from its checkpoint) and
+        waits for ours.  Re-send the kept rounds, which hold that step, at most every
+        ``RESEND_AFTER`` s while new repeats come."""
+        self.executor.spin_once(timeout_sec=timeout)
+        repeats, at = self.answered
+        now = time.monotonic()
+        if self.repeats > repeats and now - at >= RESEND_AFTER:
+            self.resends += 1
+            self.links.resend()
+            self.answered = (self.repeats, now)
 
     def round(
         self, step: int, stage: int, request: Request, stop_flag: bool, timeout: float
@@ -399,7 +414,7 @@ class LockstepAgent(AgentBase):
         hold ran out) wait until our last stage and pose messages are acknowledged: a writer
         that exits takes unacknowledged samples along, and an acknowledgement comes only with
         the writer's next heartbeat, up to 3 s later."""
-        self.hold_final_poses()
+        self.hold_final_poses(lambda: self.exchange.answer_replays(0.02))
         if not self.control.final_received:
             self.exchange.flush()
             self.flush_poses()

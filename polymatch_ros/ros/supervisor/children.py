@@ -63,6 +63,7 @@ class Child:
     lines: deque[str]
     reported_at: float | None
     ended_by_runner: bool
+    died_after_run: bool
     thread: threading.Thread
 
     def __init__(self, name: str, argv: Sequence[str], env: Mapping[str, str] | None,
@@ -92,6 +93,7 @@ class Child:
         self.hung_for: float | None = None  # it hung this long and the runner ended it
         self.reported_at = None  # monotonic time its finished run record arrived
         self.ended_by_runner = False  # it reported, then overstayed, and the runner ended it
+        self.died_after_run = False  # it died with its final states in (``Supervision.failure``)
         self.thread = threading.Thread(target=self._read, args=(self.proc,), daemon=True)
         self.thread.start()
 
@@ -176,7 +178,7 @@ class Child:
 
     def ended_well(self) -> bool:
         code = self.proc.poll()
-        return code == 0 or (code is not None and self.hung_in_teardown())
+        return code == 0 or (code is not None and (self.died_after_run or self.hung_in_teardown()))
 
     def end_if_overstaying(self, seconds: float) -> bool:
         """A process that printed its finished run record and is still running ``seconds``
@@ -316,6 +318,8 @@ class Supervision:
             # ended" would be taken for a failure with exit code 0
             if c.poll() is None or c.ended_well() or self.recovery.pending(c):
                 continue
+            if self.done_before_death(c):
+                continue
             error = self.recovery.died(c, self.watcher.ensemble_time())
             if error is not None:
                 return 1, error
@@ -323,6 +327,21 @@ class Supervision:
             self.rejoin(c)
         self.end_hung()
         return None
+
+    def done_before_death(self, child: Child | DiscoveryServer) -> bool:
+        """An agent process that died after its run had ended, nothing of it needed again: its
+        agents' final states are here and, in lockstep, every agent's (each has then ended its
+        last round, so no peer waits for a message of the dead one).  It is listed among the
+        failures, not restarted.  A lockstep process that died before every final state came
+        is restarted: it replays its last step with its peers (``LockstepAgent.settle``)."""
+        if not isinstance(child, Child) or child is self.monitor or not child.agents:
+            return False
+        done = (self.watcher.have_final_of(child.agents) if self.plan.realtime
+                else self.watcher.have_final())
+        if done:
+            child.died_after_run = True
+            self.recovery.ended(child, min(self.watcher.poses[a][0] for a in child.agents))
+        return done
 
     def end_hung(self) -> None:
         """Lockstep under ``--on-failure restart``: a process stopped for longer than the round
@@ -428,10 +447,14 @@ class Supervision:
 
     def final_everywhere(self) -> bool:
         """Every final pose is here and, in lockstep, the monitor (if any) has reported the
-        final step with every agent: nobody needs another message from the agents."""
+        final step with every agent: nobody needs another message from the agents.  After a
+        process died with its run done (``done_before_death``) the monitor may never hear
+        its final step: the final poses are enough."""
         if not self.watcher.have_final():
             return False
         if self.plan.realtime or self.monitor is None:
+            return True
+        if any(c.died_after_run for c in self.children):
             return True
         return self.watcher.monitor_reported_final()
 

@@ -85,6 +85,7 @@ class Failure:
     new_pid: int | None = None
     resumed_at: int | None = None     # lockstep: the step the new process resumed at
     hung_for: float | None = None     # it hung (stopped) this long before the runner ended it
+    after_run: bool = False           # it died with its run done: not restarted (``ended``)
 
     def how(self) -> str:
         """'killed by SIGKILL' or 'exit code 1'."""
@@ -101,6 +102,8 @@ class Failure:
         how = (self.how() if self.hung_for is None else
                f"hung (stopped) for {self.hung_for:.1f} s, ended by the runner")
         text = f"{self.process} (pid {self.pid}) {how} {when}"
+        if self.after_run:
+            return text + " after its run had ended, its final states in; not restarted"
         if self.restarted is None:
             return text + "; not restarted"
         text += f"; restarted after {self.restarted - self.died:.1f} s as pid {self.new_pid}"
@@ -156,6 +159,14 @@ class Recovery:
         backoff = self.policy.backoff * 2 ** (len(recent) - 1)
         self.due[child.name] = now + max(backoff, child.restart_delay)
         return None
+
+    def ended(self, child: Process, t: float | None) -> None:
+        """Take note of a ``child`` that died after its run had ended, with its final states
+        in the runner's hands: nothing of it is needed again, so it is not restarted (a
+        restarted one would begin a run its peers have ended)."""
+        last = " | ".join(line for line in child.tail(3) if line.strip())
+        self.failures.append(Failure(child.name, child.pid, child.poll() or 0, t, last,
+                                     time.monotonic(), after_run=True))
 
     def pending(self, child: Process) -> bool:
         """A restart of ``child`` is due (it is dead and will be started again)."""

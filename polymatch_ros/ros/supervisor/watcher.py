@@ -244,6 +244,12 @@ class Watcher:
             self.model.order == 1 or len(self.velocities) >= self.model.n_agents
         )
 
+    def have_final_of(self, agents: Sequence[int]) -> bool:
+        """The final states of ``agents`` (poses and, in second order, velocities) are here."""
+        return all(
+            a in self.poses and (self.model.order == 1 or a in self.velocities) for a in agents
+        )
+
     def monitor_reported_final(self) -> bool:
         """The monitor's last report is of the final poses' step, with every agent heard."""
         times = self.pose_times()
