@@ -152,8 +152,11 @@ class AgentBase(NodeApp):
         if command is None:
             self.drops("control", f"bad command {msg.data[:80]!r}")
             return
+        replays = self.control.replays
         _, message = self.control.command(*command)
-        if command[0] != "received":
+        if self.control.replays > replays:
+            self.log.warning(f"control {command[0]}: {message}")
+        elif command[0] != "received":
             self.log.info(f"control {command[0]}: {message}")
 
     def on_pause(self, paused: bool) -> None:

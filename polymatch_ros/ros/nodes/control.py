@@ -83,6 +83,10 @@ class AgentControl:
     current tick.
     ``reset_epoch``: realtime agents go back to their initial state at the first tick past it.
     ``final_received``: the lead host has every final pose (runs across hosts).
+    A pause, resume or reset is applied once per epoch: the same command again (``replays``)
+    is one already applied, delivered twice (a DDS writer's history re-sent to a reader that
+    matched it anew), and applying it again would send a converged ensemble back to its initial
+    state.
     """
 
     def __init__(self, mode: str, on_pause: Callable[[bool], None] | None = None) -> None:
@@ -93,9 +97,16 @@ class AgentControl:
         self.paused = False
         self.reset_epoch: float | None = None
         self.final_received = False
+        self.applied: set[tuple[str, float]] = set()  # (verb, epoch) of each pause/resume/reset
+        self.replays = 0  # those that came again, not applied again
 
     def command(self, verb: str, epoch: float | None = None) -> Answer:
         """Apply one command; return (accepted, message for a service's caller)."""
+        if epoch is not None and verb in ("pause", "resume", "reset"):
+            if (verb, epoch) in self.applied:
+                self.replays += 1
+                return True, f"{verb} of {epoch:.3f} again, already applied: not applied twice"
+            self.applied.add((verb, epoch))
         if verb == "stop":
             self.stop_requested = True
             return True, "stopping" + (" (every process at the same step)"
