@@ -77,7 +77,7 @@ class LockstepExchange:
         self.rot_tol, self.t_max = rot_tol, t_max
         self.resends = 0  # rounds re-sent because a peer's message did not come
         self.repeats = 0  # peers' messages of rounds already taken (their resends)
-        self.answered = (0, 0.0)  # after the last round: repeats answered, and when (``answer``)
+        self.answered = (0, 0.0)  # repeats answered after the last round, and when
         self.taken: dict[int, Round] = {}  # peer -> the last round of it this process has taken
         # round -> {the first agent of a message: its rows}: a message of one peer or a block
         self.inbox: defaultdict[Round, dict[int, wire.StageRows]] = defaultdict(dict)
