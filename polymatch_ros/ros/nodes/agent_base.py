@@ -121,6 +121,7 @@ class AgentBase(NodeApp):
             keys, by = ("exchange_block", "final_exchange_block"), list(self.exchange_blocks)
         self.exchange_pubs = {i: wire.publisher(node, keys[0], dim, i) for i in by}
         self.final_exchange_pubs = {i: wire.publisher(node, keys[1], dim, i) for i in by}
+        self.block_rows = self._block_rows()
 
         def on_own_node(key: str) -> dict[int, Publisher]:
             """The people's topic ``key`` of each local agent, on the agent's own node."""
@@ -217,15 +218,25 @@ class AgentBase(NodeApp):
         else:
             self._publish_exchange(pubs)
 
+    def _block_rows(self) -> dict[int, np.ndarray]:
+        """Packed lockstep: each block's agents as rows of the local groups' states laid end
+        to end (what ``_publish_exchange_blocks`` sends), found once; else empty."""
+        if self.exchange_blocks is None:
+            return {}
+        groups, layout = self.model.groups, self.layout
+        agents = [groups[gi].start + r for gi in layout.local_groups for r in layout.rows[gi]]
+        where = {a: r for r, a in enumerate(agents)}
+        return {b: np.array([where[a] for a in members], dtype=int)
+                for b, members in self.exchange_blocks.items()}
+
     def _publish_exchange_blocks(self, blocks: dict[int, list[int]],
                                  pubs: dict[int, Publisher]) -> None:
         """Every local agent's state with the run's id, one message per block on ``pubs``
         (``wire.encode_exchange_block``)."""
         from std_msgs.msg import Float64MultiArray
 
-        st, grp, model, local = self.state, self.grp, self.model, self.layout.local_groups
+        st, grp, local = self.state, self.grp, self.layout.local_groups
         parts = [gs for gi in local if (gs := st.groups[gi]) is not None]  # every local group
-        agents = [model.groups[gi].start + r for gi in local for r in self.layout.rows[gi]]
         x = np.concatenate([gs.x for gs in parts])
         rot = grp.concat([gs.rot for gs in parts])
         v: np.ndarray | None = None
@@ -234,9 +245,8 @@ class AgentBase(NodeApp):
         ws = [gs.w for gs in parts if gs.w is not None]
         if len(vs) == len(ws) == len(parts):  # second order
             v, w = np.concatenate(vs), grp.algebra_concat(ws)
-        where = {a: r for r, a in enumerate(agents)}
         for b, members in blocks.items():
-            rows = [where[a] for a in members]
+            rows = self.block_rows[b]
             msg = wire.encode_exchange_block(
                 Float64MultiArray(), grp, self.params["run_id"], b, st.t, members, x[rows],
                 grp.take(rot, rows), None if v is None else v[rows],
