@@ -11,6 +11,7 @@ import os
 import re
 
 import numpy as np
+import pytest
 from ros_harness import PY, cli_argv, needs_ros, scene_path
 
 from polymatch_ros.core.scene import load_scene
@@ -138,6 +139,46 @@ def test_a_run_stopped_by_the_stop_service_says_so_and_exits_4(ros):
     assert 0.5 <= float(stopped.group(1)) < 1000 and float(stopped.group(2)) >= 0.5
     assert float(stopped.group(3)) >= load_scene(scene_path(SCENE)).tolerance
     assert "did not converge" not in out
+
+
+STOP_TIME = """
+import sys
+import rclpy
+from std_msgs.msg import String
+from polymatch_ros.core.scene import load_scene
+from polymatch_ros.ros.supervisor.watcher import Watcher
+from polymatch_ros.ros.wire import RunRecord
+
+monitor_t, agents_t = float(sys.argv[2]), [float(t) for t in sys.argv[3:]]
+rclpy.init()
+watcher = Watcher(load_scene(sys.argv[1]), "polymatch", run_id=7)
+def status(**record):
+    watcher._status(String(data=RunRecord(mode="lockstep", run_id=7, **record).to_json()))
+status(role="monitor", t=monitor_t)
+for a, t in enumerate(agents_t):
+    status(role="agent", agents=(a,), t=t)
+watcher._control(String(data="stop"))
+print(f"STOP {watcher.stop_requested_at!r}", flush=True)
+watcher.node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+@pytest.mark.parametrize("monitor_t, agents_t, dated", [
+    (0.45, [0.6] * N, 0.6),                  # the monitor's report is one behind the records
+    (0.75, [0.6] * N, 0.75),                 # the records are the staler
+    (0.45, [0.6] * (N - 1), 0.45),           # an agent not yet heard: the monitor's alone
+])
+def test_a_stop_is_dated_at_the_latest_time_every_agent_is_known_to_have_reached(
+        ros, monitor_t, agents_t, dated):
+    """``stopped by request ... called at t``: the runner dates a stop it did not send at the
+    later of its two lower bounds of the ensemble's time, so a stop called once every agent's
+    run record said t (as the test above calls it) is never dated before t."""
+    args = [scene_path(SCENE), monitor_t, *agents_t]
+    proc = ros.start([PY, "-c", STOP_TIME, *args], timeout=60, name="watcher")
+    rc = ros.wait(proc, 70)
+    out = ros.output(proc)
+    assert rc == 0 and f"STOP {dated!r}" in out, out[-2000:]
 
 
 def test_lifecycle_agent_walks_every_transition_and_steps_only_when_active(ros):

@@ -103,9 +103,7 @@ class Watcher:
         if command is None or command[0] != "stop" or self.stop_sent:
             return
         if self.stop_requested_at is None:
-            t = self.ensemble_time()
-            self.stop_requested_at = t if t is not None else min(self.agent_time().values(),
-                                                                 default=0.0)
+            self.stop_requested_at = self.time_every_agent_reached()
 
     def _status(self, msg: Any) -> None:
         rec = wire.RunRecord.from_json(msg.data)
@@ -188,6 +186,16 @@ class Watcher:
             if len(times) >= self.model.n_agents:
                 self.last_known_time = min(times.values())
         return self.last_known_time
+
+    def time_every_agent_reached(self) -> float:
+        """The latest simulated time every agent is known to have reached: the later of the
+        monitor's last report and the slowest agent's last run record.  Either can be the
+        staler one (the monitor reports at its rate, each agent once a second), so a stop
+        called once every agent's record said t was dated before t by the monitor's alone."""
+        times = self.agent_time()
+        slowest = min(times.values()) if len(times) >= self.model.n_agents else None
+        known = [t for t in (self.ensemble_time(), slowest) if t is not None]
+        return max(known, default=min(times.values(), default=0.0))
 
     def all_heard(self) -> bool:
         """The monitor's last report covered every agent."""
