@@ -6,7 +6,9 @@ Each run is `python -m pytest -q test` (the whole suite, as CI runs it), or pyte
 given arguments (e.g. `-m ros test` for the multi-process ROS tests), in a fresh pytest
 process, bounded by a timeout.  The processes' output of every failed test is kept under
 DIR/run_<k>/<test>/ (POLYMATCH_KEEP_LOGS), so a rare failure can be read afterwards.  Prints
-one line per run and a closing `N passed, N failed` line; exits 1 if any run failed.
+one line per run, then a `  rerun: <test id>` line for each test a green run passed only on its
+rerun (pytest's ``-rR`` summary), and a closing `N passed, N failed` line; the pytest output of a
+run that failed or needed a rerun is kept in DIR/run_<k>.txt.  Exits 1 if any run failed.
 """
 
 import argparse
@@ -16,6 +18,12 @@ import sys
 import time
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def reruns(output):
+    """The test ids of pytest's ``RERUN`` summary lines (pytest-rerunfailures, ``-rR``)."""
+    return [line.split()[1] for line in output.splitlines()
+            if line.startswith("RERUN ") and len(line.split()) > 1]
 
 
 def main(argv=None):
@@ -50,7 +58,10 @@ def main(argv=None):
             f"{tail}",
             flush=True,
         )
-        if not ok:
+        rerun = reruns(proc.stdout) if proc is not None else []
+        for test in rerun:
+            print(f"  rerun: {test}", flush=True)
+        if not ok or rerun:
             os.makedirs(args.logs, exist_ok=True)
             with open(os.path.join(args.logs, f"run_{k}.txt"), "w") as fh:
                 fh.write(proc.stdout if proc is not None else tail)
