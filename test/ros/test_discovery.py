@@ -229,3 +229,21 @@ def test_server_start_fails_cleanly_on_a_taken_port(tmp_path):
         with pytest.raises(PolymatchError, match="already in use"):
             discovery.start_discovery_server(port, seconds=30,
                                              log_path=str(tmp_path / "server.log"))
+
+
+@needs_ros
+def test_a_listening_server_keeps_no_file_a_kill_could_leave_behind(tmp_path):
+    """The server's XML profile is removed once its participant has read it: a server ended by
+    SIGKILL (as the fault tests end it) leaves nothing in the temporary directory."""
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    port = discovery.free_udp_port()
+    server = discovery.start_discovery_server(
+        port, seconds=60, env=dict(os.environ, TMPDIR=str(scratch)),
+        log_path=str(tmp_path / "server.log"))
+    try:
+        assert server.process.poll() is None, server.output()
+        assert list(scratch.iterdir()) == []
+    finally:
+        assert server.stop() == 0, server.output()
+    assert list(scratch.iterdir()) == []

@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 import pytest
+import slot_use
 from proc_group import children as _children
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -226,7 +227,7 @@ def ros_slot(slots=ROS_SLOTS, poll=0.2):
     """Hold one of ``slots`` machine-wide slots (an exclusive ``flock`` on one of ``slots``
     files) while the block runs, ahead of batch work (``_ahead_of_batch_work``); wait for one
     while all are held.  The kernel releases the lock of a process that dies, so a crashed
-    worker holds nothing."""
+    worker holds nothing.  With POLYMATCH_SLOT_LOG set, each hold is logged (``slot_use``)."""
     import fcntl
 
     os.makedirs(SLOT_DIR, exist_ok=True)
@@ -239,7 +240,7 @@ def ros_slot(slots=ROS_SLOTS, poll=0.2):
                 fh.close()
                 continue
             try:
-                with _ahead_of_batch_work():
+                with _ahead_of_batch_work(), slot_use.held():
                     yield i
             finally:
                 fh.close()  # closing the file drops the lock

@@ -72,12 +72,17 @@ def port_taken(host: str, port: int) -> bool:
         return False
 
 
-def serve(args: ServerOptions, directory: str) -> None:
-    """Become the server participant; return once stopped."""
+def serve(args: ServerOptions) -> None:
+    """Become the server participant; return once stopped.
+
+    The profile file lives only until the participant has read it: a server ended by SIGKILL
+    (the fault tests kill it) or by the teardown watchdog leaves nothing behind in the
+    temporary directory.
+    """
     if port_taken(args.host, args.port):
         raise ParameterError(f"UDP port {args.host}:{args.port} is already in use")
-    profile = os.path.join(directory, "discovery_server.xml")
-    with open(profile, "w") as out:
+    handle, profile = tempfile.mkstemp(prefix="polymatch_ds_", suffix=".xml")
+    with os.fdopen(handle, "w") as out:
         out.write(discovery.server_profile_xml(args.host, args.port, args.server_id))
     for name in discovery.DISCOVERY_VARIABLES:
         os.environ.pop(name, None)
@@ -89,7 +94,10 @@ def serve(args: ServerOptions, directory: str) -> None:
     import rclpy
     from rclpy.node import Node
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    node = Node("polymatch_discovery_server")
+    try:
+        node = Node("polymatch_discovery_server")   # the participant reads the profile here
+    finally:
+        os.unlink(profile)
     if not port_taken(args.host, args.port):
         raise ParameterError(f"the discovery server did not open UDP {args.host}:{args.port}")
     print(f"{READY_LINE} {args.host}:{args.port} (GUID prefix "
@@ -106,8 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """The server process: 0 once stopped, the error's exit code after one line."""
     try:
         args, _ = parse(sys.argv[1:] if argv is None else argv)
-        with tempfile.TemporaryDirectory(prefix="polymatch_ds_") as directory:
-            serve(args, directory)
+        serve(args)
     except PolymatchError as exc:
         print(f"polymatch: error: {exc}", file=sys.stderr)
         return exc.exit_code
