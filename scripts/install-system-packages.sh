@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# System tools the multi-host tests use: iproute2 (network namespaces), nftables (packet loss),
-# tcpdump (proof that no DDS packet leaves the namespaces).  Idempotent: installs with apt-get
+# System tools: cmake and g++ build the interface package (build-interfaces.sh); the multi-host
+# tests use iproute2 (network namespaces), nftables (packet loss), tcpdump (proof that no DDS
+# packet leaves the namespaces).  Idempotent: installs with apt-get
 # only what is missing, only as root; prints one line saying what it did.
 set -euo pipefail
 
-wanted=(iproute2 nftables tcpdump)
+wanted=(cmake g++ iproute2 nftables tcpdump)
 missing=()
 for pkg in "${wanted[@]}"; do
     if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
