@@ -73,8 +73,8 @@ EVENTS = textwrap.dedent("""
     rclpy.init()
     node = rclpy.create_node("events_probe")
     bare = len(list(node.waitables))  # the node's own rosout and parameter-event writers'
-    per_agent = [wire.publisher(node, "exchange", 2, 0), wire.publisher(node, "pose", 2, 0),
-                 wire.subscription(node, "final_exchange", print, 2, 0)]
+    per_agent = [wire.publisher(node, "state", 2, 0), wire.publisher(node, "pose", 2, 0),
+                 wire.subscription(node, "final_state", print, 2, 0)]
     own = [wire.publisher(node, "status"), wire.subscription(node, "control", print)]
     print("EVENTS", [len(e.event_handlers) for e in per_agent],
           [len(e.event_handlers) for e in own], len(list(node.waitables)) - bare,

@@ -83,9 +83,9 @@ def main():
     stage = node.create_publisher(Float64MultiArray, wire.full_name(
         ensemble, "stage", agent), qos["stage"])
     exchange = node.create_publisher(Float64MultiArray, wire.full_name(
-        ensemble, "exchange", agent), qos["pose"])
+        ensemble, "state", agent), qos["pose"])
     final = node.create_publisher(Float64MultiArray, wire.full_name(
-        ensemble, "final_exchange", agent), qos["latched"])
+        ensemble, "final_state", agent), qos["latched"])
     status = node.create_publisher(String, wire.full_name(ensemble, "status"), qos["status"])
     end = time.monotonic() + seconds
     k = 0

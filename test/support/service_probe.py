@@ -46,7 +46,7 @@ class Probe:
         self.node.create_subscription(String, "/polymatch/status", self._status, latched)
 
     def _status(self, msg):
-        rec = RunRecord.from_json(msg.data)
+        rec = RunRecord.from_msg(msg)
         if rec is not None and rec.role == "agent":
             self.times[rec.agents] = rec.t
 

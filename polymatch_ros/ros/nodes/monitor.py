@@ -1,7 +1,8 @@
 """The monitor: hears every agent's pose and publishes the ensemble's diameters.
 
-It reads the run's exchange (``agent_<i>/exchange``, ``wire.exchange``), whose messages carry
-the run's id: a pose published on ``agent_<i>/pose`` by anything else does not reach it.
+It reads the run's states (``agent_<i>/state``, ``polymatch_interfaces/msg/AgentState``,
+``wire.exchange``), whose messages carry the run's id: a pose published on ``agent_<i>/pose``
+by anything else does not reach it.
 
     ros2 run polymatch_ros monitor --ros-args -r __ns:=/polymatch -r __node:=monitor \\
         -p scene:=config/congruent_triangles.yaml
@@ -12,7 +13,8 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
                                         (max over groups; similar groups at their mean scale)
   diameter/centroid   std_msgs/Float64  max_{i,j} |xbar_i - xbar_j| (max over groups)
   diameter/rotation   std_msgs/Float64  max_{i,j} |O_i - O_j|_F (max over groups)
-  status              std_msgs/String   its run record (JSON, ``wire.RunRecord``), latched
+  status              polymatch_interfaces/RunRecord  its run record (``wire.RunRecord``),
+                                        latched
   certificate         diagnostic_msgs/DiagnosticStatus  whether matching is guaranteed and by
                                         when (``core.certificate``), latched; granted once, in
                                         lockstep, and never withdrawn
@@ -135,11 +137,11 @@ class MonitorNode(NodeApp):
         k = self.params["agents_per_process"]
         if self.lockstep and k > 1:  # packed lockstep processes: a message per block and step
             for b in range(-(-self.n // k)):
-                self.readers.subscribe("exchange_block", self._block_receiver(b, k), dim, b,
+                self.readers.subscribe("state_block", self._block_receiver(b, k), dim, b,
                                        "lockstep")
         else:
             for a in range(self.n):
-                self.readers.subscribe("exchange", self._receiver(a), dim, a,
+                self.readers.subscribe("state", self._receiver(a), dim, a,
                                        self.params["mode"])
         self.control = EnsembleControl(node, self.params["mode"])
 
@@ -303,7 +305,7 @@ class MonitorNode(NodeApp):
     def _publish(
         self, t: float, rows: Mapping[int, wire.Row], velocities: Mapping[int, Velocity]
     ) -> None:
-        from std_msgs.msg import Float64, String
+        from std_msgs.msg import Float64
 
         met, keep = self._evaluate(t, rows, velocities)
         statuses = component_statuses(self, t, rows)
@@ -319,7 +321,7 @@ class MonitorNode(NodeApp):
             arr = diagnostics(self, t, met, keep, len(rows))
             arr.status.extend(statuses)
             self.diag_pub.publish(arr)
-        self.status_pub.publish(String(data=self.record().to_json()))
+        self.status_pub.publish(self.record().to_msg())
         self._certify(t, rows, velocities, met.diameter)
         if self.marker_pub is not None and self.marker_pub.get_subscription_count():
             self.marker_pub.publish(markers(self, {a: (r.x, r.rot) for a, r in rows.items()}))

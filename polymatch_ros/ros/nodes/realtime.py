@@ -77,7 +77,7 @@ class PeerTable:
         # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
         self.want_v = velocities and self.model.order == 2 and self.model.centroids_exact
         for a in layout.peers:  # the run's exchange (wire.exchange): pinned to this run's id
-            self.readers.subscribe("exchange", self._receiver(a), dim, a, "realtime")
+            self.readers.subscribe("state", self._receiver(a), dim, a, "realtime")
 
     @classmethod
     def of_agent(cls, agent: AgentBase, clock: ClockOffsets | None = None) -> PeerTable:
