@@ -135,7 +135,10 @@ def _hosts(args: argparse.Namespace, scene: Scene, bridge: bool) -> Hosts:
             "--only: set the same ROS_DOMAIN_ID on every host (e.g. export ROS_DOMAIN_ID=17)"
         )
     lead = args.monitor or len(agents) == n
-    return Hosts(args.ensemble, agents, args.monitor, lead, spec, requested, args.agent_nodes)
+    if args.run_id is not None and not 1 <= args.run_id < 2**63:
+        raise ParameterError(f"--run-id: {args.run_id} is not in 1 .. 2^63 - 1")
+    return Hosts(args.ensemble, agents, args.monitor, lead, spec, requested, args.agent_nodes,
+                 args.run_id)
 
 
 def check_ensemble(name: str) -> None:
@@ -241,6 +244,13 @@ def _add_ensemble_options(p: argparse.ArgumentParser) -> None:
         metavar="RANGE",
         help="run only these agents on this host, e.g. 0-7,12 (the others run on other hosts "
         "with the same ROS_DOMAIN_ID, --ensemble and --discovery)",
+    )
+    p.add_argument(
+        "--run-id",
+        type=int,
+        metavar="ID",
+        help="the run id every message of the run carries (1 .. 2^63 - 1), for agents started "
+        "by other programs or hosts (default: chosen, the same on every host of an --only run)",
     )
     p.add_argument(
         "--discovery",

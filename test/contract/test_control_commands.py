@@ -3,8 +3,8 @@ resume or reset is applied once per epoch, however often it is delivered."""
 
 import pytest
 from builtin_interfaces.msg import Time
-from polymatch_interfaces.msg import ControlCommand
 
+from polymatch_interfaces.msg import ControlCommand
 from polymatch_ros.ros.nodes.control import AgentControl, command_message, parse_command
 
 

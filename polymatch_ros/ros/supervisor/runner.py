@@ -183,9 +183,11 @@ def _start_server(context: RunContext, directory: str) -> DiscoveryServer | None
 
 
 def _run_id(plan: RunPlan) -> int:
-    """A fresh random id; on hosts that each run some agents (--only), the same id on every
-    host: a hash of what all of them must agree on (scene file, times, method, ensemble,
-    domain)."""
+    """The id given (--run-id), else a fresh random id; on hosts that each run some agents
+    (--only), the same id on every host: a hash of what all of them must agree on (scene file,
+    times, method, ensemble, domain)."""
+    if plan.hosts.run_id is not None:
+        return plan.hosts.run_id
     if plan.every_agent_here:
         return random.randrange(1, 2**31 - 1)
     with open(plan.scene_path, "rb") as fh:
