@@ -303,6 +303,8 @@ def _stage_rows(msg: Any, grp: RotationGroup, dim: int, run_id: int, sender: int
         mats = values.reshape(-1, grp.dim, grp.dim)
         if orthogonality(mats) > rot_tol:
             return None, "rotation not orthogonal"
+        if np.any(np.linalg.det(mats) < 0):     # orthogonal, but a reflection: not in SO(d)
+            return None, "rotation not in SO(d)"
         rot = grp.from_matrices(mats)
     x, v = rows.get("x"), rows.get("v")
     return StageRows(agents, int(msg.step), int(msg.stage), _flags(msg), float(msg.t), rot,
