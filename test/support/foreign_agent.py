@@ -56,7 +56,8 @@ class ForeignAgent:
         self.dropped = self.steps = 0
         ns = "/" + ensemble
         self.status = node.create_publisher(RunRecord, f"{ns}/status", qos(1, True, True))
-        self.pub = node.create_publisher(AgentState, f"{ns}/agent_{me}/state", qos(100, True, False))
+        self.pub = node.create_publisher(AgentState, f"{ns}/agent_{me}/state",
+                                         qos(100, True, False))
         self.final = node.create_publisher(AgentState, f"{ns}/agent_{me}/final_state",
                                            qos(1, True, True))
         for j in range(self.n):
