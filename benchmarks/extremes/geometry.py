@@ -274,10 +274,11 @@ def explain_large(v):
         for dim, rotations in ((2, "uniform"), (3, "uniform"), (3, "{within: 0.2}")):
             for n in sizes:
                 path = os.path.join(tmp, f"explain_{dim}_{n}.yaml")
+                shape = "triangle" if dim == 2 else "tetrahedron"
                 with open(path, "w", encoding="utf-8") as fh:
                     fh.write(f"name: explain_{n}\ndimension: {dim}\nseed: 1\nmodel: {{order: 1}}\n"
                              f"integrator: {{method: rkmk4, dt: 0.05}}\ntime: {{t_end: 30}}\n"
-                             f"groups:\n  - {{name: g, shape: {'triangle' if dim == 2 else 'tetrahedron'},"
+                             f"groups:\n  - {{name: g, shape: {shape},"
                              f" count: {n}, rotations: {rotations}}}\n")
                 t0 = time.perf_counter()
                 out = subprocess.run(["timeout", "600", sys.executable, "-m", "polymatch_ros.cli",
