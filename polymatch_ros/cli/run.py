@@ -193,7 +193,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     _add_ensemble_options(p)
     _add_bridge_options(p)
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true",
+                   help="no first line and no progress; the summary and errors only")
     p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
     p.add_argument("--records", metavar="JSONL",
                    help="write every process's run record (JSON, one a line) to this file")

@@ -190,7 +190,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("explain",
                        help="which model, representation and integrator a scene uses, and why")
-    p.add_argument("scene")
+    p.add_argument("scene", help="scene file or shipped scene name")
     add_integrator_options(p)
     p.add_argument("--distributed", action="store_true", help="as the ROS node set would run it")
     p.set_defaults(func=cmd_explain)
