@@ -10,6 +10,10 @@ from __future__ import annotations
 import importlib
 import textwrap
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..ros.nodes.params import Param
 
 #: node -> (its module, the attribute of its parameter table, what it is)
 NODE_TABLES: dict[str, tuple[str, str, str]] = {
@@ -46,11 +50,10 @@ def node_help(name: str) -> str:
     return "\n".join(lines)
 
 
-def _summary(p: object) -> str:
-    kind = _KINDS.get(getattr(p, "kind"), "value")
-    default = getattr(p, "default")
-    parts = [kind, f"default {_shown(default)}" if getattr(p, "fixed") else "no fixed default"]
-    bounds, choices = getattr(p, "bounds"), getattr(p, "choices")
+def _summary(p: Param) -> str:
+    kind = _KINDS.get(p.kind, "value")
+    parts = [kind, f"default {_shown(p.default)}" if p.fixed else "no fixed default"]
+    bounds, choices = p.bounds, p.choices
     if bounds is not None:
         parts.append(f"range [{_shown(float(bounds[0]))}, {_shown(float(bounds[1]))}]")
     if choices:

@@ -40,7 +40,7 @@ def _limits(args: argparse.Namespace) -> Limits | None:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """A centralised run of a scene: progress, summary table, verdict; npz and figure."""
-    from ..core.simulate import explain, simulate
+    from ..core.simulate import explain, plan, simulate
     save = writable_output(args.save, ".npz") if args.save else None
     figure = writable_output(args.figure, ".png") if args.figure else None
     scene = load_scene(args.scene, {"time.t_end": args.t_end}, limits=_limits(args))
@@ -54,6 +54,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.explain:
         print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
         print(certificate_line(scene))
+        plan(scene, args.integrator, args.dt, args.tolerance)  # a refusal: its error, exit 2
         return 0
     progress = Progress(scene.t_end, args.quiet)
     traj = simulate(scene, args.integrator, args.dt, args.tolerance, samples=samples,
@@ -108,14 +109,16 @@ def save_npz(traj: Trajectory, path: str) -> None:
 
 
 def cmd_explain(args: argparse.Namespace) -> int:
-    """Which model, representation and integrator a scene uses, and why."""
-    from ..core.simulate import explain
+    """Which model, representation and integrator a scene uses, and why; then, for a run
+    that ``simulate`` would refuse, the refusal as an error (exit code 2)."""
+    from ..core.simulate import explain, plan
     scene = load_scene(args.scene, limits=_limits(args))
     check_run(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed,
               limits=_limits(args))
     print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance,
                             distributed=args.distributed)))
     print(certificate_line(scene))
+    plan(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed)
     return 0
 
 
@@ -140,7 +143,9 @@ def cmd_integrators(args: argparse.Namespace) -> int:
 
 
 def cmd_scenes(args: argparse.Namespace) -> int:
-    """The shipped scenes as a table."""
+    """The shipped scenes as a table; ``simulate`` says whether the scene runs as shipped or is
+    kept to show a refusal (``polymatch simulate`` exits 2 with the reason)."""
+    from ..core.simulate import plan
     rows = []
     for d in shipped_config_dirs()[:1]:
         for sub in ("", "extremes"):
@@ -155,10 +160,18 @@ def cmd_scenes(args: argparse.Namespace) -> int:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
                         s = load_scene(os.path.join(folder, f))
-                    rows.append([name, s.dim, s.model.n_agents, s.model.order, s.description])
                 except PolymatchError as exc:
-                    rows.append([name, "?", "?", "?", f"invalid: {exc}"])
-    print(format_table(rows, ["scene", "d", "N", "order", "description"]))
+                    rows.append([name, "?", "?", "?", "invalid", f"invalid: {exc}"])
+                    continue
+                try:
+                    plan(s)
+                    runs = "runs"
+                except PolymatchError:
+                    runs = "refused"             # kept to show how a refusal reads
+                rows.append([name, s.dim, s.model.n_agents, s.model.order, runs, s.description])
+    print(format_table(rows, ["scene", "d", "N", "order", "simulate", "description"]))
+    print("refused: kept to show a refusal; `polymatch simulate SCENE` names the cause "
+          "and exits 2")
     return 0
 
 

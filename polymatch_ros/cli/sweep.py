@@ -73,7 +73,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--dimension", type=_list(int, 2, "a dimension"), default=(None,),
                    metavar="D,D", help="comma-separated dimensions d >= 2 (default: the scene's)")
     p.add_argument("--agents", type=_list(int, 2, "an agent count"), default=(None,),
-                   metavar="N,N", help="comma-separated agent counts N >= 2 (default: the scene's)")
+                   metavar="N,N",
+                   help="comma-separated agent counts N >= 2 (default: the scene's)")
     p.add_argument("--order", type=_list(int, 1, "a model order"), default=(None,),
                    metavar="1,2", help="comma-separated model orders: 1 (A-2), 2 (A-1) "
                    "(default: the scene's)")
