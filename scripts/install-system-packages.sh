@@ -1,10 +1,23 @@
 #!/usr/bin/env bash
-# System tools the multi-host tests use: iproute2 (network namespaces), nftables (packet loss),
-# tcpdump (proof that no DDS packet leaves the namespaces).  Idempotent: installs with apt-get
-# only what is missing, only as root; prints one line saying what it did.
+# System tools a command needs, by what it runs:
+#   demo (the default)  none: the demo and the centralised commands need only Python packages
+#   test                iproute2 (network namespaces), nftables (packet loss), tcpdump (proof
+#                       that no DDS packet leaves the namespaces), for the multi-host tests
+# Idempotent: installs with apt-get only what is missing, only as root; prints one line saying
+# what it did.
 set -euo pipefail
 
-wanted=(iproute2 nftables tcpdump)
+purpose=${1:-demo}
+case "$purpose" in
+    demo) wanted=() ;;
+    test) wanted=(iproute2 nftables tcpdump) ;;
+    *) echo "install-system-packages.sh: unknown purpose '$purpose' (demo or test)" >&2
+       exit 2 ;;
+esac
+if [ ${#wanted[@]} -eq 0 ]; then
+    echo "system packages: none needed for the $purpose"
+    exit 0
+fi
 missing=()
 for pkg in "${wanted[@]}"; do
     if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
