@@ -191,7 +191,7 @@ def cmd_scenes(args: argparse.Namespace) -> int:
     """The shipped scenes as a table; ``simulate`` says whether the scene runs as shipped or is
     kept to show a refusal (``polymatch simulate`` exits 2 with the reason)."""
     from ..core.simulate import plan
-    rows = []
+    rows: list[list[object]] = []
     for d in shipped_config_dirs()[:1]:
         for sub in ("", "extremes"):
             folder = os.path.join(d, sub)
