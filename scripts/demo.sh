@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Set up (scripts/setup.sh), then the main demo: eight congruent triangles (Figure 1), one ROS
-# process each plus the monitor, in lockstep.  Extra arguments go to `polymatch run`.
+# Set up (scripts/setup.sh; of the system packages only cmake and g++), then the main demo: eight congruent triangles
+# (Figure 1), one ROS process each plus the monitor, in lockstep.  Extra arguments go to
+# `polymatch run`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh

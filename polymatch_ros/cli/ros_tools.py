@@ -37,7 +37,7 @@ def cmd_set(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """The ``echo`` and ``set`` subcommands."""
     p = sub.add_parser("echo", help="print messages of a topic (stand-in for `ros2 topic echo`)")
-    p.add_argument("topic")
+    p.add_argument("topic", help="absolute topic name, e.g. /polymatch/diameter")
     p.add_argument("--count", type=int, help="exit after this many messages")
     p.add_argument(
         "--until-below", type=float, metavar="X", help="exit 0 once a Float64 value is below X"

@@ -14,10 +14,11 @@ import os
 
 from ..console import add_number_options, positive_float, writable_output
 from ..core.errors import ParameterError, PolymatchError
-from ..core.scene import Scene, load_scene, resolve_scene_path
+from ..core.scene import Scene, resolve_scene_path
 from ..core.simulate import plan as numerical_plan
 from ..ros.supervisor.plan import MODES, BridgeOptions, Hosts, Outputs, RunPlan, Timing
 from ..ros.supervisor.recovery import POLICIES, RestartPolicy
+from .scene_commands import check_integrator_option, load_scene_options, naming_dt_option
 
 # (flag, type, default, help) of the options that set how the agents step and wait
 RUN_OPTIONS = (
@@ -56,8 +57,9 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def build_plan(args: argparse.Namespace) -> RunPlan:
     """The checked ``RunPlan`` of the parsed ``polymatch run`` arguments; one-line errors."""
+    check_integrator_option(args.integrator)
     scene_path = resolve_scene_path(args.scene)
-    scene = load_scene(scene_path, {"time.t_end": args.t_end})
+    scene = load_scene_options(scene_path, args.t_end)
     bridge = None
     if args.mode == "bridge":
         from ..ros.supervisor import bridge_run
@@ -66,7 +68,8 @@ def build_plan(args: argparse.Namespace) -> RunPlan:
         scene = bridge_run.prepare(scene, bridge, args.only)  # the noise-floor tolerance
     timing = _timing(args, bridge is not None)
     dt = timing.time_scale / timing.rate if args.mode != "lockstep" else args.dt
-    numerics = numerical_plan(scene, args.integrator, dt, distributed=True)  # errors first
+    with naming_dt_option(args.dt if args.mode == "lockstep" else None):  # errors first
+        numerics = numerical_plan(scene, args.integrator, dt, distributed=True)
     outputs = Outputs(
         save=writable_output(args.save, ".npz") if args.save else None,  # before a long run
         records=args.records,
@@ -196,7 +199,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     _add_ensemble_options(p)
     _add_bridge_options(p)
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true",
+                   help="no first line and no progress; the summary and errors only")
     p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
     p.add_argument("--records", metavar="JSONL",
                    help="write every process's run record (JSON, one a line) to this file")

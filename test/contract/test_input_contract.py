@@ -169,3 +169,14 @@ def test_mutated_scenes_keep_the_contract_property_based():
     assert sum(stats.values()) >= 300
     assert any(k.startswith("ran") for k in stats)          # mutations do not break everything
     assert sum(v for k, v in stats.items() if k.startswith("refused")) > 100
+
+
+@pytest.mark.parametrize("argv,want", [
+    (["-i", "rk5"], "--integrator: unknown integrator 'rk5'; known: "),
+    (["--t-end", "1e300"], "--t-end 1e+300: time.samples.every: "),
+    (["--dt", "10", "--t-end", "100"], "--dt: rkmk4 is unstable at dt = 10"),
+])
+def test_run_names_the_option_before_any_process_starts(argv, want):
+    code, out, err = run_main(["run", "congruent_triangles", *argv], 20.0)
+    assert code == 2 and err.count("\n") == 1, err
+    assert err.startswith("polymatch: error: " + want), err
