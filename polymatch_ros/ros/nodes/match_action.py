@@ -120,6 +120,8 @@ class MatchServer:
 
     def _finish(self, handle: ServerGoalHandle) -> Any:
         """The execute callback, called once a goal is decided (``_end``): its result."""
+        from action_msgs.msg import GoalStatus
+
         from polymatch_interfaces.action import Match
 
         pursuit = next(p for p in self.pursuits if p.handle is handle)
@@ -137,7 +139,9 @@ class MatchServer:
             handle.succeed()
         else:
             handle.abort()
-        self.log.info(f"match goal ended: {reason}")
+        status = {GoalStatus.STATUS_SUCCEEDED: "succeeded", GoalStatus.STATUS_ABORTED: "aborted",
+                  GoalStatus.STATUS_CANCELED: "canceled"}.get(handle.status, str(handle.status))
+        self.log.info(f"match goal {status}: {reason}, diameter {result.diameter:.3e}")
         return result
 
     def report(self, t: float, met: EnsembleMetrics, heard: int,
