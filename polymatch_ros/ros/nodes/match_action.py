@@ -191,6 +191,8 @@ class MatchServer:
                 below = (rep is not None and rep.agents_heard == self.n_agents
                          and rep.diameter < pursuit.tolerance)
                 self._end(pursuit, below, "matched" if below else "run ended")
+        if not self.pursuits and not self._results_pending():
+            return  # no goal to answer: the monitor's end is not delayed
         deadline = time.monotonic() + RESULT_SECONDS
         settled = 0  # turns with nothing left: the results' responses go out in later tasks
         while time.monotonic() < deadline and settled < 5:
