@@ -2,9 +2,10 @@
 
 Every option is checked here, before any process starts (one line, exit 2): the scene and the
 integrator, --save writable, --agents-per-process, the ensemble's namespace, --only, the
-discovery spec, the ROS_DOMAIN_ID a run across hosts needs, and the bridge mode's robots.  The
-runner (``polymatch_ros.ros.supervisor.runner``) then takes the plan as it is.  ROS modules are
-imported when the command runs, not when the parser is built.
+discovery spec, the ROS_DOMAIN_ID (the user's, which a run across hosts needs set; --isolated:
+a private one), and the bridge mode's robots.  The runner (``polymatch_ros.ros.supervisor.runner``)
+then takes the plan as it is.  ROS modules are imported when the command runs, not when the
+parser is built.
 """
 
 from __future__ import annotations
@@ -137,11 +138,21 @@ def _hosts(args: argparse.Namespace, scene: Scene, bridge: bool) -> Hosts:
         raise ParameterError(
             "--only: set the same ROS_DOMAIN_ID on every host (e.g. export ROS_DOMAIN_ID=17)"
         )
+    if len(agents) < n and args.isolated:
+        raise ParameterError("--isolated: a run across hosts (--only) needs the same "
+                             "ROS_DOMAIN_ID on every host, not a private one")
+    if not args.isolated:
+        from ..ros.supervisor.environment import user_domain_id
+
+        try:
+            user_domain_id()
+        except ValueError as exc:
+            raise ParameterError(str(exc)) from None
     lead = args.monitor or len(agents) == n
     if args.run_id is not None and not 1 <= args.run_id < 2**63:
         raise ParameterError(f"--run-id: {args.run_id} is not in 1 .. 2^63 - 1")
     return Hosts(args.ensemble, agents, args.monitor, lead, spec, requested, args.agent_nodes,
-                 args.run_id)
+                 args.isolated, args.run_id)
 
 
 def check_ensemble(name: str) -> None:
@@ -236,6 +247,13 @@ def _add_ensemble_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--ensemble", default="polymatch", help="ensemble namespace (default polymatch)"
+    )
+    p.add_argument(
+        "--isolated",
+        action="store_true",
+        help="run in a fresh ROS domain of its own, which nothing else hears (tests, "
+        "benchmarks); default: your ROS graph (your ROS_DOMAIN_ID, or ROS's default 0), which a "
+        "second shell sees",
     )
     p.add_argument(
         "--no-monitor",

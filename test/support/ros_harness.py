@@ -67,8 +67,9 @@ class Ros:
         self.procs = []
         self.shm_before = set(glob.glob("/dev/shm/fastrtps_*"))
 
-    def start(self, argv, timeout, name=""):
-        """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file.
+    def start(self, argv, timeout, name="", env=None):
+        """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file;
+        ``env``: another environment than the world's (with its ROS_DOMAIN_ID, ``domain``).
         With POLYMATCH_KEEP_LOGS, a `polymatch run` also writes its processes' output
         (``--logs``), kept beside its own when the test fails."""
         argv, run_logs = list(map(str, argv)), None
@@ -84,7 +85,7 @@ class Ros:
         )
         proc = subprocess.Popen(
             ["timeout", "-k", "5", str(timeout)] + list(argv),
-            env=self.env,
+            env=self.env if env is None else env,
             stdout=log,
             stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL,

@@ -240,6 +240,10 @@ class EnsembleControl:
         self._send("stop")
         return True, "stop sent to every agent"
 
+    def stop(self) -> Answer:
+        """What the ``stop`` service does (the ``match`` action's cancel calls it)."""
+        return self._stop()
+
     def _pause(self, on: bool) -> Answer:
         self._send("pause" if on else "resume", time.time())
         return True, f"{'pause' if on else 'resume'} sent to every agent"

@@ -26,6 +26,9 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
                       one colour per group, lifetime = peer_timeout so silent agents fade
   start, stop, reset  std_srvs/Trigger  the ensemble's services (``control``), broadcast
   pause               std_srvs/SetBool  to every agent on the control topic
+  match               polymatch_interfaces/action/Match  a goal until the diameter is below a
+                                        tolerance, with feedback at each report; its cancel
+                                        stops the ensemble (``match_action``)
 In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
 second, the latest simulated time that every agent's pose has reached (its loop, at that rate,
 takes the poses that came since its last report and publishes it, so the last step is reported
@@ -55,6 +58,7 @@ from ...core.proximity import ComponentTracker
 from .. import wire
 from .control import EnsembleControl
 from .exchange import DropCounter, LeanReaders, received_at
+from .match_action import MatchServer
 from .monitor_output import certificate_status, diagnostics, markers
 from .params import MONITOR, declare, resolve_monitor
 from .process import NodeApp, ros_main
@@ -144,6 +148,7 @@ class MonitorNode(NodeApp):
                 self.readers.subscribe("state", self._receiver(a), dim, a,
                                        self.params["mode"])
         self.control = EnsembleControl(node, self.params["mode"])
+        self.match = MatchServer(node, self.scene.tolerance, self.n, self.control)
 
     def _wait_for_report_readers(self) -> None:
         """Until ``report_readers`` readers matched every report writer (at most
@@ -323,6 +328,7 @@ class MonitorNode(NodeApp):
             self.diag_pub.publish(arr)
         self.status_pub.publish(self.record().to_msg())
         self._certify(t, rows, velocities, met.diameter)
+        self.match.report(t, met, len(rows), self.certificate)
         if self.marker_pub is not None and self.marker_pub.get_subscription_count():
             self.marker_pub.publish(markers(self, {a: (r.x, r.rot) for a, r in rows.items()}))
 
@@ -383,6 +389,7 @@ class MonitorNode(NodeApp):
                 self.report_due()
         if self.lockstep:
             self._report_completed()
+        self.match.close(self.executor)  # open goals end; their results go out
         return 0
 
     def _stop(self, sig: int, frame: FrameType | None) -> None:
@@ -390,6 +397,7 @@ class MonitorNode(NodeApp):
 
     def destroy(self) -> None:
         self.readers.destroy()
+        self.match.destroy()
         super().destroy()
 
     def final_record(self) -> wire.RunRecord | None:

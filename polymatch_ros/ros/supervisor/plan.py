@@ -32,6 +32,7 @@ class Hosts:
     discovery: DiscoverySpec           # how the DDS participants find each other
     agents_per_process: int | None     # -k as asked (bridge mode: 1); None: choose
     agent_nodes: str = "auto"          # --agent-nodes: auto | full | lean | none (``hosted``)
+    isolated: bool = False             # --isolated: a fresh private domain, not the user's
     run_id: int | None = None          # --run-id: the id every message of the run carries;
                                        # None: chosen (``runner``)
 

@@ -2,11 +2,11 @@
 
 Starts the monitor and one process per agent (or per K agents) in the ensemble's namespace
 (``-r __ns:=/<ensemble>``, nodes ``agent_<i>`` and ``monitor``), all with loopback discovery
-and a fresh ROS_DOMAIN_ID unless the user set them; shows progress (simulated time,
-diameter, rounds/s); stops at t_end or once the diameter has stayed under the scene's
-tolerance; prints a summary (final diameters per group, in lockstep the deviation from the
-centralised solution, wall time, rounds/s) from the agents' final poses and run records; and
-ends every process it started, by PID, also on Ctrl-C and when a child dies.
+unless the user set otherwise, in the user's ROS domain (``--isolated``: a fresh one); shows
+progress (simulated time, diameter, rounds/s); stops at t_end or once the diameter has stayed
+under the scene's tolerance; prints a summary (final diameters per group, in lockstep the
+deviation from the centralised solution, wall time, rounds/s) from the agents' final poses and
+run records; and ends every process it started, by PID, also on Ctrl-C and when a child dies.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ from .discovery import (
     discovery_environments,
     start_discovery_server,
 )
-from .environment import reserved_domain_id, ros_environment
+from .environment import describe_domain, ros_environment, run_domain_id
 from .packing import PackingChoice, choose_packing
 from .plan import RunPlan
 from .recording import report_recording, start_recorder
@@ -62,7 +62,7 @@ class RunContext:
     domain: int                           # ROS_DOMAIN_ID
     envs: DiscoveryEnvironments | None    # client/super-client/server overlays, --discovery
     packing: PackingChoice                # -k as given, or chosen (``choose_packing``)
-    shared_domain: bool                   # the user's ROS_DOMAIN_ID, or discovery beyond loopback
+    shared_domain: bool                   # the user's domain, or discovery beyond loopback
     directory: str                        # the run's private temporary directory
     run_id: int                           # the stage messages' and checkpoints' run id
 
@@ -103,10 +103,11 @@ def run(plan: RunPlan) -> int:
 
     The caller ends the process with it (``teardown.end_process``): rclpy ran in this process.
     """
-    # a domain reserved for this run holds no other ensemble; the user's, or one reached
-    # beyond loopback, may (``Watcher.refuse_names_in_use``)
-    shared = bool(os.environ.get("ROS_DOMAIN_ID")) or plan.hosts.discovery.kind != "localhost"
-    with reserved_domain_id() as domain, tempfile.TemporaryDirectory(
+    # a domain reserved for this run (--isolated) holds no other ensemble; the user's, or one
+    # reached beyond loopback, may (``Watcher.refuse_names_in_use``)
+    isolated = plan.hosts.isolated
+    shared = not isolated or plan.hosts.discovery.kind != "localhost"
+    with run_domain_id(isolated) as domain, tempfile.TemporaryDirectory(
         prefix="polymatch_run_"
     ) as directory:
         env = ros_environment(domain)
@@ -342,6 +343,8 @@ def _announce(context: RunContext) -> None:
         f"ensemble {wire.namespace(plan.hosts.ensemble)}",
         file=sys.stderr, flush=True,
     )
+    print(describe_domain(context.domain, plan.hosts.isolated, str(discovery)), file=sys.stderr,
+          flush=True)
 
 
 def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
