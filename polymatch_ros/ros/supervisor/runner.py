@@ -48,6 +48,7 @@ from .environment import reserved_domain_id, ros_environment
 from .packing import PackingChoice, choose_packing
 from .plan import RunPlan
 from .recording import report_recording, start_recorder
+from .shm import SegmentLedger
 from .summary import RunOutcome, report, verdict
 from .watcher import Watcher
 
@@ -118,12 +119,15 @@ def run(plan: RunPlan) -> int:
         context = RunContext(plan, env, domain, envs, packing, shared, directory,
                              _run_id(plan))
         _adopt(env if envs is None else envs.for_role("super_client", env))
+        ledger = SegmentLedger()
         server = _start_server(context, directory)
         try:
-            code = _run(context, server)
+            code = _run(context, server, ledger)
         finally:
             if server is not None:
+                ledger.note([server.pid], force=True)
                 server.stop()  # the one running now (``recovery`` may have restarted it)
+            ledger.remove_ended()  # what its ended (or killed) children left in /dev/shm
     return code
 
 
@@ -342,7 +346,8 @@ def _announce(context: RunContext) -> None:
     )
 
 
-def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
+def _run(context: RunContext, server: DiscoveryServer | None = None,
+         ledger: SegmentLedger | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -375,11 +380,14 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
             others = bridge_run.robots(plan, context.role_env("client"))  # as the agents
         others += start_recorder(plan, context.env, context.envs, context.directory)
         monitor, children = _start(context)
-        supervision = Supervision(plan, watcher, children, monitor, progress, server)
+        supervision = Supervision(plan, watcher, children, monitor, progress, server, others,
+                                  ledger)
         code, message = supervision.watch(interrupted, start)
     except PolymatchError as exc:
         code, message = exc.exit_code, str(exc)
     finally:
+        if supervision is not None:
+            supervision.note_segments(force=True)
         stop_all(children, monitor, watcher)
         stop_all(others, None, None)
         for s, h in old.items():
