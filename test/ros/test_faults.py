@@ -144,7 +144,7 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     assert "failures: 3 process death(s), 3 restarted" in out
     assert _gone(before + [int(f[4]) for f in failures])
     # the killed processes' Fast DDS segments (seen while they ran) are gone with the others'
-    assert shm.seen.get(victim) and shm.seen.get(monitor), shm.seen
+    assert shm.of(victim) and shm.of(monitor), shm.seen
     assert shm.left() == [], shm.left()
 
 

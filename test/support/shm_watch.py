@@ -28,6 +28,14 @@ def descendants(pids):
     return out
 
 
+def command_line(pid):
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            return fh.read()
+    except OSError:
+        return b""
+
+
 def mapped_segments(pid):
     """The Fast DDS segments process ``pid`` maps (paths); empty once it has ended."""
     try:
@@ -42,15 +50,22 @@ class ShmWatch:
 
     def __init__(self, roots, interval=0.25):
         self.roots, self.interval = roots, interval
-        self.seen = {}  # pid -> its segments' paths
+        # (pid, command line) -> its segments' paths: a child between fork and exec still maps
+        # its parent's, and is looked at again once it runs its own program
+        self.seen = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._watch, daemon=True)
         self._thread.start()
 
     def look(self):
         for pid in descendants(self.roots()):
-            if not self.seen.get(pid):
-                self.seen[pid] = mapped_segments(pid)
+            key = (pid, command_line(pid))
+            if not self.seen.get(key):
+                self.seen[key] = mapped_segments(pid)
+
+    def of(self, pid):
+        """The segments noted of process ``pid`` (running its own program)."""
+        return set().union(*[segs for (p, _), segs in list(self.seen.items()) if p == pid])
 
     def _watch(self):
         while not self._stop.wait(self.interval):

@@ -66,6 +66,7 @@ class RunContext:
     shared_domain: bool                   # the user's ROS_DOMAIN_ID, or discovery beyond loopback
     directory: str                        # the run's private temporary directory
     run_id: int                           # the stage messages' and checkpoints' run id
+    ledger: SegmentLedger                 # its children's /dev/shm segments (``shm``)
 
     @property
     def agents_per_process(self) -> int:
@@ -116,13 +117,13 @@ def run(plan: RunPlan) -> int:
         packing = choose_packing(
             plan.packing, len(plan.hosts.agents), envs is None and _localhost(env)
         )
-        context = RunContext(plan, env, domain, envs, packing, shared, directory,
-                             _run_id(plan))
-        _adopt(env if envs is None else envs.for_role("super_client", env))
         ledger = SegmentLedger()
+        context = RunContext(plan, env, domain, envs, packing, shared, directory,
+                             _run_id(plan), ledger)
+        _adopt(env if envs is None else envs.for_role("super_client", env))
         server = _start_server(context, directory)
         try:
-            code = _run(context, server, ledger)
+            code = _run(context, server)
         finally:
             if server is not None:
                 ledger.note([server.pid], force=True)
@@ -346,8 +347,17 @@ def _announce(context: RunContext) -> None:
     )
 
 
-def _run(context: RunContext, server: DiscoveryServer | None = None,
-         ledger: SegmentLedger | None = None) -> int:
+def _stop(context: RunContext, children: list[Child], monitor: Child | None,
+          watcher: Watcher | None, others: list[Child]) -> None:
+    """End every process of the run by its PID (the robots and the recorder last), once the
+    ledger has looked at each one still running (``shm``)."""
+    running = [c for c in [*children, *others, monitor] if c is not None and c.poll() is None]
+    context.ledger.note([c.pid for c in running], force=True)
+    stop_all(children, monitor, watcher)
+    stop_all(others, None, None)
+
+
+def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -381,15 +391,12 @@ def _run(context: RunContext, server: DiscoveryServer | None = None,
         others += start_recorder(plan, context.env, context.envs, context.directory)
         monitor, children = _start(context)
         supervision = Supervision(plan, watcher, children, monitor, progress, server, others,
-                                  ledger)
+                                  context.ledger)
         code, message = supervision.watch(interrupted, start)
     except PolymatchError as exc:
         code, message = exc.exit_code, str(exc)
     finally:
-        if supervision is not None:
-            supervision.note_segments(force=True)
-        stop_all(children, monitor, watcher)
-        stop_all(others, None, None)
+        _stop(context, children, monitor, watcher, others)
         for s, h in old.items():
             signal.signal(s, h)
     try:
