@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 #: the families, in report order (stated here, not read from the package)
 FAMILY_NAMES = ["step", "meanfield", "dop853", "precision", "extremes", "longhorizon",
                 "distributed", "packing", "scaling", "sweep", "basins", "graphs", "lossy", "trade",
-                "bridge", "realtime", "reductions", "faults"]
+                "bridge", "realtime", "reductions", "faults", "leftovers"]
 
 # headers every family must print
 EXPECTED = {
@@ -66,8 +66,9 @@ EXPECTED = {
 
 # lossy runs ROS ensembles on namespace hosts: even --quick takes about a minute; its tables
 # are tested from records below.  faults --quick takes two minutes of killing and restarting
-# processes; what it measures is asserted in test/ros/test_faults.py.
-QUICK_FAMILIES = [name for name in FAMILY_NAMES if name not in ("lossy", "faults")]
+# processes; what it measures is asserted in test/ros/test_faults.py.  leftovers --quick is two
+# 10-process runs; what it measures (no /dev/shm entry left) is asserted in test/ros.
+QUICK_FAMILIES = [name for name in FAMILY_NAMES if name not in ("lossy", "faults", "leftovers")]
 
 
 def test_family_table_is_the_stated_list_in_report_order():
@@ -80,7 +81,7 @@ def test_family_table_is_the_stated_list_in_report_order():
 #: are numerics, run beside the ROS tests as test/core is (their timings are printed, never
 #: asserted)
 ROS_FAMILIES = {"distributed", "packing", "scaling", "graphs", "lossy", "trade", "bridge",
-                "realtime", "faults"}
+                "realtime", "faults", "leftovers"}
 
 
 def test_ros_families_are_families():

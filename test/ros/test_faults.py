@@ -15,6 +15,7 @@ import time
 import numpy as np
 import pytest
 from ros_harness import PY, cli_argv, needs_ros, scene_path
+from shm_watch import ShmWatch
 
 from benchmarks.hosts.runs import argv_of, children, descendants, node_name, scene_with
 from polymatch_ros.ros.wire import run_records
@@ -114,6 +115,7 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     # t_end 6 (300 steps): the probes that time the faults need a few seconds each, and the
     # four processes make about 150 rounds/s
     run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--round-timeout", "4")
+    shm = ShmWatch(lambda: [run.pid])  # the run's processes' /dev/shm entries
     _until(ros, 0.3, run)
     slow = _process(run, "agents_4_5")
     os.kill(slow, signal.SIGSTOP)
@@ -122,11 +124,13 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     victim, hung = _process(run, "agents_2_3"), _process(run, "agents_0_1")
     _until(ros, 0.8, run)
     monitor = _process(run, "monitor")
+    shm.look()
     os.kill(monitor, signal.SIGKILL)
     os.kill(victim, signal.SIGKILL)
     os.kill(hung, signal.SIGSTOP)
     before = descendants(run.pid)
     rc, out = _finish(ros, run)
+    shm.stop()
     assert rc == 3 and "did not converge" in out, out[-3000:]  # t_end 6 is before matching
     assert float(DEVIATION.search(out).group(1)) <= 1e-9, out[-3000:]
     failures = FAILURE.findall(out)
@@ -139,6 +143,9 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     assert len(steps) == 2 and all(40 <= s < 300 for s in steps), out[-3000:]
     assert "failures: 3 process death(s), 3 restarted" in out
     assert _gone(before + [int(f[4]) for f in failures])
+    # the killed processes' Fast DDS segments (seen while they ran) are gone with the others'
+    assert shm.of(victim) and shm.of(monitor), shm.seen
+    assert shm.left() == [], shm.left()
 
 
 def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_4_2(ros):

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from exactness import central_vertices, received_vertices
 from ros_harness import cli_argv, needs_ros, placed_vertices, scene_path
+from shm_watch import ShmWatch
 
 from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState, State
@@ -123,9 +124,14 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
                  "--records", records),
         timeout=230,
     )
+    shm = ShmWatch(lambda: [proc.pid])  # the run's processes' /dev/shm entries
     rc = ros.wait(proc, 240)
+    shm.stop()
     text = ros.output(proc)
     assert rc == 0, text
+    # a clean run leaves /dev/shm as it found it: the Fast DDS segments its runner, monitor and
+    # four agent processes made, seen while they ran, are gone
+    assert len(shm.segments) >= 5 and shm.left() == [], (shm.seen, shm.left())
     assert ros.wait(echo, 20) == 0, ros.output(echo)
     values = [float(v) for v in re.findall(r"^data: (\S+)$", ros.output(echo), re.M)]
     assert values[0] > 1.0 and values[-1] < 1e-6

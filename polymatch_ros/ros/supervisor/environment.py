@@ -31,8 +31,10 @@ NETWORK_PROFILE: str = os.path.join(os.path.dirname(PROFILE), "fastdds_profile_n
 # in 44 runs over shared memory, none over UDP.  Under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 # FASTDDS_BUILTIN_TRANSPORTS does not remove shared memory (its listener threads and
 # /dev/shm segments are there), so the loopback profile (``PROFILE``) names the transport
-# itself: UDPv4 on 127.0.0.1 for discovery and data.  The variable still selects UDPv4 under the
-# network profile.  A user's own FASTDDS_BUILTIN_TRANSPORTS and profile file win.
+# itself: UDPv4 on 127.0.0.1 for discovery and data.  rmw_fastrtps still adds a shared-memory
+# transport of its own under LOCALHOST; it listens on no port but leaves a segment in /dev/shm
+# when its process dies (``shm``).  The variable still selects UDPv4 under the network profile.
+# A user's own FASTDDS_BUILTIN_TRANSPORTS and profile file win.
 TRANSPORTS: str = "UDPv4"
 
 

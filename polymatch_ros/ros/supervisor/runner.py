@@ -48,6 +48,7 @@ from .environment import describe_domain, ros_environment, run_domain_id
 from .packing import PackingChoice, choose_packing
 from .plan import RunPlan
 from .recording import report_recording, start_recorder
+from .shm import SegmentLedger
 from .summary import RunOutcome, report, verdict
 from .watcher import Watcher
 
@@ -65,6 +66,7 @@ class RunContext:
     shared_domain: bool                   # the user's domain, or discovery beyond loopback
     directory: str                        # the run's private temporary directory
     run_id: int                           # the stage messages' and checkpoints' run id
+    ledger: SegmentLedger                 # its children's /dev/shm segments (``shm``)
 
     @property
     def agents_per_process(self) -> int:
@@ -116,15 +118,18 @@ def run(plan: RunPlan) -> int:
         packing = choose_packing(
             plan.packing, len(plan.hosts.agents), envs is None and _localhost(env)
         )
+        ledger = SegmentLedger()
         context = RunContext(plan, env, domain, envs, packing, shared, directory,
-                             _run_id(plan))
+                             _run_id(plan), ledger)
         _adopt(env if envs is None else envs.for_role("super_client", env))
         server = _start_server(context, directory)
         try:
             code = _run(context, server)
         finally:
             if server is not None:
+                ledger.note([server.pid], force=True)
                 server.stop()  # the one running now (``recovery`` may have restarted it)
+            ledger.remove_ended()  # what its ended (or killed) children left in /dev/shm
     return code
 
 
@@ -347,6 +352,16 @@ def _announce(context: RunContext) -> None:
           flush=True)
 
 
+def _stop(context: RunContext, children: list[Child], monitor: Child | None,
+          watcher: Watcher | None, others: list[Child]) -> None:
+    """End every process of the run by its PID (the robots and the recorder last), once the
+    ledger has looked at each one still running (``shm``)."""
+    running = [c for c in [*children, *others, monitor] if c is not None and c.poll() is None]
+    context.ledger.note([c.pid for c in running], force=True)
+    stop_all(children, monitor, watcher)
+    stop_all(others, None, None)
+
+
 def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
@@ -380,13 +395,13 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
             others = bridge_run.robots(plan, context.role_env("client"))  # as the agents
         others += start_recorder(plan, context.env, context.envs, context.directory)
         monitor, children = _start(context)
-        supervision = Supervision(plan, watcher, children, monitor, progress, server)
+        supervision = Supervision(plan, watcher, children, monitor, progress, server, others,
+                                  context.ledger)
         code, message = supervision.watch(interrupted, start)
     except PolymatchError as exc:
         code, message = exc.exit_code, str(exc)
     finally:
-        stop_all(children, monitor, watcher)
-        stop_all(others, None, None)
+        _stop(context, children, monitor, watcher, others)
         for s, h in old.items():
             signal.signal(s, h)
     try:
