@@ -260,7 +260,7 @@ MONITOR = (
         "agents_per_process",
         1,
         "lockstep: K of the agents' partition; with K > 1 each process sends its agents' "
-        "states in one message a step (exchanges/block_<b>), and the monitor reads those",
+        "states in one message a step (states/block_<b>), and the monitor reads those",
         (1, 1_000_000),
     ),
     Param(

@@ -36,8 +36,8 @@ class Watcher:
 
     It hears every process's run record (``status``: progress, agents up, and the monitor's
     headline diameter), calls the ensemble's start and stop services (``control``), and takes each
-    agent's *final* state from its latched ``final_exchange`` topic (packed lockstep processes:
-    its block's ``final_exchange_block``) for the summary - not
+    agent's *final* state from its latched ``final_state`` topic (packed lockstep processes:
+    its block's ``final_state_block``) for the summary - not
     the per-step poses, so supervising a run adds no load to the lockstep rounds.  Only this
     run's final states and run records are taken (``run_id``, ``wire.exchange``): a latched
     final pose or a record of another run, or anything else on the topics, is ignored and
