@@ -24,6 +24,8 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
                       one colour per group, lifetime = peer_timeout so silent agents fade
   start, stop, reset  std_srvs/Trigger  the ensemble's services (``control``), broadcast
   pause               std_srvs/SetBool  to every agent on the control topic
+  /clock              rosgraph_msgs/Clock  lockstep: the simulated time of each step it
+                                        reports (``sim_clock``), for use_sim_time tools
 In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
 second, the latest simulated time that every agent's pose has reached (its loop, at that rate,
 takes the poses that came since its last report and publishes it, so the last step is reported
@@ -56,6 +58,7 @@ from .exchange import DropCounter, LeanReaders, received_at
 from .monitor_output import certificate_status, diagnostics, markers
 from .params import MONITOR, declare, resolve_monitor
 from .process import NodeApp, ros_main
+from .sim_clock import SimClock
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -142,6 +145,7 @@ class MonitorNode(NodeApp):
                 self.readers.subscribe("exchange", self._receiver(a), dim, a,
                                        self.params["mode"])
         self.control = EnsembleControl(node, self.params["mode"])
+        self.clock = SimClock(node) if self.lockstep else None  # /clock: the reported step's
 
     def _wait_for_report_readers(self) -> None:
         """Until ``report_readers`` readers matched every report writer (at most
@@ -274,6 +278,8 @@ class MonitorNode(NodeApp):
             t, rows, vel = self.unreported
             self.unreported = None
             self._publish(t, rows, vel)
+            if self.clock is not None:
+                self.clock.advance(self.completed)
 
     def _drain(self) -> None:
         """Take the poses and twists the readers hold (lockstep: up to their depth, 100 each)."""
