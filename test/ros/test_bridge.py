@@ -363,14 +363,17 @@ def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
 
 
 @needs_ros
-def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
+@pytest.mark.parametrize("cmd_vel_type", ["twist_stamped", "twist"])
+def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path, cmd_vel_type):
     """Eight first-order robots (A-2), each driven by its bridged agent, match to the noise
-    floor (Theorem 4.2 up to the measurement noise)."""
+    floor (Theorem 4.2 up to the measurement noise), with commands on cmd_vel of either type
+    (robots that took no command would not move)."""
     count = 8
     scene = _scene(tmp_path, SCENE_ROBOTS.format(t_end=25.0, count=count))
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene, "--mode", "bridge",
                       "--rate", "10", "--position-noise", "0.002", "--angle-noise", "0.002",
-                      "--lag", "0.2", "--timeout", "90"], timeout=110)
+                      "--lag", "0.2", "--cmd-vel-type", cmd_vel_type, "--timeout", "90"],
+                     timeout=110)
     rc = ros.wait(proc, 120)
     text = ros.output(proc)
     assert rc == 0, text[-3000:]
