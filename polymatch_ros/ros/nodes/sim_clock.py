@@ -28,7 +28,7 @@ class SimClock:
 
     def __init__(self, node: Node) -> None:
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-        from rosgraph_msgs.msg import Clock
+        from rosgraph_msgs.msg import Clock  # type: ignore[import-untyped]
 
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.BEST_EFFORT,
