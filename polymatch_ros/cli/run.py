@@ -17,6 +17,7 @@ from ..console import add_number_options, positive_float, writable_output
 from ..core.errors import ParameterError, PolymatchError
 from ..core.scene import Scene, resolve_scene_path
 from ..core.simulate import plan as numerical_plan
+from ..ros.nodes.params import CMD_TYPES
 from ..ros.supervisor.plan import MODES, BridgeOptions, Hosts, Outputs, RunPlan, Timing
 from ..ros.supervisor.recovery import POLICIES, RestartPolicy
 from .scene_commands import check_integrator_option, load_scene_options, naming_dt_option
@@ -119,6 +120,7 @@ def _bridge_options(args: argparse.Namespace) -> BridgeOptions:
         max_linear_accel=args.max_linear_accel,
         max_angular_accel=args.max_angular_accel,
         robot_log=args.robot_log,
+        cmd_vel_type=args.cmd_vel_type,
     )
 
 
@@ -225,6 +227,10 @@ def _add_bridge_options(p: argparse.ArgumentParser) -> None:
     """The options of the simulated robots (bridge mode)."""
     g = p.add_argument_group("bridge mode (simulated robots)")
     add_number_options(g, ROBOT_OPTIONS)
+    g.add_argument("--cmd-vel-type", choices=CMD_TYPES, default=CMD_TYPES[0],
+                   help="first order: the robots' cmd_vel message, twist_stamped "
+                   "(geometry_msgs/TwistStamped, as Jazzy's diff_drive_controller takes; default) "
+                   "or twist (geometry_msgs/Twist)")
     g.add_argument("--robot-log", metavar="DIR",
                    help="each robot writes its true and measured pose at every step to "
                    "DIR/robot_<i>.txt")

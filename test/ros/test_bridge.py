@@ -363,14 +363,17 @@ def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
 
 
 @needs_ros
-def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
+@pytest.mark.parametrize("cmd_vel_type", ["twist_stamped", "twist"])
+def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path, cmd_vel_type):
     """Eight first-order robots (A-2), each driven by its bridged agent, match to the noise
-    floor (Theorem 4.2 up to the measurement noise)."""
+    floor (Theorem 4.2 up to the measurement noise), with commands on cmd_vel of either type
+    (robots that took no command would not move)."""
     count = 8
     scene = _scene(tmp_path, SCENE_ROBOTS.format(t_end=25.0, count=count))
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene, "--mode", "bridge",
                       "--rate", "10", "--position-noise", "0.002", "--angle-noise", "0.002",
-                      "--lag", "0.2", "--timeout", "90"], timeout=110)
+                      "--lag", "0.2", "--cmd-vel-type", cmd_vel_type, "--timeout", "90"],
+                     timeout=110)
     rc = ros.wait(proc, 120)
     text = ros.output(proc)
     assert rc == 0, text[-3000:]
@@ -404,3 +407,45 @@ def test_second_order_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path)
     for agent in range(8):
         true_x = np.loadtxt(tmp_path / f"robot_{agent}.txt")[:, 1:3]
         assert np.linalg.norm(true_x[-1] - true_x[0]) > 0.1, f"robot {agent} did not move"
+
+
+@pytest.mark.parametrize("cmd_type,message_type", [
+    ("twist_stamped", "geometry_msgs/msg/TwistStamped"),  # the default: Jazzy's controllers
+    ("twist", "geometry_msgs/msg/Twist"),                  # on request
+])
+def test_cmd_vel_twist_stamped_by_default_twist_on_request(cmd_type, message_type):
+    """The bridge's command crosses the wire (CDR) as the asked type and the simulated robot
+    that subscribes with the same ``cmd_type`` takes exactly the numbers sent (chosen here)."""
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from polymatch_ros.cli import build_parser
+    from polymatch_ros.core.command import Twist
+    from polymatch_ros.ros.nodes.bridge import command_class
+    from polymatch_ros.ros.nodes.robot import ROBOT, RobotNode
+    from polymatch_ros.ros.supervisor.bridge_run import agent_args
+
+    defaults = {spec: next(p.default for p in params if p.name == "cmd_type")
+                for spec, params in (("agent", AGENT), ("robot", ROBOT))}
+    assert defaults == {"agent": "twist_stamped", "robot": "twist_stamped"}
+    args = build_parser().parse_args(["run", "x.yaml", "--mode", "bridge"]
+                                     + ["--cmd-vel-type", cmd_type] * (cmd_type == "twist"))
+    assert args.cmd_vel_type == cmd_type
+    options = SimpleNamespace(max_linear_speed=1.0, max_angular_speed=1.0, cmd_vel_type=cmd_type)
+    assert f"cmd_type:={cmd_type}" in agent_args(options, order=1)
+
+    sent = Twist(np.array([0.25, -0.5, 0.0]), np.array([0.0, 0.0, 0.75]), False)
+    clock = SimpleNamespace(now=lambda: SimpleNamespace(to_msg=lambda: Time(sec=7)))
+    bridge = SimpleNamespace(  # what BridgeAgent._message reads of its node
+        cmd_class=command_class(1, cmd_type), params={"frame_id": "map", "command_frame": "world"},
+        node=SimpleNamespace(get_clock=lambda: clock))
+    msg = BridgeAgent._message(bridge, sent)
+    cls = type(msg)
+    assert f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}" == message_type
+    received = deserialize_message(serialize_message(msg), command_class(1, cmd_type))
+    if cmd_type == "twist_stamped":
+        assert (received.header.stamp.sec, received.header.frame_id) == (7, "map")
+    robot = SimpleNamespace(command=None)
+    RobotNode._command(robot, received)
+    linear, angular, _ = robot.command
+    assert linear.tolist() == [0.25, -0.5, 0.0] and angular.tolist() == [0.0, 0.0, 0.75]

@@ -115,7 +115,7 @@ CHOICE_CASES = [
     ("agent", "agent_nodes", ("full", "lean", "none")),
     ("agent", "start", ("now", "control", "at")),
     ("agent", "pose_type", ("pose", "odometry")),
-    ("agent", "cmd_type", ("twist", "twist_stamped")),
+    ("agent", "cmd_type", ("twist_stamped", "twist")),
     ("agent", "command_frame", ("world", "body")),
     ("monitor", "mode", ("lockstep", "realtime")),
 ]
@@ -233,7 +233,8 @@ LOCKSTEP_TABLE = {
     "discovery_timeout": 120.0, "pose_subscribers": 0, "exchange_subscribers": 0,
     "frame_id": "world",
     "max_linear_speed": 1e6, "max_angular_speed": 1e6, "max_linear_accel": 1e6,
-    "max_angular_accel": 1e6, "pose_timeout": 0.5, "pose_type": "pose", "cmd_type": "twist",
+    "max_angular_accel": 1e6, "pose_timeout": 0.5, "pose_type": "pose",
+    "cmd_type": "twist_stamped",
     "command_frame": "world", "run_id": 0,
 }
 # a realtime agent on congruent_triangles_second_order given gamma:=2.0 and rate:=5.0: no dt (it

@@ -29,6 +29,8 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
   match               polymatch_interfaces/action/Match  a goal until the diameter is below a
                                         tolerance, with feedback at each report; its cancel
                                         stops the ensemble (``match_action``)
+  /clock              rosgraph_msgs/Clock  lockstep: the simulated time of each step it
+                                        reports (``sim_clock``), for use_sim_time tools
 In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
 second, the latest simulated time that every agent's pose has reached (its loop, at that rate,
 takes the poses that came since its last report and publishes it, so the last step is reported
@@ -62,6 +64,7 @@ from .match_action import MatchServer
 from .monitor_output import certificate_status, diagnostics, markers
 from .params import MONITOR, declare, resolve_monitor
 from .process import NodeApp, ros_main
+from .sim_clock import SimClock
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -149,6 +152,7 @@ class MonitorNode(NodeApp):
                                        self.params["mode"])
         self.control = EnsembleControl(node, self.params["mode"])
         self.match = MatchServer(node, self.scene.tolerance, self.n, self.control)
+        self.clock = SimClock(node) if self.lockstep else None  # /clock: the reported step's
 
     def _wait_for_report_readers(self) -> None:
         """Until ``report_readers`` readers matched every report writer (at most
@@ -281,6 +285,8 @@ class MonitorNode(NodeApp):
             t, rows, vel = self.unreported
             self.unreported = None
             self._publish(t, rows, vel)
+            if self.clock is not None:
+                self.clock.advance(self.completed)
 
     def _drain(self) -> None:
         """Take the poses and twists the readers hold (lockstep: up to their depth, 100 each)."""
