@@ -211,6 +211,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="stop once the diameter stayed under the tolerance this long (simulated s)",
     )
     _add_ensemble_options(p)
+    _add_host_options(p)
     _add_bridge_options(p)
     p.add_argument("--quiet", "-q", action="store_true",
                    help="no first line and no progress; the summary and errors only")
@@ -234,6 +235,30 @@ def _add_bridge_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--robot-log", metavar="DIR",
                    help="each robot writes its true and measured pose at every step to "
                    "DIR/robot_<i>.txt")
+
+
+def _add_host_options(p: argparse.ArgumentParser) -> None:
+    """Which agents run on this host, the run's id, and how DDS discovers the others."""
+    p.add_argument(
+        "--only",
+        metavar="RANGE",
+        help="run only these agents on this host, e.g. 0-7,12 (the others run on other hosts "
+        "with the same ROS_DOMAIN_ID, --ensemble and --discovery)",
+    )
+    p.add_argument(
+        "--run-id",
+        type=int,
+        metavar="ID",
+        help="the run id every message of the run carries (1 .. 2^63 - 1), for agents started "
+        "by other programs or hosts (default: chosen, the same on every host of an --only run)",
+    )
+    p.add_argument(
+        "--discovery",
+        default="localhost",
+        metavar="SPEC",
+        help="DDS discovery: localhost (default), subnet, server[:HOST:PORT] (bare: a server "
+        "of this run on 127.0.0.1), peers:ADDR,...",
+    )
 
 
 def _add_ensemble_options(p: argparse.ArgumentParser) -> None:
@@ -266,26 +291,6 @@ def _add_ensemble_options(p: argparse.ArgumentParser) -> None:
         dest="monitor",
         action="store_false",
         help="do not start the monitor (on every host but one of a run across hosts)",
-    )
-    p.add_argument(
-        "--only",
-        metavar="RANGE",
-        help="run only these agents on this host, e.g. 0-7,12 (the others run on other hosts "
-        "with the same ROS_DOMAIN_ID, --ensemble and --discovery)",
-    )
-    p.add_argument(
-        "--run-id",
-        type=int,
-        metavar="ID",
-        help="the run id every message of the run carries (1 .. 2^63 - 1), for agents started "
-        "by other programs or hosts (default: chosen, the same on every host of an --only run)",
-    )
-    p.add_argument(
-        "--discovery",
-        default="localhost",
-        metavar="SPEC",
-        help="DDS discovery: localhost (default), subnet, server[:HOST:PORT] (bare: a server "
-        "of this run on 127.0.0.1), peers:ADDR,...",
     )
     p.add_argument(
         "--no-compare",
