@@ -14,9 +14,12 @@ import time
 
 import numpy as np
 import pytest
-from ros_harness import PY, cli_argv, needs_ros, scene_path
+from exactness import central_vertices, received_vertices
+from ros_harness import PY, cli_argv, needs_ros, placed_vertices, scene_path
 
 from benchmarks.hosts.runs import argv_of, children, descendants, node_name, scene_with
+from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.simulate import plan, simulate
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros
@@ -104,7 +107,25 @@ def _zombie(pid):
         return False
 
 
-def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
+def _lockstep_scene(dt, t_end):
+    """SCENE at the run's step and end time, and the method its distributed run uses."""
+    scene = load_scene(scene_path(SCENE), {"integrator.dt": dt, "time.t_end": t_end})
+    return scene, plan(scene, None, None, distributed=True).name
+
+
+def _assert_saved_equal_centralised(save, dt, t_end):
+    """The final poses the runner saved are at t_end and, vertex by vertex (brute force over
+    agents and vertices), within 1e-9 of the centralised run's."""
+    scene, method = _lockstep_scene(dt, t_end)
+    t, got = received_vertices(scene, save)
+    assert t == pytest.approx(t_end)
+    want = central_vertices(scene, method, t)
+    dev = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, want))
+    assert dev <= 1e-9, f"saved poses {dev:.3e} from the centralised run"
+
+
+
+def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros, tmp_path):
     """Lockstep, four processes (round timeout 4 s): one hangs 2 s (SIGSTOP, SIGCONT) and is
     waited for; then, together, one is killed (SIGKILL) and one hangs for good, taken for dead
     after the round timeout.  The two are restarted and resume from their checkpoints (one
@@ -113,7 +134,9 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     with them, is restarted; the rounds never wait for it."""
     # t_end 6 (300 steps): the probes that time the faults need a few seconds each, and the
     # four processes make about 150 rounds/s
-    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--round-timeout", "4")
+    save = tmp_path / "final.npz"
+    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--round-timeout", "4",
+               "--save", save)
     _until(ros, 0.3, run)
     slow = _process(run, "agents_4_5")
     os.kill(slow, signal.SIGSTOP)
@@ -139,15 +162,18 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     assert len(steps) == 2 and all(40 <= s < 300 for s in steps), out[-3000:]
     assert "failures: 3 process death(s), 3 restarted" in out
     assert _gone(before + [int(f[4]) for f in failures])
+    _assert_saved_equal_centralised(save, 0.02, 6.0)
 
 
-def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_4_2(ros):
+def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_4_2(ros,
+                                                                                     tmp_path):
     """Lockstep, four processes, the monitor stopped (SIGSTOP) before the end: no agent is
     told 'received', so each holds its final poses.  SIGKILL of one of them once the runner
     has every final state: it is listed, not restarted (a restarted one would begin a step
     its peers have ended), the monitor is not waited for, and the run ends as it would have:
     equal to the centralised run, exit 3 (t_end 6 is before matching), nothing left over."""
-    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2")
+    save = tmp_path / "final.npz"
+    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--save", save)
     _until(ros, 0.3, run)
     monitor = _process(run, "monitor")
     os.kill(monitor, signal.SIGSTOP)
@@ -166,6 +192,7 @@ def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_
     assert AFTER_RUN.findall(out) == [("agents_2_3", str(victim), "6")], out[-3000:]
     assert "failures: 1 process death(s), 0 restarted" in out, out[-3000:]
     assert _gone(before)
+    _assert_saved_equal_centralised(save, 0.02, 6.0)
 
 
 def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_path):
@@ -254,9 +281,27 @@ def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_
     assert bool(data["partial"]) and 0.5 <= float(data["t"]) < 500
     times = data["group0_times"]
     assert times.shape == (n,) and np.all(times >= 0.5) and np.all(times < 500)
+    assert float(data["t"]) == pytest.approx(times.max())
     rotations = data["group0_rotations"]
     assert np.allclose(rotations @ rotations.transpose(0, 2, 1), np.eye(2), atol=1e-12)
+    assert np.allclose(np.linalg.det(rotations), 1.0, atol=1e-12)
+    if mode == "lockstep":
+        _assert_each_agent_at_its_time_is_the_centralised_run(data, times)
     assert _gone(before)
+
+
+def _assert_each_agent_at_its_time_is_the_centralised_run(data, times):
+    """Lockstep: agent i's saved pose is the centralised run's agent i at its own time t_i (the
+    agents of a process share a step, processes may be a step apart), vertex by vertex."""
+    scene, method = _lockstep_scene(0.02, float(times.max()))
+    traj = simulate(scene, method, 0.02, samples=sorted(set(times.tolist())), metrics=False)
+    at = {round(t, 9): st for t, st in zip(traj.times, traj.states)}
+    reference = scene.model.groups[0].reference
+    for i, t in enumerate(times):
+        state = at[round(float(t), 9)]
+        want = placed_vertices(traj.scene.model, state.groups, scene.origin)[0]  # vertex, agent
+        got = data["group0_centroids"][i] + reference @ data["group0_rotations"][i].T
+        assert np.max(np.linalg.norm(got - want[:, i], axis=-1)) <= 1e-9, (i, t)
 
 
 def _progress_past(ros, run, t):
