@@ -7,8 +7,14 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from core_testlib import defect, make_scene, rot_matrices, skew_matrices, state_error
-from scipy.integrate import solve_ivp
+from core_testlib import (
+    defect,
+    make_scene,
+    rot_matrices,
+    skew_matrices,
+    state_error,
+    written_out_states,
+)
 
 from polymatch_ros.core import (
     METHODS,
@@ -21,7 +27,7 @@ from polymatch_ros.core import (
 )
 from polymatch_ros.core.errors import StepLimitError
 from polymatch_ros.core.metrics import ensemble_metrics
-from polymatch_ros.core.model import GroupState, State
+from polymatch_ros.core.model import GroupState
 
 # ---------------------------------------------------------------------------------------------
 # the registry, pinned here: name -> (order, stages, exchange rounds, model orders accepted)
@@ -179,61 +185,17 @@ ORDER_CASES += [("A-1 3d so3-exp", "rkmk4"), ("A-1 3d so3-exp", "lie_heun"),
 SAME_PROBLEM_AS = {"A-1 3d so3-exp": "A-1 3d", "A-1 3d matrix": "A-1 3d"}
 
 
-def _lohe_torque(mats, kappa):
-    """kappa/(2N) sum_k (O_k O_i^T - O_i O_k^T) for every agent i (the coupling of A-1/A-2)."""
-    total = mats.sum(axis=0)
-    return kappa / (2 * len(mats)) * (total @ np.swapaxes(mats, 1, 2)
-                                       - mats @ total.T)
-
-
-def _written_out(scene):
-    """The right-hand side of the scene's model, written out from the paper on flat arrays:
-    (A-2) gamma O_i' = torque_i O_i, gamma x_i' = kappa/N sum_k (x_k - x_i); (A-1) O_i' = W_i O_i,
-    m W_i' = -gamma W_i + torque_i, x_i' = v_i, m v_i' = -gamma v_i + kappa/N sum_k (x_k - x_i)."""
-    model = scene.model
-    n, d = scene.initial.groups[0].x.shape
-    kappa, gamma, mass = model.kappa, model.gamma, model.mass
-    sizes = [n * d * d, n * d] + ([n * d * d, n * d] if model.order == 2 else [])
-
-    def rhs(_t, y):
-        parts = np.split(y, np.cumsum(sizes)[:-1])
-        mats, x = parts[0].reshape(n, d, d), parts[1].reshape(n, d)
-        torque = _lohe_torque(mats, kappa)
-        pull = kappa / n * (x.sum(axis=0) - n * x)
-        if model.order == 1:
-            return np.concatenate([(torque @ mats).ravel() / gamma, pull.ravel() / gamma])
-        w, v = parts[2].reshape(n, d, d), parts[3].reshape(n, d)
-        return np.concatenate([(w @ mats).ravel(), v.ravel(),
-                               ((torque - gamma * w) / mass).ravel(),
-                               ((pull - gamma * v) / mass).ravel()])
-
-    return rhs
-
-
 @functools.cache
 def _reference(kind):
-    """The state at t = 1: for A-1 and A-2, scipy's DOP853 (``solve_ivp``, rtol 3e-14) of the
-    model written out (``_written_out``) on the flat rotation matrices; for F-1 and F-2 (their
-    weights and inter-group potential are not written out here), rkmk4 at dt = 1/256 (its own
-    error at most 8e-4 of an error it measures)."""
+    """The state at t = 1: for A-1 and A-2, scipy's DOP853 of the model written out
+    (``core_testlib.written_out_states``); for F-1 and F-2 (their weights and inter-group
+    potential are not written out), rkmk4 at dt = 1/256 (its own error at most 8e-4 of an error
+    it measures)."""
     scene = _order_scene(kind)
     if kind.startswith("F-"):
         return simulate(scene, "rkmk4", 1.0 / 256, samples=[0.0], keep_states=False,
                         metrics=False)
-    grp, gs = scene.model.rotations, scene.initial.groups[0]
-    y0 = [rot_matrices(grp, gs.rot).ravel(), gs.x.ravel()]
-    if scene.model.order == 2:
-        y0 += [skew_matrices(grp, gs.w).ravel(), gs.v.ravel()]
-    sol = solve_ivp(_written_out(scene), (0.0, 1.0), np.concatenate(y0), method="DOP853",
-                    rtol=3e-14, atol=1e-15)
-    assert sol.success, sol.message
-    n, d = gs.x.shape
-    parts = np.split(sol.y[:, -1], np.cumsum([n * d * d, n * d, n * d * d])[:len(y0) - 1])
-    mats = parts[0].reshape(n, d, d)
-    final = GroupState(parts[1].reshape(n, d), grp.from_matrices(mats),
-                       *((parts[3].reshape(n, d), grp.algebra_from_skew(parts[2].reshape(n, d, d)))
-                         if scene.model.order == 2 else ()))
-    return SimpleNamespace(scene=scene, final=State(1.0, (final,)))
+    return SimpleNamespace(scene=scene, final=written_out_states(scene, [1.0])[0])
 
 
 @pytest.mark.parametrize("kind,method", ORDER_CASES,
