@@ -536,6 +536,13 @@ def test_extreme_huge_coordinates_1e9_explicit_vertices_load_within_input_precis
     a = rot_matrices(scene.model.rotations, scene.initial.groups[0].rot)
     b = rot_matrices(near.model.rotations, near.initial.groups[0].rot)
     assert np.max(np.abs(a - b)) < 1e-6
+    # the triangles as built (turned by 0.3, 1.2, 2.0 rad about centroids (0, 0), (3, -2),
+    # (-1, 4)): relative turns and centroid gaps within the input's precision (1e9 eps ~ 2e-7)
+    turns = np.arctan2(a[:, 1, 0], a[:, 0, 0])
+    np.testing.assert_allclose(np.angle(np.exp(1j * (turns[1:] - turns[0]))), [0.9, 1.7],
+                               rtol=0, atol=1e-6)
+    x = scene.initial.groups[0].x
+    np.testing.assert_allclose(x[1:] - x[0], [[3.0, -2.0], [-1.0, 4.0]], rtol=0, atol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -314,6 +314,10 @@ def test_stability_error_fields_match_its_message():
     err = exc.value
     assert err.method == "rkmk4" and err.dt == 0.01 and 0 < err.limit < 0.01
     assert f"dt < {err.limit:.3g} ({err.cause}" in str(err)
+    # the damping mode -gamma/m is the fastest: RK4's real boundary (2.785) times m/gamma
+    rk4 = _rk_real_stability_boundary([1.0, 1.0, 1 / 2, 1 / 6, 1 / 24])
+    assert rk4 == pytest.approx(2.785293563, rel=1e-8)
+    assert err.limit == pytest.approx(rk4 * 1e-8 / 2.0, rel=1e-3)
 
 
 def test_adaptive_final_state_at_t_end_like_fixed_step_theorem_4_2():
