@@ -54,6 +54,7 @@ from core_testlib import (
     brute_matching_diameter,
     brute_rotation_diameter,
     defect,
+    lohe_torque,
     make_scene,
     rot_matrices,
     rotation_energy,
@@ -668,6 +669,13 @@ def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
     traj = simulate(scene)
     assert not traj.converged and traj.stationarity < 1e-10
     assert traj.metrics[0].groups[0].rotation_diameter >= 1.0
+    # an equilibrium that is not consensus, checked on the model written out: the torque
+    # kappa/(2N) sum_k (O_k O_i^T - O_i O_k^T) vanishes for every agent, and the rotations stay
+    # D_O >= 1 apart (brute force), so the polytopes do not match
+    mats = rot_matrices(scene.model.rotations, traj.final.groups[0].rot)
+    assert np.max(np.abs(lohe_torque(mats, scene.model.kappa))) < 1e-10
+    assert brute_rotation_diameter(mats) >= 1.0
+    assert brute_matching_diameter(scene.model, traj.final, 0) > 100 * scene.tolerance
     code, msg = convergence_verdict(replace(scene, expect_convergence=True), traj.diameters[-1],
                                     traj.converged_at, traj.stationarity)
     assert code == 3 and "not consensus" in msg
