@@ -114,7 +114,8 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
     # the monitor's reports (at most report_rate a second): the last is the final step's
     diameters = [m.data for _, m in got["/polymatch/diameter"][1]]
     assert 1 <= len(diameters) <= mon.reports and diameters[-1] == mon.diameter
-    assert any('"role": "monitor"' in m.data for _, m in got["/polymatch/status"][1])
+    assert any(m.role == "monitor" and m.run_id == mon.run_id
+               for _, m in got["/polymatch/status"][1])
 
     from polymatch_ros.ros.wire.recording_read import diameter_series, read_recording
 

@@ -32,6 +32,7 @@ pytestmark = needs_ros
 # (measured: 0 to about 1.3 s after the first agent); a run of t_end 1 lasts about 1.3 s, and
 # in 2 of 28 runs one agent had not matched it before the end, so it had nothing to drop.
 ROGUE_T_END = 4.0
+RUN_ID = "31337"
 ROGUE = os.path.join(REPO, "test", "support", "rogue_publisher.py")
 # the foreign states' stamp: late in the realtime run (its t_end is one more), so that a reader
 # that took them would take them as agent 3's newest
@@ -41,7 +42,7 @@ FOREIGN_STAMP = 299
 def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     # the rogue outlives the longest run this test allows (30 s to start flooding + the run's
     # 150 s): it is still sending when the run ends, and the harness ends it by its PID
-    rogue = ros.start([PY, ROGUE, "polymatch", "3", "200"], timeout=210)
+    rogue = ros.start([PY, ROGUE, "polymatch", "3", "200", "--run-id", RUN_ID], timeout=210)
     deadline = time.monotonic() + 30                  # the flood is on before the run starts
     while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -49,6 +50,7 @@ def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     out = tmp_path / "final.npz"
     proc = ros.start(
         cli_argv("run", scene_path("congruent_triangles"), "--t-end", ROGUE_T_END,
+                 "--run-id", RUN_ID,  # the rogue's NaN messages carry it: checked, not trusted
                  "--integrator", "rkmk4", "--no-compare", "--save", out, "--timeout", 150, "-q",
                  "--round-timeout", 60,  # the flood is under test, not the timeout
                  "-k", 1),  # a process per agent: each one reads agent 3's stage topic
