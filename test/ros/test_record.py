@@ -138,7 +138,9 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
     assert offered(other)["/clock"] == [("BEST_EFFORT", "VOLATILE")]  # lockstep's /clock
     assert beside["/clock"][0] == "rosgraph_msgs/msg/Clock"
     ticks = [m.clock.sec * 10**9 + m.clock.nanosec for _, m in beside["/clock"][1]]
-    assert ticks and all(a < b for a, b in zip(ticks, ticks[1:])), ticks
+    # the recorder, found late by a run of ten steps, may hear none of its few /clock samples
+    # (best effort); those it heard go forward
+    assert all(a < b for a, b in zip(ticks, ticks[1:])), ticks
     assert beside["/polymatch/diameter"][1][-1][1].data == mon.diameter  # latched: the last
     statuses = [m for _, m in beside["/polymatch/status"][1]]  # decoded by rosbags
     # the monitor's last report, as the run's --records has it
