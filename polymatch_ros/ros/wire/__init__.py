@@ -13,6 +13,7 @@ from .codec import (
     STAMP_SLACK,
     Stage,
     StageRows,
+    decode_agent_rows,
     decode_block,
     decode_stage,
     encode_block,
