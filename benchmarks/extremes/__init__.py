@@ -216,7 +216,7 @@ CASES = (
         (("order", o),))
       for o in (1, 2)),
     C("explain_large", "explain, N = 10^4, 10^5, 10^6, d = 2 and 3",
-      "at most 5 s at N = 10^6 (uniform rotations)", explain_large),
+      "certificate verdicts right; at most 5 s at N = 10^6 (uniform rotations)", explain_large),
 )
 
 

@@ -289,6 +289,12 @@ def explain_large(v):
                 if rotations == "uniform":
                     worst[n] = max(worst.get(n, 0.0), wall)
     top = max(sizes)
+    # The certificate's verdict is the behaviour; the 5 s bound is held only at N = 10^6 (a
+    # full run): --quick's N = 10^4 takes well under a second, and a shared machine's load
+    # would turn a bound on it into a test of that load.
+    verdicts_right = all(r[3] == 0 and r[5].startswith("not certified" if r[2] == "uniform"
+                                                       else "certified") for r in rows)
+    in_time = v.quick or worst[top] <= 5.0
     return Outcome(
         "; ".join(f"N = {n}: {worst[n]:.1f} s" for n in sizes) + " (uniform rotations, slowest d)",
-        worst[top] <= 5.0 and all(r[3] == 0 for r in rows), tuple(rows))
+        verdicts_right and in_time, tuple(rows))
