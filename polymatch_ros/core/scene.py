@@ -74,17 +74,15 @@ class Scene:
 
 
 def shipped_config_dirs() -> list[str]:
-    """Where shipped scenes live: the repository's config/, then the installed share/ directory."""
-    dirs = []
-    here = os.path.dirname(os.path.abspath(__file__))
-    dirs.append(os.path.join(os.path.dirname(os.path.dirname(here)), "config"))
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        dirs.append(os.path.join(get_package_share_directory("polymatch_ros"), "config"))
-    except Exception:   # no ament index (plain pip install): the repository copy is all there is
-        pass
-    dirs.append(os.path.join(sys.prefix, "share", "polymatch_ros", "config"))
-    return [d for d in dirs if os.path.isdir(d)]
+    """Where shipped scenes live: the repository's config/, then share/polymatch_ros/config of
+    the prefix the package is installed in (PREFIX/lib/pythonX.Y/site-packages/polymatch_ros:
+    a colcon install's package prefix or a pip install's environment), then ``sys.prefix``'s."""
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    install_prefix = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(package))))
+    dirs = [os.path.join(os.path.dirname(package), "config"),
+            os.path.join(install_prefix, "share", "polymatch_ros", "config"),
+            os.path.join(sys.prefix, "share", "polymatch_ros", "config")]
+    return list(dict.fromkeys(d for d in dirs if os.path.isdir(d)))
 
 
 def resolve_scene_path(name: str) -> str:

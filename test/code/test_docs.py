@@ -10,6 +10,7 @@ import re
 import pytest
 
 from polymatch_ros.cli import NODES, build_parser
+from polymatch_ros.cli.reference import subcommands
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 PAGES = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md")])
@@ -75,9 +76,7 @@ def shown_commands() -> list[tuple[str, str, str]]:
 
 
 def subparsers() -> dict:
-    parser = build_parser()
-    action = next(a for a in parser._subparsers._group_actions)      # argparse has no public API
-    return dict(action.choices)
+    return subcommands(build_parser())
 
 
 def test_the_docs_show_commands_and_the_check_sees_them():

@@ -15,7 +15,8 @@ import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "polymatch_ros"
-ROS_PREFIXES = ("rclpy", "rcl_", "rcutils", "rmw", "rosidl", "builtin_interfaces", "launch")
+ROS_PREFIXES = ("rclpy", "rcl_", "rcutils", "rmw", "rosidl", "builtin_interfaces", "launch",
+                "ament_")
 ROS_SUFFIXES = ("_msgs", "_srvs", "_interfaces")
 
 #: each layer, and the layers of the package it may import (besides itself)
