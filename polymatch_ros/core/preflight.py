@@ -1,7 +1,7 @@
 """Before a run: refuse options that would be ignored and runs that would not fit.
 
-``check_run`` resolves the integrator as ``simulate.plan`` will (explicit choice > scene
-file > recommendation) and then refuses, with one line naming the option:
+``check_run`` resolves the integrator as ``simulate.plan`` does (``simulate.choose_method``:
+explicit choice > scene file > recommendation) and then refuses, with one line naming the option:
 
 - ``--dt`` for the adaptive integrator, ``--tolerance`` for a fixed-step one (a scene's own
   ``integrator.dt``/``tolerance`` that ``method: auto`` does not use gives a warning);
@@ -11,31 +11,18 @@ file > recommendation) and then refuses, with one line naming the option:
 """
 
 import warnings
-from dataclasses import replace
 
 from .errors import ParameterError, SceneError
 from .limits import FLOAT, Budget, Limits
-from .scene import DEFAULT_DT, Scene, check_step_count
-
-
-def resolve_method(scene: Scene, method: str | None = None, tolerance: float | None = None,
-                   distributed: bool = False) -> tuple[str, str]:
-    """(name, how it was chosen) exactly as ``simulate.plan`` resolves it."""
-    from .simulate import recommend
-    name = method or scene.integrator.method
-    if name != "auto":
-        return name, "chosen explicitly" if method else "from the scene file"
-    if tolerance is not None:
-        scene = replace(scene, integrator=replace(scene.integrator, tolerance=tolerance))
-    name, reason = recommend(scene, distributed)
-    return name, f"auto picked it: {reason}"
+from .scene import Scene, check_step_count
+from .simulate import choose_method
 
 
 def check_run(scene: Scene, method: str | None = None, dt: float | None = None,
               tolerance: float | None = None, *, distributed: bool = False,
               kept_samples: int = 0, limits: Limits | None = None) -> int:
     """Refuse (ParameterError/SceneError) or warn before any step is taken; return the steps."""
-    name, why = resolve_method(scene, method, tolerance, distributed)
+    name, why = choose_method(scene, method, tolerance, distributed)
     spec = scene.integrator
     if name == "adaptive":
         _refuse_unused("dt", dt, spec.dt, f"the adaptive integrator chooses its own steps ({why})",
@@ -44,7 +31,7 @@ def check_run(scene: Scene, method: str | None = None, dt: float | None = None,
     else:
         _refuse_unused("tolerance", tolerance, spec.tolerance, f"{name} takes fixed steps ({why})",
                        "use --dt, or -i adaptive for a tolerance")
-        step = dt if dt is not None else (spec.dt or DEFAULT_DT)
+        step = dt if dt is not None else spec.step
         where = "--dt" if dt is not None else "integrator.dt"
         try:
             steps = check_step_count(scene.t_end, step, spec.max_steps, where)

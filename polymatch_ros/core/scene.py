@@ -40,7 +40,9 @@ from .scene_groups import GroupContext, build_group
 from .so import group_for
 from .yamlfile import parse_yaml, read_scene_file
 
+#: the fixed step of a scene that names none, and the adaptive tolerance of one that names none
 DEFAULT_DT = 0.05
+DEFAULT_TOLERANCE = 1e-8
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,11 @@ class IntegratorSpec:
     dt: float | None = None
     tolerance: float | None = None
     max_steps: int = 10_000_000
+
+    @property
+    def step(self) -> float:
+        """The fixed step the scene asks for, else ``DEFAULT_DT``."""
+        return self.dt or DEFAULT_DT
 
 
 @dataclass

@@ -77,7 +77,7 @@ def recommend(scene: Scene, distributed: bool = False) -> tuple[str, str]:
     if m.gamma == 0:
         return "lie_verlet", ("undamped (gamma = 0): symplectic splitting keeps the energy "
                               "without drift")
-    dt = scene.integrator.dt or 0.05
+    dt = scene.integrator.step
     if m.mass / m.gamma < 0.5 * dt:
         return "etd2", (f"m/gamma = {m.mass / m.gamma:.3g} < dt/2: damping is stiff, "
                         "integrate it exactly "
@@ -87,25 +87,34 @@ def recommend(scene: Scene, distributed: bool = False) -> tuple[str, str]:
     return "rkmk4", "second order, non-stiff: 4th-order Munthe-Kaas"
 
 
-def plan(scene: Scene, method: str | None = None, dt: float | None = None,
-         tolerance: float | None = None, distributed: bool = False, check: bool = True) -> Plan:
-    """Resolve the integrator: explicit choice > scene file > recommendation; check stability."""
+def choose_method(scene: Scene, method: str | None = None, tolerance: float | None = None,
+                  distributed: bool = False) -> tuple[str, str]:
+    """(name, how it was chosen): explicit choice > scene file > ``recommend`` (which sees the
+    tolerance asked for, if any)."""
     name = method or scene.integrator.method
-    reason = "chosen explicitly" if method else "from the scene file"
+    if name != "auto":
+        return name, "chosen explicitly" if method else "from the scene file"
     if tolerance is not None:
         scene = replace(scene, integrator=replace(scene.integrator, tolerance=tolerance))
-    if name == "auto":
-        name, reason = recommend(scene, distributed)
+    name, reason = recommend(scene, distributed)
+    return name, f"auto picked it: {reason}"
+
+
+def plan(scene: Scene, method: str | None = None, dt: float | None = None,
+         tolerance: float | None = None, distributed: bool = False, check: bool = True) -> Plan:
+    """Resolve the integrator (``choose_method``); check stability."""
+    name, reason = choose_method(scene, method, tolerance, distributed)
     tol = tolerance if tolerance is not None else scene.integrator.tolerance
     if name == "adaptive":
         from .adaptive import AdaptiveLie
         if distributed:
             raise PolymatchError("the adaptive integrator runs centralised only; "
                                  "pick a fixed-step method")
-        tol = tol or 1e-8
+        from .scene import DEFAULT_TOLERANCE
+        tol = tol or DEFAULT_TOLERANCE
         return Plan(AdaptiveLie(tol, max_steps=scene.integrator.max_steps), None, tol, reason)
     meth = get_method(name)
-    step = dt if dt is not None else (scene.integrator.dt or 0.05)
+    step = dt if dt is not None else scene.integrator.step
     if not step > 0 or not math.isfinite(step):
         raise PolymatchError(f"dt must be a positive number, got {step}")
     if step > scene.t_end:

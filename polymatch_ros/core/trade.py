@@ -185,8 +185,8 @@ def fastest(rows: Sequence[Row], target: float, over_ros: bool = False) -> Row |
 
 def step_ladder(scene: Scene) -> list[float]:
     """Fixed steps: H / 1, 2, 4, 10, 20, 40 with H the 1-2-5 number at most 4 x the scene's dt
-    (0.05 when it names none) and at most t_end."""
-    base = 4.0 * (scene.integrator.dt or 0.05)
+    (``DEFAULT_DT`` when it names none) and at most t_end."""
+    base = 4.0 * scene.integrator.step
     top = min(base, scene.t_end)
     decade = 10.0 ** math.floor(math.log10(top))
     h = max(m * decade for m in (1.0, 2.0, 5.0) if m * decade <= top * (1 + 1e-12))
