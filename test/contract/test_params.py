@@ -31,7 +31,7 @@ AGENT_NAMES = [
     "start_time", "peer_timeout", "delay",
     "clock_offset_warn", "hold_final", "round_timeout", "stall_timeout", "peers_restart",
     "checkpoint", "discovery_timeout",
-    "pose_subscribers", "exchange_subscribers", "frame_id", "max_linear_speed",
+    "pose_subscribers", "exchange_subscribers", "exchange_rate", "frame_id", "max_linear_speed",
     "max_angular_speed", "max_linear_accel", "max_angular_accel", "pose_timeout", "pose_type",
     "cmd_type", "command_frame", "run_id",
 ]

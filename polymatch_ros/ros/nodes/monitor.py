@@ -142,10 +142,10 @@ class MonitorNode(NodeApp):
         self._wait_for_report_readers()
         self.readers = LeanReaders(node, "_poses")
         k = self.params["agents_per_process"]
-        if self.lockstep and k > 1:  # packed lockstep processes: a message per block and step
+        if k > 1:  # packed processes: a message per block and step (tick)
             for b in range(-(-self.n // k)):
                 self.readers.subscribe("state_block", self._block_receiver(b, k), dim, b,
-                                       "lockstep")
+                                       self.params["mode"])
         else:
             for a in range(self.n):
                 self.readers.subscribe("state", self._receiver(a), dim, a,
@@ -200,7 +200,7 @@ class MonitorNode(NodeApp):
         return receive
 
     def _block_receiver(self, block: int, k: int) -> Callable[[Any, MessageInfo], None]:
-        """The callback of one block's exchange topic (lockstep, K agents per process): each
+        """The callback of one block's exchange topic (K agents per process): each
         row as one agent's message; a malformed row drops the whole message."""
         run_id = self.params["run_id"]
 

@@ -48,6 +48,7 @@ from .motion import (
 )
 from .record import RECORD_KEY, RunRecord, drop_summary, run_records
 from .topics import (
+    BLOCK_MODES,
     DEFAULT_ENSEMBLE,
     TOPICS,
     Topic,
