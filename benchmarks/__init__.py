@@ -10,6 +10,7 @@
     python -m benchmarks lossy        three namespace hosts: realtime error, lockstep rate vs loss
     python -m benchmarks bridge       simulated robots in the loop: error vs pose noise and lag
     python -m benchmarks realtime_scale  realtime at 8 ... 1024 agents, 10 ... 50 Hz: late ticks, CPU
+    python -m benchmarks watching     lockstep rounds/s with the monitor over without, 8 ... 1024
     python -m benchmarks faults       process deaths: a realtime soak with kills, lockstep resumes
     python -m benchmarks leftovers    /dev/shm after a run; rounds/s with and without its clean-up
     python -m benchmarks basins       basins of consensus on rings and random graphs, d = 2, 3, 4
@@ -67,6 +68,7 @@ FAMILIES = {
     "bridge": "benchmarks.bridge",
     "realtime": "benchmarks.realtime",
     "realtime_scale": "benchmarks.realtime_scale",
+    "watching": "benchmarks.watching",
     "reductions": "benchmarks.reductions",
     "faults": "benchmarks.faults",
     "leftovers": "benchmarks.leftovers",

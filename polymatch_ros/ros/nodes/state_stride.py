@@ -25,7 +25,8 @@ class StateStride:
     """``due(step)``: whether this process sends the states of ``step`` on the exchange.
 
     ``rate`` Hz (0: every step) is how often; the stride is measured on this process's pace,
-    from the wall-clock time between two steps it sent."""
+    from the wall-clock time since the last step it sent: at each step it sends, and at every
+    step once a period has passed without one (a pace that fell shortens the stride at once)."""
 
     def __init__(self, rate: float, clock: Callable[[], float] = time.monotonic) -> None:
         self.period = 0.0 if rate <= 0 else 1.0 / float(rate)
@@ -37,12 +38,14 @@ class StateStride:
         """True for the steps to send: multiples of the stride, and the ``last`` step."""
         if self.period == 0.0:
             return True
-        if step % self.stride and not last:
-            return False
         now = self.clock()
         if self.mark is not None and step > self.mark[0]:
-            per_step = (now - self.mark[1]) / (step - self.mark[0])
-            self.stride = power_of_two_within(self.period, per_step)
+            elapsed = now - self.mark[1]
+            # at a step it sends, or once a period has passed without one (the pace fell)
+            if step % self.stride == 0 or elapsed > self.period:
+                self.stride = power_of_two_within(self.period, elapsed / (step - self.mark[0]))
+        if step % self.stride and not last:
+            return False
         self.mark = (step, now)
         return True
 
