@@ -177,22 +177,27 @@ class AgentBase(NodeApp):
         return self.control.paused
 
     # -- publishing ------------------------------------------------------------------------------
-    def publish_state(self, final: bool = False, exchange: bool = True) -> None:
-        """Publish every local agent's state on the run's exchange (peers, monitor; unless not
-        ``exchange``) and its pose (and velocity) for people and tools; ``final``: on the
-        latched final topics only (the last step's pose is already on the pose topic: once is
-        not a repeat).
-
-        Per-step messages nobody subscribes to are not even built (the lockstep hot loop).
-        """
+    def publish_state(self, final: bool = False) -> None:
+        """Publish every local agent's state on the run's exchange (peers, monitor) and its
+        pose (and velocity) for people and tools; ``final``: on the latched final topics only
+        (the last step's pose is already on the pose topic: once is not a repeat)."""
         if final:
             self._send_states(self.final_exchange_pubs)
             self._publish_rows(self.final_pubs, self.final_twist_pubs)
+            self._maybe_diagnostics()
         else:
-            if exchange and any(p.get_subscription_count() for p in self.exchange_pubs.values()):
-                self._send_states(self.exchange_pubs)
-            if any(p.get_subscription_count() for p in self.pose_pubs.values()):
-                self._publish_rows(self.pose_pubs, self.twist_pubs)
+            self.publish_step()
+
+    def publish_step(self, exchange: bool = True) -> None:
+        """A step's states: on the run's exchange (unless not ``exchange``: lockstep sends them
+        at the monitor's pace, ``state_stride``) and the pose topics.
+
+        Per-step messages nobody subscribes to are not even built (the lockstep hot loop).
+        """
+        if exchange and any(p.get_subscription_count() for p in self.exchange_pubs.values()):
+            self._send_states(self.exchange_pubs)
+        if any(p.get_subscription_count() for p in self.pose_pubs.values()):
+            self._publish_rows(self.pose_pubs, self.twist_pubs)
         self._maybe_diagnostics()
 
     def _publish_exchange(self, pubs: dict[int, Publisher]) -> None:

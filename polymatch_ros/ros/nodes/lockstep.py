@@ -385,7 +385,7 @@ class LockstepAgent(AgentBase):
             now = time.monotonic()
             self.round_time = now - start
             last = stop or k == len(grid) - 1
-            self.publish_state(exchange=self.state_stride.due(self.steps, last))
+            self.publish_step(exchange=self.state_stride.due(self.steps, last))
             # the node's own entities (control topic, parameter services) cost a full wait-set
             # rebuild per spin: serve them a few times a second, not every step
             if now - last_spin > 0.1:
