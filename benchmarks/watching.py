@@ -1,8 +1,9 @@
 """What watching costs: lockstep rounds/s of `polymatch run` with and without the monitor.
 
-For each N (default 8, 64, 1024), N congruent triangles (first-order model, rkmk4, R rounds)
-through `polymatch run` with its default packing, with the monitor and with ``--no-monitor``,
-the two alternating ``--repeats`` times (so that the machine's drift hits them alike).  A run's
+For each N (default 8, 64, 1024), N congruent triangles (first-order model, rkmk4, R rounds:
+a few seconds a run) through `polymatch run` with its default packing, with the monitor and
+with ``--no-monitor``, the two alternating ``--repeats`` times, which one first alternating
+too (so that the machine's drift hits them alike).  A run's
 rate is the mean of its agent processes' rounds/s (their run records); the table gives the
 medians and their ratio, with the monitor over without: the monitor reads the agents' states at
 its report rate (``nodes.state_stride``), and should cost the run next to nothing.
@@ -15,12 +16,13 @@ HELP = "lockstep rounds/s of `polymatch run` with the monitor over without, 8 ..
 
 
 def add_arguments(p):
-    from .options import at_least, int_list
+    from .options import int_list
 
     p.add_argument("--agents", type=int_list(2), default=[8, 64, 1024], metavar="N,N,...",
                    help="ensemble sizes (default 8,64,1024)")
-    p.add_argument("--rounds", type=at_least(8), default=4000,
-                   help="rounds per run (default 4000)")
+    p.add_argument("--rounds", type=int_list(8), default=[40000, 40000, 4000],
+                   metavar="R,R,...", help="rounds per run at each size, the last for any "
+                   "further size (default 40000,40000,4000: a few seconds a run)")
 
 
 def _scene_yaml(n, steps, dt):
@@ -58,17 +60,19 @@ def run(args, log):
 
     report = Report(NAME, "What watching costs (`python -m benchmarks watching`)")
     sizes = [8] if args.quick else args.agents
-    rounds = 40 if args.quick else args.rounds
+    rounds = [40] if args.quick else args.rounds
     repeats = 1 if args.quick else (args.repeats or 3)
-    steps = max(2, rounds // 4)  # rkmk4: 4 rounds a step
-    rows, load = [], [os.getloadavg()]
+    rows, load, captions = [], [os.getloadavg()], []
     with private_runs() as (tmp, env):
-        for n in sizes:
+        for i, n in enumerate(sizes):
+            steps = max(2, rounds[min(i, len(rounds) - 1)] // 4)  # rkmk4: 4 rounds a step
+            captions.append(f"{n}: {4 * steps}")
             path = write_scene(tmp, f"watching_{n}.yaml", _scene_yaml(n, steps, 0.01))
-            timeout = 120 + n * rounds // 2000
+            timeout = 120 + n * steps // 500
             runs = {"with": [], "without": []}
             for r in range(repeats):
-                for label, extra in (("with", []), ("without", ["--no-monitor"])):
+                pair = (("with", []), ("without", ["--no-monitor"]))
+                for label, extra in pair if r % 2 == 0 else pair[::-1]:
                     log(f"{n} agents, repeat {r + 1}/{repeats}, {label} the monitor")
                     runs[label].append(_rate(env, path, timeout, extra))
                     load.append(os.getloadavg())
@@ -80,8 +84,9 @@ def run(args, log):
         ["agents", "with the monitor (each run)", "without (each run)", "median with",
          "median without", "with / without"],
         rows,
-        caption=f"Lockstep rounds/s, N congruent triangles, rkmk4, {steps} steps ({4 * steps} "
-        f"rounds), default packing, {repeats} alternating runs each; load averages (1, 5, 15 "
+        caption=f"Lockstep rounds/s, N congruent triangles, rkmk4, rounds a run by N "
+        f"({', '.join(captions)}), default packing, {repeats} alternating runs each; load "
+        f"averages (1, 5, 15 "
         f"min) at the start {'/'.join(f'{v:.1f}' for v in load[0])}, at the end "
         f"{'/'.join(f'{v:.1f}' for v in load[-1])}, on {os.cpu_count()} cores",
     )

@@ -31,10 +31,12 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
                                         stops the ensemble (``match_action``)
   /clock              rosgraph_msgs/Clock  lockstep: the simulated time of each step it
                                         reports (``sim_clock``), for use_sim_time tools
-In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
-second, the latest simulated time that every agent's pose has reached (its loop, at that rate,
-takes the poses that came since its last report and publishes it, so the last step is reported
-within 1/report_rate s); in realtime at ``rate`` Hz from the latest poses, taken only then.
+In lockstep it collects the steps' states the agents send at its pace (``exchange_rate``,
+``state_stride``) and reports, at most ``report_rate`` times a second, the latest simulated time
+that every agent's state has reached (its loop, at that rate, takes the states that came since
+its last report and publishes it); in realtime at ``rate`` Hz from the latest poses, taken only
+then.  Either way its reports take at most ``REPORT_CPU_SHARE`` of a core: where one costs
+more (a large ensemble), the reports come less often.
 It ends on SIGINT or SIGTERM (exit 0), in lockstep after one more report of the latest step
 completed, and never in the middle of a report.
 The headline topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo`
@@ -78,6 +80,10 @@ if TYPE_CHECKING:
 REPORT_READERS_SECONDS = 20.0
 #: an agent's velocities as heard: (v, W as one algebra row)
 Velocity = tuple[np.ndarray, np.ndarray]
+#: the share of a core the reports may take: a report that costs c s of CPU is followed by the
+#: next one no sooner than c / REPORT_CPU_SHARE s later (1024 agents: a few reports a second),
+#: so that watching a large ensemble leaves the agents the machine
+REPORT_CPU_SHARE = 0.05
 
 
 class MonitorNode(NodeApp):
@@ -392,7 +398,10 @@ class MonitorNode(NodeApp):
                 due += self.report_period
                 if due <= now:  # behind (a loaded machine): the next one a period from now
                     due = now + self.report_period
+                cpu = time.thread_time()
                 self.report_due()
+                # at most REPORT_CPU_SHARE of a core: a costly report spaces the next ones
+                due = max(due, now + (time.thread_time() - cpu) / REPORT_CPU_SHARE)
         if self.lockstep:
             self._report_completed()
         self.match.close(self.executor)  # open goals end; their results go out
