@@ -20,9 +20,9 @@ def add_arguments(p):
 
     p.add_argument("--agents", type=int_list(2), default=[8, 64, 1024], metavar="N,N,...",
                    help="ensemble sizes (default 8,64,1024)")
-    p.add_argument("--rounds", type=int_list(8), default=[40000, 40000, 4000],
+    p.add_argument("--rounds", type=int_list(8), default=[160000, 80000, 8000],
                    metavar="R,R,...", help="rounds per run at each size, the last for any "
-                   "further size (default 40000,40000,4000: a few seconds a run)")
+                   "further size (default 160000,80000,8000: several seconds a run)")
 
 
 def _scene_yaml(n, steps, dt):
