@@ -35,6 +35,13 @@ def test_realtime_packs_by_the_measured_rule(n, processes):
                                                            n, True).reason
 
 
+def test_realtime_on_a_host_of_some_agents_keeps_a_process_per_agent():
+    """--only: the other agents may speak only the public per-agent state topics."""
+    packing = Packing(requested=None, monitor=True, mode="realtime", whole=False)
+    choice = choose_packing(packing, 8, True)
+    assert choice.agents_per_process == 1 and "--only" in choice.reason
+
+
 def test_realtime_k1_keeps_one_agent_a_process_bridge_always():
     # 30 + runner + monitor = 32
     assert _k(30, k=1) == 1

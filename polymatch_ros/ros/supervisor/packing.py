@@ -10,7 +10,10 @@ Realtime (``python -m benchmarks realtime_scale``, ``docs/bench/realtime_scale.m
 costs each process its agents' numerics, vectorised, plus reading the other processes' states
 and publishing its own, and the reading dominates: one process holds the rate with the least
 CPU a tick at every size measured, and is the default as in lockstep; ``-k 1`` keeps one agent
-a process, so that a crash costs one agent.  Bridge runs relay one robot a process.
+a process, so that a crash costs one agent.  A host that runs only some of the agents
+(``--only``) keeps a process per agent by default: the other agents may be of another
+implementation, which speaks the public per-agent state topics (``agent_<i>/state``), not the
+blocks.  Bridge runs relay one robot a process.
 
 Every agent is its own node at any packing (``nodes.hosted``): a full node (its services and
 parameters too) while a process hosts up to ``FULL_AGENT_NODES`` agents, a lean one (its pose
@@ -87,7 +90,7 @@ def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> Pac
         return PackingChoice(k, f"lockstep's fastest measured packing, up to "
                                 f"{LOCKSTEP_AGENTS_PER_PROCESS} agents a process "
                                 f"(docs/bench/packing.md); -k 1: a process per agent")
-    if packing.mode == "realtime":
+    if packing.mode == "realtime" and packing.whole:
         k = max(need, min(n_agents, REALTIME_AGENTS_PER_PROCESS))
         return PackingChoice(k, f"realtime's measured packing: the least CPU a tick, up to "
                                 f"{REALTIME_AGENTS_PER_PROCESS} agents a process "
@@ -97,5 +100,6 @@ def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> Pac
         return PackingChoice(need, f"{n_agents} agents + {own} own processes exceed the "
                                    f"{LOCALHOST_PARTICIPANTS} DDS participants LOCALHOST "
                                    f"discovery reaches: the fewest agents a process that fit")
+    why = "" if packing.whole else ", and other hosts' agents read agent_<i>/state (--only)"
     return PackingChoice(1, f"{packing.mode}: a process per agent, so that a crash costs one "
-                            f"agent")
+                            f"agent{why}")
