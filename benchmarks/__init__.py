@@ -9,6 +9,8 @@
     python -m benchmarks scaling      lockstep at 8 ... 4096 agents: rounds/s, start-up, memory
     python -m benchmarks lossy        three namespace hosts: realtime error, lockstep rate vs loss
     python -m benchmarks bridge       simulated robots in the loop: error vs pose noise and lag
+    python -m benchmarks realtime_scale  realtime, 8 ... 1024 agents at 10 ... 50 Hz: late ticks
+    python -m benchmarks watching     lockstep rounds/s with the monitor over without, 8 ... 1024
     python -m benchmarks faults       process deaths: a realtime soak with kills, lockstep resumes
     python -m benchmarks leftovers    /dev/shm after a run; rounds/s with and without its clean-up
     python -m benchmarks basins       basins of consensus on rings and random graphs, d = 2, 3, 4
@@ -65,6 +67,8 @@ FAMILIES = {
     "trade": "benchmarks.trade",
     "bridge": "benchmarks.bridge",
     "realtime": "benchmarks.realtime",
+    "realtime_scale": "benchmarks.realtime_scale",
+    "watching": "benchmarks.watching",
     "reductions": "benchmarks.reductions",
     "faults": "benchmarks.faults",
     "leftovers": "benchmarks.leftovers",

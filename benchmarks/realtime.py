@@ -1,8 +1,9 @@
 """Can the agents hold their rate? Realtime ticks started late, and CPU per tick, against the rate.
 
-The paper's 8 triangles, one agent process each, the monitor running (what `polymatch run
---mode realtime` starts), time scale 1, at 25 ... 200 Hz, each rate run R times in turn
-(the rates alternate, so that the machine's drift hits them alike).  From the agents' run
+The paper's 8 triangles, one agent process each (`polymatch run --mode realtime -k 1`; the
+default packing, and larger ensembles: ``realtime_scale``), the monitor running, time scale 1,
+at 25 ... 200 Hz, each rate run R times in turn (the rates alternate, so that the machine's
+drift hits them alike).  From the agents' run
 records: the share of ticks that started more than one period late (all agents, and the
 worst agent), and each agent process's CPU time per tick over its ticks (every thread: the
 middleware's too).  8 x CPU per tick x rate, over the machine's cores, is the share of the
@@ -32,7 +33,8 @@ def _run_rate(env, path, rate, seconds, tmp, tag):
     from .ros_runs import agent_records, run_cli
 
     records = os.path.join(tmp, f"rt_{rate:g}_{tag}.jsonl")
-    run_cli(env, ["run", path, "--mode", "realtime", "--rate", str(rate), "--time-scale", "1",
+    run_cli(env, ["run", path, "--mode", "realtime", "-k", "1", "--rate", str(rate),
+                  "--time-scale", "1",
                   "--t-end", str(seconds), "--hold", "1e9", "-q", "--no-compare",
                   "--records", records, "--timeout", str(seconds + 120)], seconds + 180)
     recs = [r for r in agent_records(records) if r.finished and r.steps]

@@ -17,7 +17,7 @@ from bench_tables import family_tables, number
 from benchmarks import main
 
 ROS_QUICK_FAMILIES = ["distributed", "packing", "scaling", "graphs", "trade", "bridge",
-                      "realtime"]
+                      "realtime", "realtime_scale", "watching"]
 
 # headers every family must print
 EXPECTED = {
@@ -31,6 +31,9 @@ EXPECTED = {
                 "transport share", "| 8 "],
     "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
               "injected delay"],
+    "realtime_scale": ["| agents", "packing (processes x agents)", "ticks started late",
+                       "CPU ms per agent tick", "wall / simulated time", "default: 1 x 8"],
+    "watching": ["| agents", "median with", "median without", "with / without"],
     "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
                "true: median / max", "true / floor", "true below floor from (s)",
                "(A-2) alone (no noise, no lag"],
@@ -82,8 +85,19 @@ def _bridge(tables, out):
         assert row["true: median / max"] != "-", row
 
 
+def _ratios(tables, out):
+    """Every size ran with and without the monitor: its ratio is the medians' quotient."""
+    rows = _rows(tables, "with / without")
+    assert rows, tables
+    for row in rows:
+        on, off = number(row["median with"]), number(row["median without"])
+        assert on > 0 and off > 0, row
+        assert number(row["with / without"]) == pytest.approx(on / off, rel=0.05), row
+
+
 VALUES = {"distributed": _finished, "packing": _shapes_multiply, "scaling": _shapes_multiply,
-          "graphs": None, "trade": _trade, "bridge": _bridge, "realtime": _finished}
+          "graphs": None, "trade": _trade, "bridge": _bridge, "realtime": _finished,
+          "realtime_scale": _shapes_multiply, "watching": _ratios}
 
 
 @pytest.mark.usefixtures("ros")  # the slot and domain of a ROS world; the family takes its own

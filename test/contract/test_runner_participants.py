@@ -4,7 +4,8 @@ LOCALHOST discovery reaches.
 rmw_fastrtps probes the first 32 participant ports on 127.0.0.1; two participants beyond
 them never meet (measured: 32 agent processes + runner + monitor never finish discovery).
 Lockstep packs up to LOCKSTEP_AGENTS_PER_PROCESS agents a process (``docs/bench/packing.md``);
-realtime runs a process per agent while they fit.
+realtime up to REALTIME_AGENTS_PER_PROCESS (``docs/bench/realtime_scale.md``); bridge runs a
+process per agent while they fit.
 """
 
 import pytest
@@ -14,6 +15,7 @@ from polymatch_ros.ros.supervisor.packing import (
     FULL_AGENT_NODES,
     LOCALHOST_PARTICIPANTS,
     LOCKSTEP_AGENTS_PER_PROCESS,
+    REALTIME_AGENTS_PER_PROCESS,
     choose_packing,
 )
 from polymatch_ros.ros.supervisor.plan import Packing
@@ -24,17 +26,33 @@ def _k(n, k=None, monitor=True, mode="realtime", localhost=True):
     return choose_packing(packing, n, localhost=localhost).agents_per_process
 
 
-def test_realtime_runs_one_agent_per_process_while_it_fits():
+@pytest.mark.parametrize("n,processes", [(2, 1), (8, 1), (64, 1), (1024, 1), (4096, 1),
+                                         (4097, 2)])
+def test_realtime_packs_by_the_measured_rule(n, processes):
+    k = _k(n)
+    assert k == min(n, REALTIME_AGENTS_PER_PROCESS) and -(-n // k) == processes
+    assert "docs/bench/realtime_scale.md" in choose_packing(Packing(None, True, mode="realtime"),
+                                                           n, True).reason
+
+
+def test_realtime_on_a_host_of_some_agents_keeps_a_process_per_agent():
+    """--only: the other agents may speak only the public per-agent state topics."""
+    packing = Packing(requested=None, monitor=True, mode="realtime", whole=False)
+    choice = choose_packing(packing, 8, True)
+    assert choice.agents_per_process == 1 and "--only" in choice.reason
+
+
+def test_realtime_k1_keeps_one_agent_a_process_bridge_always():
     # 30 + runner + monitor = 32
-    assert _k(30) == 1
-    assert _k(31, monitor=False) == 1
+    assert _k(30, k=1) == 1
+    assert _k(31, k=1, monitor=False) == 1
     assert _k(8, mode="bridge") == 1
 
 
-def test_realtime_packs_agents_when_processes_would_exceed_the_limit():
-    k = _k(32)
+def test_bridge_packs_agents_when_processes_would_exceed_the_limit():
+    k = _k(32, mode="bridge")
     assert k == 2 and -(-32 // k) + 2 <= LOCALHOST_PARTICIPANTS
-    k = _k(1000)
+    k = _k(1000, mode="bridge")
     assert -(-1000 // k) + 2 <= LOCALHOST_PARTICIPANTS
 
 
@@ -67,7 +85,7 @@ def test_explicit_k_beyond_the_limit_is_a_one_line_error():
 
 
 def test_no_limit_without_localhost_discovery():
-    assert _k(100, localhost=False) == 1
+    assert _k(100, mode="bridge", localhost=False) == 1
     assert _k(100, k=1, localhost=False) == 1
 
 

@@ -68,9 +68,10 @@ def test_realtime_agents_couple_only_to_peers_in_range_and_the_split_is_named(ro
     out = tmp_path / "final.npz"
     echo = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/diagnostics", "--timeout", "90"],
                      timeout=100)
+    # -k 1: a process per agent, each one's diagnostics name its peers in range
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", str(path), "--mode", "realtime",
                       "--rate", "20", "--time-scale", "2", "--timeout", "90", "--save", str(out),
-                      "-q"], timeout=120)
+                      "-k", "1", "-q"], timeout=120)
     rc = ros.wait(proc, 130)
     text = ros.output(proc)
     assert rc == 3, text

@@ -46,6 +46,23 @@ RATE = 20.0
 RUN_BOUND = 180  # s: only a hang takes this long; the run itself ends at t_end (simulated)
 
 
+def test_realtime_default_packing_is_one_process_and_says_why(ros):
+    """Without -k a realtime run packs its agents as measured (``supervisor.packing``): one
+    process steps all eight together, each still its own node; its first line says why."""
+    proc = ros.start(
+        [PY, "-m", "polymatch_ros.cli", "run", scene_path(SCENE), "--mode", "realtime",
+         "--rate", str(RATE), "--time-scale", "2", "--t-end", "2", "--timeout", "90", "-v"],
+        timeout=120,
+    )
+    rc = ros.wait(proc, 130)
+    text = ros.output(proc)
+    assert rc in (0, 3), text
+    assert re.search(r"^polymatch run: 8 agents in 1 process of up to 8, agent nodes full "
+                     r"\(realtime's measured packing", text, re.M), text
+    assert re.search(r"^agent 0,1,2,3,4,5,6,7: finished at t = 2 after 20 realtime steps", text,
+                     re.M), text
+
+
 def test_realtime_converges_survives_sigkill_and_rejoin_theorem_4_2(ros):
     start = time.time() + 10.0  # every process is up well before t = 0
     common = dict(
@@ -94,9 +111,11 @@ def test_realtime_converges_survives_sigkill_and_rejoin_theorem_4_2(ros):
 
 
 def test_last_realtime_progress_line_has_the_true_diameter_and_a_rate(ros):
-    """The runner's last progress line is the final state's: its diameter is the summary's, its
-    rate is not negative (a monitor report of fewer agents after the end must not count); each
-    agent reports its CPU time per tick."""
+    """Two processes of four agents (``-k 4``), each stepping its agents together and reading
+    the other's states as one block a tick: the runner's last progress line is the final
+    state's, its diameter is the summary's, its rate is not negative (a monitor report of
+    fewer agents after the end must not count); each process reports its CPU time per tick,
+    and the agents' diameter fell (Theorem 4.2: the ensemble matches)."""
     proc = ros.start(
         [
             PY,
@@ -114,15 +133,20 @@ def test_last_realtime_progress_line_has_the_true_diameter_and_a_rate(ros):
             "6",
             "--timeout",
             "120",
+            "-k",
+            "4",
             "-v",
         ],
         timeout=150,
     )
     rc = ros.wait(proc, 160)
     text = ros.output(proc)
-    # each agent's line (-v) gives its process's CPU time per tick, measured over its ticks
-    cpu = [float(v) for v in re.findall(r"^agent \d+: .*CPU ([0-9.]+) ms per tick", text, re.M)]
-    assert len(cpu) == 8 and all(v > 0.0 for v in cpu), text
+    assert re.search(r"^polymatch run: 8 agents in 2 processes of up to 4", text, re.M), text
+    # each process's line (-v) gives its CPU time per tick, measured over its ticks
+    cpu = re.findall(r"^agent ([0-9,]+): .*?(\d+) started more than one period late "
+                     r"\(CPU ([0-9.]+) ms per tick\).*no messages dropped", text, re.M)
+    assert sorted(a for a, _, _ in cpu) == ["0,1,2,3", "4,5,6,7"], text
+    assert all(float(v) > 0.0 for _, _, v in cpu), text
     assert rc in (0, 3), text
     progress = re.findall(r"^t = +([0-9.]+) / .*diameter = (\S+) +(\S+) rounds/s", text, re.M)
     assert progress, text
@@ -130,3 +154,5 @@ def test_last_realtime_progress_line_has_the_true_diameter_and_a_rate(ros):
     summary = re.search(r"^triangles +8 +\S+ +\S+ +(\S+) ", text, re.M)
     assert summary and diameter == float(summary.group(1)), text
     assert diameter > 0.0 and rate >= 0.0 and t == 6.0, text
+    first = float(progress[0][1])
+    assert diameter < 0.5 * first, (first, diameter)

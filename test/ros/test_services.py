@@ -82,10 +82,11 @@ def test_lockstep_pause_holds_every_process_and_stop_ends_all_at_the_same_step(r
 
 
 def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converges(ros):
-    """Through ``polymatch run`` (which starts and stops the ensemble by its services)."""
+    """Through ``polymatch run`` (which starts and stops the ensemble by its services); a
+    process per agent (-k 1), so that agent_0 is a lifecycle node of its own."""
     run = ros.start(
         cli_argv("run", scene_path(SCENE), "--mode", "realtime", "--rate", "20",
-                 "--time-scale", "2", "--t-end", "80", "--timeout", str(BOUND)),
+                 "--time-scale", "2", "--t-end", "80", "--timeout", str(BOUND), "-k", "1"),
         timeout=BOUND + 20,
         name="runner",
     )

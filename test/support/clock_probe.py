@@ -2,10 +2,10 @@
 
     python test/support/clock_probe.py POSE_TOPIC END_NS BOUND_S
 
-Prints ``CLOCK <ns>`` for every /clock message and ``POSE <ns>`` for every stamp on
-POSE_TOPIC (geometry_msgs/PoseStamped), until /clock reaches END_NS (then, once the pose of
-END_NS came too, ``NOW <ns> <ros time active>``: its own clock, which follows /clock) or BOUND_S
-seconds pass (exit 3).
+Prints ``CLOCK <ns> <monotonic s>`` for every /clock message (and when it came) and
+``POSE <ns>`` for every stamp on POSE_TOPIC (geometry_msgs/PoseStamped), until /clock reaches
+END_NS (then, once the pose of END_NS came too, ``NOW <ns> <ros time active>``: its own clock,
+which follows /clock) or BOUND_S seconds pass (exit 3).
 """
 
 import sys
@@ -29,7 +29,7 @@ def main():
     def on_clock(msg):
         ns = msg.clock.sec * 10**9 + msg.clock.nanosec
         seen.append(ns)
-        print(f"CLOCK {ns}", flush=True)
+        print(f"CLOCK {ns} {time.monotonic():.4f}", flush=True)
 
     poses = []
 

@@ -17,6 +17,7 @@ LOCKSTEP_TABLE = {
     "peer_timeout": 1.0, "delay": 0.0, "clock_offset_warn": 0.1, "hold_final": 0.0,
     "round_timeout": 10.0, "stall_timeout": 300.0, "peers_restart": False,
     "discovery_timeout": 120.0, "pose_subscribers": 0, "exchange_subscribers": 0,
+    "exchange_rate": 40.0,
     "frame_id": "world",
     "max_linear_speed": 1e6, "max_angular_speed": 1e6, "max_linear_accel": 1e6,
     "max_angular_accel": 1e6, "pose_timeout": 0.5, "pose_type": "pose",

@@ -112,9 +112,10 @@ class AgentBase(NodeApp):
     def _make_publishers(self) -> None:
         node, dim, local = self.node, self.model.dim, self.layout.local
         self.hosted = self._host_agents()
-        # lockstep's packed processes send their agents' states in one message a block and step
+        # packed processes (lockstep, realtime) send their agents' states in one message a block
+        # and step (tick)
         self.exchange_blocks = self.layout.local_blocks() if (
-            self.mode == "lockstep" and self.layout.blocks) else None
+            self.mode in wire.BLOCK_MODES and self.layout.blocks) else None
         # writers by agent, or by block: (key of the per-step topic, of the final one), indices
         keys, by = ("state", "final_state"), local
         if self.exchange_blocks is not None:
@@ -179,18 +180,24 @@ class AgentBase(NodeApp):
     def publish_state(self, final: bool = False) -> None:
         """Publish every local agent's state on the run's exchange (peers, monitor) and its
         pose (and velocity) for people and tools; ``final``: on the latched final topics only
-        (the last step's pose is already on the pose topic: once is not a repeat).
-
-        Per-step messages nobody subscribes to are not even built (the lockstep hot loop).
-        """
+        (the last step's pose is already on the pose topic: once is not a repeat)."""
         if final:
             self._send_states(self.final_exchange_pubs)
             self._publish_rows(self.final_pubs, self.final_twist_pubs)
+            self._maybe_diagnostics()
         else:
-            if any(p.get_subscription_count() for p in self.exchange_pubs.values()):
-                self._send_states(self.exchange_pubs)
-            if any(p.get_subscription_count() for p in self.pose_pubs.values()):
-                self._publish_rows(self.pose_pubs, self.twist_pubs)
+            self.publish_step()
+
+    def publish_step(self, exchange: bool = True) -> None:
+        """A step's states: on the run's exchange (unless not ``exchange``: lockstep sends them
+        at the monitor's pace, ``state_stride``) and the pose topics.
+
+        Per-step messages nobody subscribes to are not even built (the lockstep hot loop).
+        """
+        if exchange and any(p.get_subscription_count() for p in self.exchange_pubs.values()):
+            self._send_states(self.exchange_pubs)
+        if any(p.get_subscription_count() for p in self.pose_pubs.values()):
+            self._publish_rows(self.pose_pubs, self.twist_pubs)
         self._maybe_diagnostics()
 
     def _publish_exchange(self, pubs: dict[int, Publisher]) -> None:
@@ -212,14 +219,14 @@ class AgentBase(NodeApp):
 
     def _send_states(self, pubs: dict[int, Publisher]) -> None:
         """Every local agent's state on the run's exchange writers ``pubs``: a message per
-        block (packed lockstep) or per agent."""
+        block (packed processes) or per agent."""
         if self.exchange_blocks is not None:
             self._publish_exchange_blocks(self.exchange_blocks, pubs)
         else:
             self._publish_exchange(pubs)
 
     def _block_rows(self) -> dict[int, np.ndarray]:
-        """Packed lockstep: each block's agents as rows of the local groups' states laid end
+        """Packed processes: each block's agents as rows of the local groups' states laid end
         to end (what ``_publish_exchange_blocks`` sends), found once; else empty."""
         if self.exchange_blocks is None:
             return {}

@@ -21,6 +21,7 @@ from .. import wire
 from .agent_base import AgentBase
 from .exchange import RoundTimeout, lean_node
 from .stage_links import AgentLinks, BlockLinks, local_fields
+from .state_stride import StateStride
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor
@@ -300,6 +301,8 @@ class LockstepAgent(AgentBase):
         )
         self.exchange.paused = self._serve_control
         self.resumed_at: int | None = None  # the step this process resumed at, if restarted
+        # the steps whose states go out on the run's exchange (the monitor's), at its pace
+        self.state_stride = StateStride(params["exchange_rate"])
 
     def _serve_control(self) -> bool:
         """Inside a long round wait: take control messages and service calls; paused?"""
@@ -382,7 +385,8 @@ class LockstepAgent(AgentBase):
             self.steps += 1
             now = time.monotonic()
             self.round_time = now - start
-            self.publish_state()
+            last = stop or k == len(grid) - 1
+            self.publish_step(exchange=self.state_stride.due(self.steps, last))
             # the node's own entities (control topic, parameter services) cost a full wait-set
             # rebuild per spin: serve them a few times a second, not every step
             if now - last_spin > 0.1:

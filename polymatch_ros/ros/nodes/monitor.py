@@ -29,12 +29,15 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
   match               polymatch_interfaces/action/Match  a goal until the diameter is below a
                                         tolerance, with feedback at each report; its cancel
                                         stops the ensemble (``match_action``)
-  /clock              rosgraph_msgs/Clock  lockstep: the simulated time of each step it
-                                        reports (``sim_clock``), for use_sim_time tools
-In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
-second, the latest simulated time that every agent's pose has reached (its loop, at that rate,
-takes the poses that came since its last report and publishes it, so the last step is reported
-within 1/report_rate s); in realtime at ``rate`` Hz from the latest poses, taken only then.
+  /clock              rosgraph_msgs/Clock  lockstep: the simulated time of the latest step
+                                        every agent completed, ``report_rate`` times a
+                                        second (``sim_clock``), for use_sim_time tools
+In lockstep it collects the steps' states the agents send at its pace (``exchange_rate``,
+``state_stride``) and reports, at most ``report_rate`` times a second, the latest simulated time
+that every agent's state has reached (its loop, at that rate, takes the states that came since
+its last report and publishes it); in realtime at ``rate`` Hz from the latest poses, taken only
+then.  Either way its reports take at most ``REPORT_CPU_SHARE`` of a core: where one costs
+more (a large ensemble), the reports come less often.
 It ends on SIGINT or SIGTERM (exit 0), in lockstep after one more report of the latest step
 completed, and never in the middle of a report.
 The headline topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo`
@@ -78,6 +81,10 @@ if TYPE_CHECKING:
 REPORT_READERS_SECONDS = 20.0
 #: an agent's velocities as heard: (v, W as one algebra row)
 Velocity = tuple[np.ndarray, np.ndarray]
+#: the share of a core the reports may take: a report that costs c s of CPU is followed by the
+#: next one no sooner than c / REPORT_CPU_SHARE s later (1024 agents: a few reports a second),
+#: so that watching a large ensemble leaves the agents the machine
+REPORT_CPU_SHARE = 0.05
 
 
 class MonitorNode(NodeApp):
@@ -112,6 +119,11 @@ class MonitorNode(NodeApp):
         self.stopping = False  # SIGINT or SIGTERM came: end after the report under way
         self.certificate = CertificateKeeper(self.scene.tolerance)
         self.components = ComponentTracker()  # proximity graphs: who hears whom, since when
+        if self.lockstep:
+            # the certificate's root finder (scipy.optimize: most of a second to load) is loaded
+            # before the agents start, which wait for this node's readers, not in the first
+            # report, which would hold the report loop (and /clock) while the rounds run
+            import scipy.optimize  # noqa: F401
         self._wire_up()
         rate = params["report_rate"] if self.lockstep else params["rate"]
         self.report_period = 1.0 / rate
@@ -142,17 +154,17 @@ class MonitorNode(NodeApp):
         self._wait_for_report_readers()
         self.readers = LeanReaders(node, "_poses")
         k = self.params["agents_per_process"]
-        if self.lockstep and k > 1:  # packed lockstep processes: a message per block and step
+        if k > 1:  # packed processes: a message per block and step (tick)
             for b in range(-(-self.n // k)):
                 self.readers.subscribe("state_block", self._block_receiver(b, k), dim, b,
-                                       "lockstep")
+                                       self.params["mode"])
         else:
             for a in range(self.n):
                 self.readers.subscribe("state", self._receiver(a), dim, a,
                                        self.params["mode"])
         self.control = EnsembleControl(node, self.params["mode"])
         self.match = MatchServer(node, self.scene.tolerance, self.n, self.control)
-        self.clock = SimClock(node) if self.lockstep else None  # /clock: the reported step's
+        self.clock = SimClock(node) if self.lockstep else None  # /clock: the completed step's
 
     def _wait_for_report_readers(self) -> None:
         """Until ``report_readers`` readers matched every report writer (at most
@@ -200,7 +212,7 @@ class MonitorNode(NodeApp):
         return receive
 
     def _block_receiver(self, block: int, k: int) -> Callable[[Any, MessageInfo], None]:
-        """The callback of one block's exchange topic (lockstep, K agents per process): each
+        """The callback of one block's exchange topic (K agents per process): each
         row as one agent's message; a malformed row drops the whole message."""
         run_id = self.params["run_id"]
 
@@ -278,15 +290,21 @@ class MonitorNode(NodeApp):
             for key in [k for k in pending if k <= self.completed]:
                 del pending[key]
 
-    def _report_completed(self) -> None:
-        """Lockstep, at ``report_rate`` Hz: publish the latest completed time if it is new."""
+    def _follow(self) -> None:
+        """Lockstep, every ``1 / report_rate`` s whether or not a report is due: take the states
+        that came, and advance ``/clock`` to the latest step every agent has completed.  The
+        clock so keeps its pace when the reports are spaced out (``REPORT_CPU_SHARE``)."""
         self._drain()
+        if self.clock is not None and self.completed >= 0:
+            self.clock.advance(self.completed)
+
+    def _report_completed(self) -> None:
+        """Lockstep: publish the latest completed time if it is new."""
+        self._follow()
         if self.unreported is not None:
             t, rows, vel = self.unreported
             self.unreported = None
             self._publish(t, rows, vel)
-            if self.clock is not None:
-                self.clock.advance(self.completed)
 
     def _drain(self) -> None:
         """Take the poses and twists the readers hold (lockstep: up to their depth, 100 each)."""
@@ -385,6 +403,7 @@ class MonitorNode(NodeApp):
         for sig in (signal.SIGINT, signal.SIGTERM):  # after rclpy's: the end is ours
             signal.signal(sig, self._stop)
         due = time.monotonic() + self.report_period
+        quiet_until = 0.0  # no report before (the reports' share of a core)
         while not self.stopping:
             self.executor.spin_once(timeout_sec=min(0.1, max(0.0, due - time.monotonic())))
             now = time.monotonic()
@@ -392,7 +411,14 @@ class MonitorNode(NodeApp):
                 due += self.report_period
                 if due <= now:  # behind (a loaded machine): the next one a period from now
                     due = now + self.report_period
-                self.report_due()
+                cpu = time.thread_time()
+                if now >= quiet_until:
+                    self.report_due()
+                elif self.lockstep:  # no report: the states still taken, /clock advanced
+                    self._follow()
+                # at most REPORT_CPU_SHARE of a core: a costly report spaces the next ones
+                quiet_until = max(quiet_until,
+                                  now + (time.thread_time() - cpu) / REPORT_CPU_SHARE)
         if self.lockstep:
             self._report_completed()
         self.match.close(self.executor)  # open goals end; their results go out

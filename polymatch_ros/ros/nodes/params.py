@@ -190,6 +190,14 @@ AGENT = (
         "do not start before this many subscribers (the monitor) listen to the run's exchange",
         (0, 100000),
     ),
+    Param(
+        "exchange_rate",
+        40.0,
+        "lockstep: send the states on the run's exchange (what the monitor reads) about this "
+        "many times a wall-clock second, at steps every process sends (multiples of a "
+        "power-of-two stride) and the last step; 0: every step",
+        (0.0, 1e6),
+    ),
     Param("frame_id", "world", "frame_id of published poses"),
     Param(
         "max_linear_speed", 1e6, "bridge: commanded linear speed limit (m/s, by norm)", (0.0, 1e6)
@@ -263,8 +271,8 @@ MONITOR = (
     Param(
         "agents_per_process",
         1,
-        "lockstep: K of the agents' partition; with K > 1 each process sends its agents' "
-        "states in one message a step (states/block_<b>), and the monitor reads those",
+        "K of the agents' partition; with K > 1 each process sends its agents' states in one "
+        "message a step or tick (states/block_<b>), and the monitor reads those",
         (1, 1_000_000),
     ),
     Param(

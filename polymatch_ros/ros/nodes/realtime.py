@@ -7,9 +7,14 @@ one of its process's agents in the latest poses (``PeerTable.in_range``), as a r
 Each peer's clock offset is estimated from its pose stamps (clock_offset.py) and published in
 the diagnostics.
 
+A process may host K agents (``-k``): they step together on the process's tick, the numerics
+vectorised over them (the core's ``drive`` over the process's rows, as in lockstep), with the
+latest states the process has of the other processes' agents, and it publishes their states in
+one message a tick (``states/block_<b>``, read as one message per peer process).
+
 A tick's work: wait on the agent node (control, services, parameters) until the tick is due,
-take what the peers' readers hold (``PeerTable.drain``: their own lean node, one wait, at
-most one pose per peer), step, publish.  The peers' poses do not wake the agent between
+take what the peers' readers hold (``PeerTable.drain``: straight from the middleware, at
+most a few states per reader), step, publish.  The peers' poses do not wake the agent between
 ticks: their readers keep the newest (depth 1), and the middleware's reception time stamps
 each one for the clock offsets and the silence timeout.
 """
@@ -76,8 +81,15 @@ class PeerTable:
         self.readers = LeanReaders(node, "_peers")
         # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
         self.want_v = velocities and self.model.order == 2 and self.model.centroids_exact
-        for a in layout.peers:  # the run's exchange (wire.exchange): pinned to this run's id
-            self.readers.subscribe("state", self._receiver(a), dim, a, "realtime")
+        # the run's exchange (wire.exchange): pinned to this run's id; packed processes send
+        # their agents' states in one message a tick (a block), read as one reader a process
+        if layout.blocks:
+            for b in layout.peer_blocks():
+                self.readers.subscribe("state_block", self._block_receiver(b), dim, b,
+                                       "realtime")
+        else:
+            for a in layout.peers:
+                self.readers.subscribe("state", self._receiver(a), dim, a, "realtime")
 
     @classmethod
     def of_agent(cls, agent: AgentBase, clock: ClockOffsets | None = None) -> PeerTable:
@@ -92,12 +104,20 @@ class PeerTable:
             agent, SimpleNamespace(t=-np.inf, x=None, rot=None, v=None, heard=0.0)
         )
 
+    def _heard(self, agent: int, got: wire.Motion, wall: float, mono: float) -> None:
+        """A peer's decoded state waits in ``pending`` as (t, offset x, rotation) and, where the
+        flow needs it, the centroid velocity, stamped with the time the middleware received it
+        (``wall``, ``mono``)."""
+        if self.clock is not None:
+            self.clock.add(agent, got.t, wall)
+        self.pending[agent].append((mono, "pose", (got.t, got.x, got.rot)))
+        if self.want_v and got.v is not None and \
+                self.layout.owner[agent][0] in self.layout.local_groups:
+            self.pending[agent].append((mono, "twist", got.v))
+
     def _receiver(self, agent: int) -> Callable[[Any, MessageInfo], None]:
-        """The callback of one peer's exchange topic: decoded states wait in ``pending`` as
-        (t, offset x, rotation) and, where the flow needs it, the centroid velocity, stamped
-        with the time the middleware received them.  Another run's message, or anything
-        malformed, is dropped and counted."""
-        want_v = self.want_v and self.layout.owner[agent][0] in self.layout.local_groups
+        """The callback of one peer's exchange topic (``_heard``).  Another run's message, or
+        anything malformed, is dropped and counted."""
 
         def receive(msg: Any, info: MessageInfo) -> None:
             got, reason = wire.decode_exchange(msg, self.grp, self.model.dim, self.run_id,
@@ -105,12 +125,25 @@ class PeerTable:
             if got is None:
                 self.drops(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
                 return
+            self._heard(agent, got, *received_at(info))
+
+        return receive
+
+    def _block_receiver(self, block: int) -> Callable[[Any, MessageInfo], None]:
+        """The callback of one peer process's block topic: each row of a peer as that peer's
+        message (``_heard``); a malformed row drops the whole message."""
+        peers = set(self.layout.peers)
+
+        def receive(msg: Any, info: MessageInfo) -> None:
+            got, reason = wire.decode_exchange_block(
+                msg, self.grp, self.model.dim, self.run_id, block, self.layout.k, self.t_max)
+            if got is None:
+                self.drops(f"block {block}", reason)  # type: ignore[arg-type]  # with None
+                return
             wall, mono = received_at(info)
-            if self.clock is not None:
-                self.clock.add(agent, got.t, wall)
-            self.pending[agent].append((mono, "pose", (got.t, got.x, got.rot)))
-            if want_v and got.v is not None:
-                self.pending[agent].append((mono, "twist", got.v))
+            for agent, motion in got:
+                if agent in peers:
+                    self._heard(agent, motion, wall, mono)
 
         return receive
 

@@ -1,11 +1,12 @@
 """``/clock``: a lockstep run's simulated time, for tools started with ``use_sim_time:=true``.
 
 One process of a run publishes it: the monitor, which already follows the simulated time (the
-latest step every agent has completed).  Each report publishes the time of the step it
-reports, the very stamp of that step's poses (integer nanoseconds), so a tool that follows
-``/clock`` lines up with the stamps; between reports the clock holds.  It never goes back:
-a time at or before the last one published is skipped.  The agents do not publish it: one
-writer per run keeps the clock single-valued, and a report costs the lockstep rounds nothing.
+latest step every agent has completed).  Every ``1 / report_rate`` s (whether or not a
+diameter report is due) it publishes the time of that step, the very stamp of that step's poses
+(integer nanoseconds), so a tool that follows ``/clock`` lines up with the stamps; in between
+the clock holds.  It never goes back: a time at or before the last one published is skipped.
+The agents do not publish it: one writer per run keeps the clock single-valued, and it costs
+the lockstep rounds nothing.
 
 The writer's QoS is the clock's of ROS (rclcpp's ``ClockQoS``, what ``ros2 bag play --clock``
 offers): the newest value only, BEST_EFFORT, VOLATILE; rclpy's and rclcpp's time sources read

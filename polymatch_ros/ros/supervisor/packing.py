@@ -4,10 +4,16 @@ Lockstep (``python -m benchmarks packing`` and ``scaling``, ``docs/bench/``, 2 c
 costs each process its share of the numerics plus one DDS exchange with every other process,
 and the exchange dominates; one process was the fastest packing at 8, 32, 64, 256 and 1024
 agents (at 1024: 423 rounds/s against 70 in 4 processes of 256), and at 4096 (96 rounds/s
-against 51 in 4 of 1024 and 4 in 16 of 256; ``docs/guide/speed-and-accuracy.md``).  Realtime and
-bridge runs step at a fixed rate, so speed does not choose: one process per agent, so that a
-crash costs one agent and per-agent faults stay per agent, while the processes fit the
-participants LOCALHOST discovery reaches.
+against 51 in 4 of 1024 and 4 in 16 of 256; ``docs/guide/speed-and-accuracy.md``).
+
+Realtime (``python -m benchmarks realtime_scale``, ``docs/bench/realtime_scale.md``): a tick
+costs each process its agents' numerics, vectorised, plus reading the other processes' states
+and publishing its own, and the reading dominates: one process holds the rate with the least
+CPU a tick at every size measured, and is the default as in lockstep; ``-k 1`` keeps one agent
+a process, so that a crash costs one agent.  A host that runs only some of the agents
+(``--only``) keeps a process per agent by default: the other agents may be of another
+implementation, which speaks the public per-agent state topics (``agent_<i>/state``), not the
+blocks.  Bridge runs relay one robot a process.
 
 Every agent is its own node at any packing (``nodes.hosted``): a full node (its services and
 parameters too) while a process hosts up to ``FULL_AGENT_NODES`` agents, a lean one (its pose
@@ -28,6 +34,8 @@ LOCALHOST_PARTICIPANTS = 32
 
 #: lockstep: the most agents one process hosts unless -k says otherwise (measured, above)
 LOCKSTEP_AGENTS_PER_PROCESS = 4096
+#: realtime: the most agents one process hosts unless -k says otherwise (measured, above)
+REALTIME_AGENTS_PER_PROCESS = 4096
 #: --agent-nodes auto: full agent nodes in a process of up to this many agents, lean beyond
 FULL_AGENT_NODES = 32
 
@@ -82,9 +90,16 @@ def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> Pac
         return PackingChoice(k, f"lockstep's fastest measured packing, up to "
                                 f"{LOCKSTEP_AGENTS_PER_PROCESS} agents a process "
                                 f"(docs/bench/packing.md); -k 1: a process per agent")
+    if packing.mode == "realtime" and packing.whole:
+        k = max(need, min(n_agents, REALTIME_AGENTS_PER_PROCESS))
+        return PackingChoice(k, f"realtime's measured packing: the least CPU a tick, up to "
+                                f"{REALTIME_AGENTS_PER_PROCESS} agents a process "
+                                f"(docs/bench/realtime_scale.md); -k 1: a process per agent, "
+                                f"so that a crash costs one agent")
     if need > 1:
         return PackingChoice(need, f"{n_agents} agents + {own} own processes exceed the "
                                    f"{LOCALHOST_PARTICIPANTS} DDS participants LOCALHOST "
                                    f"discovery reaches: the fewest agents a process that fit")
+    why = "" if packing.whole else ", and other hosts' agents read agent_<i>/state (--only)"
     return PackingChoice(1, f"{packing.mode}: a process per agent, so that a crash costs one "
-                            f"agent")
+                            f"agent{why}")

@@ -87,6 +87,7 @@ class Packing:
     recorder: bool = False     # --record: the recorder is one more
     mode: str = "lockstep"     # lockstep | realtime | bridge
     agent_nodes: str = "auto"  # --agent-nodes as asked
+    whole: bool = True         # this host runs every agent (no --only): realtime may pack
 
 
 @dataclass(frozen=True)
@@ -122,4 +123,5 @@ class RunPlan:
     def packing(self) -> Packing:
         """What decides this host's agents per process."""
         return Packing(self.hosts.agents_per_process, self.hosts.monitor,
-                       self.outputs.record is not None, self.mode, self.hosts.agent_nodes)
+                       self.outputs.record is not None, self.mode, self.hosts.agent_nodes,
+                       self.every_agent_here)

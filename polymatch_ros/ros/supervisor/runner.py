@@ -74,9 +74,10 @@ class RunContext:
 
     @property
     def exchange_blocks(self) -> int | None:
-        """K where the agents send their states a block of K at a time (packed lockstep)."""
+        """K where the agents send their states a block of K at a time (packed lockstep and
+        realtime processes)."""
         k = self.agents_per_process
-        return k if k > 1 and self.plan.mode == "lockstep" else None
+        return k if k > 1 and self.plan.mode in wire.BLOCK_MODES else None
 
     def checkpoint_path(self, name: str) -> str:
         """The checkpoint of the agent process ``name`` (a bridge agent's holds the measured
@@ -255,7 +256,7 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
     monitor_mode = "realtime" if plan.realtime else "lockstep"
     monitor = common + ["-p", f"mode:={monitor_mode}"]
     monitor += ["-p", f"peer_timeout:={timing.peer_timeout!r}", "-p", f"run_id:={context.run_id}"]
-    monitor += ["-p", f"agents_per_process:={k}"]  # lockstep: how the agents' states come
+    monitor += ["-p", f"agents_per_process:={k}"]  # how the agents' states come
     # the recorder (--record) hears every report, the first too (``report_readers``)
     monitor += ["-p", f"report_readers:={int(plan.outputs.record is not None)}"]
     if plan.realtime:

@@ -49,6 +49,7 @@ from .motion import (
 )
 from .record import RECORD_KEY, RunRecord, drop_summary, echoed_run_records, run_records
 from .topics import (
+    BLOCK_MODES,
     DEFAULT_ENSEMBLE,
     TOPICS,
     Topic,

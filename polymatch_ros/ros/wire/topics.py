@@ -19,6 +19,9 @@ if TYPE_CHECKING:
     from rclpy.subscription import Subscription
 
 DEFAULT_ENSEMBLE = "polymatch"
+#: the modes whose packed processes (K > 1) send their agents' states a block at a time
+#: (``state_block``); a bridge agent relays its own robot's pose, one agent a process
+BLOCK_MODES = ("lockstep", "realtime")
 
 
 @dataclass(frozen=True)
@@ -41,8 +44,10 @@ TOPICS = {
     # the run's own exchange (wire.exchange): each state with the run's id, for the peers and
     # the monitor; the pose and twist topics above are for people and tools
     "state": Topic("agent_{agent}/state", "state", "pose", realtime_reader_qos="latest"),
-    # lockstep with K agents per process: the states of block b's agents, one message a step
-    "state_block": Topic("states/block_{agent}", "state_block", "pose"),
+    # K agents per process (lockstep, realtime): the states of block b's agents, one message a
+    # step or tick
+    "state_block": Topic("states/block_{agent}", "state_block", "pose",
+                         realtime_reader_qos="latest"),
     # the final state, latched, for people and tools
     "final_pose": Topic("agent_{agent}/final_pose", "pose", "latched"),
     "final_twist": Topic("agent_{agent}/final_twist", "twist", "latched"),
