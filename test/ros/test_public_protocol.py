@@ -57,10 +57,10 @@ def test_an_agent_written_from_the_msg_files_joins_and_the_ensemble_matches_theo
 
 
 # The reader listens this long once it sees the wrong writer in the ROS graph (DDS discovery
-# gives the graph and a match of the same type alike); the wrong writer writes a little longer
-# once it sees the reader there
+# gives the graph and a match of the same type alike); the wrong writer, discovered within about
+# a second of its start, writes a little longer
 LISTEN = 3.0
-WRONG_WRITES = LISTEN + 2.0
+WRONG_WRITES = LISTEN + 3.0
 
 READER = textwrap.dedent(f"""
     import time, rclpy
@@ -79,19 +79,21 @@ READER = textwrap.dedent(f"""
         rclpy.spin_once(reader, timeout_sec=0.05)
         most = max(most, sub.get_publisher_count())
     print("WRONG", seen, most, len(heard), flush=True)
-    end = time.monotonic() + 20.0
+    end, most = time.monotonic() + 30.0, 0
     while time.monotonic() < end and not heard:
         rclpy.spin_once(reader, timeout_sec=0.05)
+        most = max(most, sub.get_publisher_count())
     end = time.monotonic() + 1.0  # matched a while more: the writer sees it too
     while time.monotonic() < end:
         rclpy.spin_once(reader, timeout_sec=0.05)
-    print("RIGHT", sub.get_publisher_count(), len(heard) > 0, flush=True)
+        most = max(most, sub.get_publisher_count())
+    print("RIGHT", most, len(heard) > 0, flush=True)
     reader.destroy_node()
     rclpy.shutdown()
 """)
 
-# writes until it sees the reader (matched, or in the ROS graph), then argv[2] seconds more
-# (at most 30 s)
+# argv[2] seconds: the wrong writer writes that long, the typed one that long once it has matched
+# the reader (at most 30 s)
 WRITER = textwrap.dedent("""
     import sys, time, rclpy
     from std_msgs.msg import Float64MultiArray
@@ -102,14 +104,14 @@ WRITER = textwrap.dedent("""
     kind = AgentState if typed else Float64MultiArray
     topic = "/polymatch/agent_3/state"
     pub = node.create_publisher(kind, topic, 10)
-    end, most = time.monotonic() + 30.0, 0
+    seconds = float(sys.argv[2])
+    end, most = time.monotonic() + (30.0 if typed else seconds), 0
     while time.monotonic() < end:
         pub.publish(AgentState(agent=3) if typed else Float64MultiArray(data=[4.0, 1.0, 3.0]))
         most = max(most, pub.get_subscription_count())
         rclpy.spin_once(node, timeout_sec=0.05)
-        seen = most or node.count_subscribers(topic)
-        if seen and end - time.monotonic() > float(sys.argv[2]):
-            end = time.monotonic() + float(sys.argv[2])
+        if most and end - time.monotonic() > seconds:
+            end = time.monotonic() + seconds
     print("MATCHED", most, flush=True)
     node.destroy_node()
     rclpy.shutdown()
@@ -129,14 +131,14 @@ def test_a_writer_of_another_type_on_an_agents_topic_is_never_matched(ros):
     """DDS matches a reader and a writer only of the same type (Jazzy's type hashes): a
     Float64MultiArray writer on agent_3/state, seen in the ROS graph, never reaches the run's
     AgentState reader, and an AgentState writer does (the positive control)."""
-    reader = ros.start([PY, "-c", READER], timeout=60, name="reader")
+    reader = ros.start([PY, "-c", READER], timeout=90, name="reader")
     assert _wait_for(ros, reader, "READING", 30), ros.output(reader)
     wrong = ros.start([PY, "-c", WRITER, "wrong", str(WRONG_WRITES)], timeout=60,
                       name="wrong_writer")
     assert _wait_for(ros, reader, "WRONG", 45), ros.output(reader)
-    right = ros.start([PY, "-c", WRITER, "typed", "2"], timeout=60, name="typed_writer")
+    right = ros.start([PY, "-c", WRITER, "typed", "3"], timeout=60, name="typed_writer")
     for proc in (reader, wrong, right):
-        assert ros.wait(proc, 70) == 0, ros.output(proc)
+        assert ros.wait(proc, 100) == 0, ros.output(proc)
     text = ros.output(reader)
     # in the graph while the reader listened, never matched, none heard
     assert re.search(r"^WRONG 1 0 0$", text, re.M), text
