@@ -37,37 +37,46 @@ GRAPH = textwrap.dedent("""
 """)
 
 
-def _probe(ros, argv, name):
-    proc = ros.start(argv, timeout=90, name=name)
-    assert ros.wait(proc, 100) == 0, ros.output(proc)
-    return ros.output(proc)
+def _probes(ros, probes):
+    """Start every probe at once (each waits for the nodes it asks, up to its own bound);
+    each one's output once all have ended well."""
+    procs = {name: ros.start(argv, timeout=90, name=name) for name, argv in probes.items()}
+    for proc in procs.values():
+        assert ros.wait(proc, 100) == 0, ros.output(proc)
+    return {name: ros.output(proc) for name, proc in procs.items()}
 
 
 def test_every_agent_of_a_packed_process_is_a_node_with_its_topics_services_and_parameters(
         ros, tmp_path):
     logs = tmp_path / "logs"
+    # the probes start with the run and ask it as soon as its nodes are there; at time scale 2
+    # the run converges (and stops) about 10 s after its agents start
     run = ros.start(cli_argv("run", scene_path("congruent_triangles"), "--mode", "realtime",
-                             "--rate", "20", "-k", "4", "--t-end", "30", "--timeout", "120",
-                             "--no-compare", "--logs", logs), timeout=140, name="run")
-    text = _probe(ros, [PY, "-c", GRAPH], "graph")
-    graph = json.loads(re.search(r"^GRAPH (.*)$", text, re.M).group(1))
+                             "--rate", "20", "--time-scale", "2", "-k", "4", "--t-end", "30",
+                             "--timeout", "120", "--no-compare", "--logs", logs),
+                    timeout=140, name="run")
+    out = _probes(ros, {
+        "graph": [PY, "-c", GRAPH],
+        "services": [PY, os.path.join(SUPPORT, "service_probe.py"),
+                     "call /polymatch/agent_5/pause true", "call /polymatch/agent_5/pause false"],
+        "params": [PY, os.path.join(SUPPORT, "param_probe.py"),
+                   "get /polymatch/agent_5 agent agents host_node mode agents_per_process",
+                   "set /polymatch/agent_5 t_end 5.0",
+                   "get /polymatch/agents_4_7 agent agents"],
+    })
+    graph = json.loads(re.search(r"^GRAPH (.*)$", out["graph"], re.M).group(1))
     names = set(graph["names"])
     assert {f"agent_{i}" for i in range(8)} | {"agents_0_3", "agents_4_7"} <= names, graph
     # each pose topic has one writer: the agent's own node
     assert graph["owners"] == {str(i): [f"agent_{i}"] for i in range(8)}, graph
 
-    calls = _probe(ros, [PY, os.path.join(SUPPORT, "service_probe.py"),
-                         "call /polymatch/agent_5/pause true",
-                         "call /polymatch/agent_5/pause false"], "services")
+    calls = out["services"]
     answers = re.findall(r"^RESULT /polymatch/agent_5/pause (\S+) (.*)$", calls, re.M)
     assert [a[0] for a in answers] == ["True", "True"], calls
     assert all("applied by its process /polymatch/agents_4_7 to the 4 agents it hosts" in a[1]
                for a in answers), calls
 
-    params = _probe(ros, [PY, os.path.join(SUPPORT, "param_probe.py"),
-                          "get /polymatch/agent_5 agent agents host_node mode agents_per_process",
-                          "set /polymatch/agent_5 t_end 5.0",
-                          "get /polymatch/agents_4_7 agent agents"], "params")
+    params = out["params"]
     got = [json.loads(m) for m in re.findall(r"^PARAMS \S+ (.*)$", params, re.M)]
     assert got[0] == {"agent": 5, "agents": [4, 5, 6, 7], "host_node": "/polymatch/agents_4_7",
                       "mode": "realtime", "agents_per_process": 4}, params

@@ -181,14 +181,14 @@ def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_
     told 'received', so each holds its final poses.  SIGKILL of one of them once the runner
     has every final state: it is listed, not restarted (a restarted one would begin a step
     its peers have ended), the monitor is not waited for, and the run ends as it would have:
-    equal to the centralised run, exit 3 (t_end 6 is before matching), nothing left over."""
+    equal to the centralised run, exit 3 (t_end 3 is before matching), nothing left over."""
     save = tmp_path / "final.npz"
-    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--save", save)
+    run = _run(ros, "--t-end", "3", "--dt", "0.02", "-k", "2", "--save", save)
     _until(ros, 0.3, run)
     monitor = _process(run, "monitor")
     os.kill(monitor, signal.SIGSTOP)
     try:
-        _until(ros, 5.99, run)
+        _until(ros, 2.99, run)
         time.sleep(2)  # the runner takes the final states every 0.2 s once a process finished
         victim = _process(run, "agents_2_3")
         before = descendants(run.pid)
@@ -199,10 +199,10 @@ def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_
     rc, out = _finish(ros, run)
     assert rc == 3 and "did not converge" in out, out[-3000:]
     assert float(DEVIATION.search(out).group(1)) <= 1e-9, out[-3000:]
-    assert AFTER_RUN.findall(out) == [("agents_2_3", str(victim), "6")], out[-3000:]
+    assert AFTER_RUN.findall(out) == [("agents_2_3", str(victim), "3")], out[-3000:]
     assert "failures: 1 process death(s), 0 restarted" in out, out[-3000:]
     assert _gone(before)
-    _assert_saved_equal_centralised(save, 0.02, 6.0)
+    _assert_saved_equal_centralised(save, 0.02, 3.0)
 
 
 def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_path):

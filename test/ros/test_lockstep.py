@@ -122,7 +122,8 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     )
     records, saved = tmp_path / "records.jsonl", tmp_path / "final.npz"
     proc = ros.start(
-        cli_argv("run", scene_path("congruent_triangles"), "-k", 2, "--timeout", 200,
+        # two agent processes: each round crosses processes, and fewer processes step faster
+        cli_argv("run", scene_path("congruent_triangles"), "-k", 4, "--timeout", 200,
                  "--records", records, "--save", saved),
         timeout=230,
     )
@@ -132,8 +133,8 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     text = ros.output(proc)
     assert rc == 0, text
     # a clean run leaves /dev/shm as it found it: the Fast DDS segments its runner, monitor and
-    # four agent processes made, seen while they ran, are gone
-    assert len(shm.segments) >= 5 and shm.left() == [], (shm.seen, shm.left())
+    # two agent processes made, seen while they ran, are gone
+    assert len(shm.segments) >= 3 and shm.left() == [], (shm.seen, shm.left())
     assert ros.wait(echo, 20) == 0, ros.output(echo)
     values = [float(v) for v in re.findall(r"^data: (\S+)$", ros.output(echo), re.M)]
     assert values[0] > 1.0 and values[-1] < 1e-6
@@ -145,7 +146,7 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     # a normal run is clean: nothing dropped, by the monitor or any agent
     assert re.search(r"^monitor: last report .*; no messages dropped$", text, re.M), text
     recs = run_records(records.read_text().splitlines())
-    assert len(recs) == 5 and all(r.finished for r in recs if r.role == "agent"), recs
+    assert len(recs) == 3 and all(r.finished for r in recs if r.role == "agent"), recs
     assert all(r.dropped == {} for r in recs), [r.dropped for r in recs]
     assert t_final < load_scene(scene_path("congruent_triangles")).t_end  # stopped on convergence
     scene = load_scene(scene_path("congruent_triangles"))

@@ -56,27 +56,44 @@ def test_an_agent_written_from_the_msg_files_joins_and_the_ensemble_matches_theo
     assert np.allclose(x[AGENT] - origin, ast.literal_eval(said.group(2)), atol=1e-9)
 
 
-READER = textwrap.dedent("""
+# The reader listens this long once it sees the wrong writer in the ROS graph (DDS discovery
+# gives the graph and a match of the same type alike); the wrong writer, discovered within about
+# a second of its start, writes a little longer
+LISTEN = 3.0
+WRONG_WRITES = LISTEN + 3.0
+
+READER = textwrap.dedent(f"""
     import time, rclpy
     from polymatch_ros.ros import wire
     rclpy.init()
     reader = rclpy.create_node("reader", namespace="/polymatch")
-    heard, most = [], 0
+    heard, most, topic = [], 0, "/polymatch/agent_3/state"
     sub = wire.subscription(reader, "state", heard.append, 2, 3)
     print("READING", flush=True)
-    end = time.monotonic() + 4.0
+    end = time.monotonic() + 30.0
+    while time.monotonic() < end and reader.count_publishers(topic) == 0:
+        rclpy.spin_once(reader, timeout_sec=0.05)
+    seen = reader.count_publishers(topic)
+    end = time.monotonic() + {LISTEN}
     while time.monotonic() < end:
         rclpy.spin_once(reader, timeout_sec=0.05)
         most = max(most, sub.get_publisher_count())
-    print("WRONG", most, len(heard), flush=True)
-    end = time.monotonic() + 20.0
+    print("WRONG", seen, most, len(heard), flush=True)
+    end, most = time.monotonic() + 30.0, 0
     while time.monotonic() < end and not heard:
         rclpy.spin_once(reader, timeout_sec=0.05)
-    print("RIGHT", sub.get_publisher_count(), len(heard) > 0, flush=True)
+        most = max(most, sub.get_publisher_count())
+    end = time.monotonic() + 1.0  # matched a while more: the writer sees it too
+    while time.monotonic() < end:
+        rclpy.spin_once(reader, timeout_sec=0.05)
+        most = max(most, sub.get_publisher_count())
+    print("RIGHT", most, len(heard) > 0, flush=True)
     reader.destroy_node()
     rclpy.shutdown()
 """)
 
+# argv[2] seconds: the wrong writer writes that long, the typed one that long once it has matched
+# the reader (at most 30 s)
 WRITER = textwrap.dedent("""
     import sys, time, rclpy
     from std_msgs.msg import Float64MultiArray
@@ -85,12 +102,16 @@ WRITER = textwrap.dedent("""
     node = rclpy.create_node("writer")
     typed = sys.argv[1] == "typed"
     kind = AgentState if typed else Float64MultiArray
-    pub = node.create_publisher(kind, "/polymatch/agent_3/state", 10)
-    end, most = time.monotonic() + float(sys.argv[2]), 0
+    topic = "/polymatch/agent_3/state"
+    pub = node.create_publisher(kind, topic, 10)
+    seconds = float(sys.argv[2])
+    end, most = time.monotonic() + (30.0 if typed else seconds), 0
     while time.monotonic() < end:
         pub.publish(AgentState(agent=3) if typed else Float64MultiArray(data=[4.0, 1.0, 3.0]))
         most = max(most, pub.get_subscription_count())
         rclpy.spin_once(node, timeout_sec=0.05)
+        if most and end - time.monotonic() > seconds:
+            end = time.monotonic() + seconds
     print("MATCHED", most, flush=True)
     node.destroy_node()
     rclpy.shutdown()
@@ -108,17 +129,19 @@ def _wait_for(ros, proc, word, seconds):
 
 def test_a_writer_of_another_type_on_an_agents_topic_is_never_matched(ros):
     """DDS matches a reader and a writer only of the same type (Jazzy's type hashes): a
-    Float64MultiArray writer on agent_3/state never reaches the run's AgentState reader, and
-    an AgentState writer does (the positive control)."""
-    reader = ros.start([PY, "-c", READER], timeout=60, name="reader")
+    Float64MultiArray writer on agent_3/state, seen in the ROS graph, never reaches the run's
+    AgentState reader, and an AgentState writer does (the positive control)."""
+    reader = ros.start([PY, "-c", READER], timeout=90, name="reader")
     assert _wait_for(ros, reader, "READING", 30), ros.output(reader)
-    wrong = ros.start([PY, "-c", WRITER, "wrong", "5"], timeout=30, name="wrong_writer")
-    assert _wait_for(ros, reader, "WRONG", 30), ros.output(reader)
-    right = ros.start([PY, "-c", WRITER, "typed", "8"], timeout=30, name="typed_writer")
+    wrong = ros.start([PY, "-c", WRITER, "wrong", str(WRONG_WRITES)], timeout=60,
+                      name="wrong_writer")
+    assert _wait_for(ros, reader, "WRONG", 45), ros.output(reader)
+    right = ros.start([PY, "-c", WRITER, "typed", "3"], timeout=60, name="typed_writer")
     for proc in (reader, wrong, right):
-        assert ros.wait(proc, 70) == 0, ros.output(proc)
+        assert ros.wait(proc, 100) == 0, ros.output(proc)
     text = ros.output(reader)
-    assert re.search(r"^WRONG 0 0$", text, re.M), text            # never matched, none heard
+    # in the graph while the reader listened, never matched, none heard
+    assert re.search(r"^WRONG 1 0 0$", text, re.M), text
     assert re.search(r"^RIGHT 1 True$", text, re.M), text         # the run's own type matches
     assert "MATCHED 0" in ros.output(wrong), ros.output(wrong)
     assert "MATCHED 1" in ros.output(right), ros.output(right)

@@ -165,10 +165,11 @@ def _scene_file(path, group, shape, count, dimension, dt, t_end, **extra):
     return path
 
 
-def test_colcon_build_and_installed_executables_start(ros, tmp_path):
-    """colcon builds both packages of the repository, the interface package (ament_cmake,
-    rosidl) against the PyPI wheels as scripts/build-interfaces.sh does, and the node
-    executables it installs start."""
+@pytest.fixture
+def colcon_install(tmp_path):
+    """The repository's two packages built by colcon into a scratch workspace; its install
+    base.  A fixture the test requests before ``ros``: the build starts no ROS process, so it
+    runs before the test takes a ROS slot, and the slot is held only while the executables run."""
     colcon = os.path.join(os.path.dirname(PY), "colcon")
     if not os.path.exists(colcon):
         pytest.skip("colcon is not installed in this environment")
@@ -192,11 +193,20 @@ def test_colcon_build_and_installed_executables_start(ros, tmp_path):
         cwd=ws, env=env, capture_output=True, text=True,
     )
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
-    interfaces = ws / "install" / "polymatch_interfaces"
+    return ws / "install"
+
+
+# ``colcon_install`` before ``ros``: pytest sets up a test's fixtures of one scope in the order
+# the test names them, so the build is done before the slot is taken
+def test_colcon_build_and_installed_executables_start(colcon_install, ros, tmp_path):
+    """colcon builds both packages of the repository, the interface package (ament_cmake,
+    rosidl) against the PyPI wheels as scripts/build-interfaces.sh does, and the node
+    executables it installs start."""
+    interfaces = colcon_install / "polymatch_interfaces"
     assert (interfaces / "share" / "polymatch_interfaces" / "msg" / "AgentState.msg").exists()
     assert (interfaces / "lib" / "python3.11" / "site-packages" / "polymatch_interfaces" / "msg"
             / "_agent_state.py").exists()
-    prefix = ws / "install" / "polymatch_ros"
+    prefix = colcon_install / "polymatch_ros"
     exe = prefix / "lib" / "polymatch_ros"
     assert all((exe / name).exists() for name in ("agent", "monitor", "robot", "polymatch"))
     assert (prefix / "share" / "polymatch_ros" / "config" / "congruent_triangles.yaml").exists()
@@ -329,7 +339,7 @@ def test_a_stalled_peer_is_waited_for_and_the_run_completes(ros, tmp_path):
     machine can starve a process.  Its writer stays matched (the DDS lease is 10 s), so its
     neighbours wait instead of failing, and all three finish the run.  (With stall_timeout
     below the freeze the same run fails naming agent 2 "present but silent".)"""
-    agents = _three_agents_running(ros, tmp_path, 8.0, round_timeout=1.0)   # 800 steps
+    agents = _three_agents_running(ros, tmp_path, 5.0, round_timeout=1.0)   # 500 steps
     frozen = _children(agents[2].pid)
     assert frozen
     for pid in frozen:
@@ -342,7 +352,7 @@ def test_a_stalled_peer_is_waited_for_and_the_run_completes(ros, tmp_path):
             os.kill(pid, signal.SIGCONT)
     for a in agents:
         assert ros.wait(a, 60) == 0, ros.output(a)[-1500:]
-        assert "finished at t = 8" in ros.output(a), ros.output(a)[-1500:]
+        assert "finished at t = 5" in ros.output(a), ros.output(a)[-1500:]
 
 
 def _wait_until_all_step(ros, diag, agents, n, t_min, timeout):
