@@ -222,7 +222,7 @@ def test_colcon_build_and_installed_executables_start(colcon_install, ros, tmp_p
     )
     assert ros.wait(agent, 70) == 0, ros.output(agent)
     assert "agent 0: finished at t = 2 after 20 steps" in ros.output(agent)
-    # a shipped scene by name, found through the ament index of the colcon install
+    # a shipped scene by name, found in the share directory of the colcon install's prefix
     monitor = ros.start(
         [str(exe / "monitor"), "--ros-args", "-p", "scene:=congruent_triangles"], timeout=60
     )
