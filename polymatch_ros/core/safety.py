@@ -133,7 +133,8 @@ def filter_command(nominal: np.ndarray, p: np.ndarray, peers: np.ndarray, spec: 
         relaxed = least_violation(nominal, rows, lower)
         value = np.asarray(fallback, dtype=float) if relaxed is None else relaxed
         return Filtered(value, True, 0, infeasible=True)
-    moved = float(np.linalg.norm(u - nominal)) > UNCHANGED * max(1.0, float(np.linalg.norm(nominal)))
+    scale = max(1.0, float(np.linalg.norm(nominal)))
+    moved = float(np.linalg.norm(u - nominal)) > UNCHANGED * scale
     return Filtered(u if moved else nominal, moved, active)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from . import graph
 from .checks import Map, describe, number, vector
 from .errors import SceneError
+from .formation import check_separation, parse_formation
 from .integrators import METHODS
 from .limits import (
     FLOAT,
@@ -34,7 +35,6 @@ from .limits import (
     Limits,
     check_rates,
 )
-from .formation import check_separation, parse_formation
 from .model import Model, State, validate_model
 from .proximity import BYTES_PER_WEIGHT
 from .safety import SafetySpec, parse_safety

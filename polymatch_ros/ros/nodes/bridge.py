@@ -43,15 +43,14 @@ from typing import TYPE_CHECKING, Any
 
 from ...core.command import (
     ZERO,
-    accel_command,
     brake_command,
     bridge_system,
-    command_from_ensemble,
     is_still,
     rotation3,
 )
 from ...core.errors import ParameterError
 from ...core.model import GroupState, State
+from ...core.shaping import shaper_for
 from .. import wire
 from .agent_base import AgentBase
 from .realtime import PeerTable, RealtimeAgent
@@ -145,6 +144,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
             raise ParameterError("mode bridge: one agent per process (one robot each)")
         super()._configure(p)
         self.rebuild_system()  # refuses d >= 4 and undamped second order before any topic
+        self.shaper = shaper_for(self.scene, self.layout.local[0], p)
         if self.model.order == 2 and p["pose_type"] != "odometry":
             raise ParameterError(
                 "mode bridge: a second-order scene needs the robot's velocity: "
@@ -178,7 +178,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
             self.measured = None
             return
         self.measured = SimpleNamespace(
-            x=got[0] - self.scene.origin, rot=got[1], v=velocity[0], w=velocity[1],
+            x=self.shaper.state_x(got[0], self.grp.to_matrices(got[1])[0]), rot=got[1],
+            v=velocity[0], w=velocity[1],
             heard=time.monotonic()
         )
 
@@ -252,7 +253,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.state = self._state_at(t, own)
         self.checkpoint.write(self.steps, t, self.state)  # what --save keeps if the run ends now
         super().publish_state()
-        request = SimpleNamespace(stage=self.state, fields=("rot", "x"))
+        fields = ("rot", "x", "v") if self.model.order == 2 else ("rot", "x")
+        request = SimpleNamespace(stage=self.state, fields=fields)
         heard = self.peers.in_range(self.peers.active(), self.state)  # a radio: peers in range
         ensemble = self.peers.ensemble(request, heard)  # type: ignore[arg-type]
         twist = self._command(gi, row, ensemble, own)
@@ -268,12 +270,9 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self, gi: int, row: int, ensemble: Ensemble, own: SimpleNamespace
     ) -> Twist:
         """The twist (A-2) or the acceleration (A-1) of this agent against ``ensemble``."""
-        p, rot = self.params, self.grp.to_matrices(own.rot)[0]
-        if self.model.order == 2:
-            return accel_command(self.system, gi, row, ensemble, rot, own.v, own.w,
-                                 p["command_frame"], p["max_linear_accel"], p["max_angular_accel"])
-        return command_from_ensemble(self.system, gi, row, ensemble, rot, p["command_frame"],
-                                     p["max_linear_speed"], p["max_angular_speed"])
+        rot = self.grp.to_matrices(own.rot)[0]  # formation, safety filter, drive: core.shaping
+        return self.shaper.command(self.system, gi, row, ensemble, own, rot, self.state.t,
+                                   self.params)
 
     def _state_at(self, t: float, own: SimpleNamespace) -> State:
         gi = self.layout.owner[self.layout.local[0]][0]
@@ -300,6 +299,9 @@ class BridgeAgent(RuntimeParams, AgentBase):
         note, extra = super().diagnostic_note()
         extra["commands"] = self.commands
         extra["holding"] = self.holding or "no"
+        extra.update(self.shaper.note())
+        if self.shaper.watch.deadlocked and not self.holding:
+            note = "deadlock: the safety filter holds the robot short of its place; " + note
         if self.peers.in_range_count is not None:
             extra["peers_in_range"] = self.peers.in_range_count
         return (f"robot held: {self.holding}; " if self.holding else note), extra

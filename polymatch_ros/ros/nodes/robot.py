@@ -34,6 +34,8 @@ import numpy as np
 
 from ...core.command import saturate
 from ...core.errors import ParameterError
+from ...core.formation import positions
+from ...core.unicycle import unicycle_step
 from .params import Param, declare, scene_file
 from .process import ros_main
 
@@ -60,6 +62,9 @@ ROBOT = (
     Param("command_frame", "world", "cmd_vel / cmd_accel components in the world | body frame",
           choices=("world", "body")),
     Param("frame_id", "world", "frame_id of the measured pose"),
+    Param("drive", "holonomic", "holonomic | unicycle (a differential-drive base: it follows "
+          "only linear.x and angular.z of a body-frame cmd_vel)",
+          choices=("holonomic", "unicycle")),
     Param("pose_log", str, "file for one line per step: time, true and measured pose "
           "(declared when given)"),
 )
@@ -141,6 +146,23 @@ class SimulatedRobot:
         self.w = saturate(self.w + self.alpha * dt, self.max_angular)[0]
         self._move(dt)
 
+    def roll(self, dt: float, v: float, omega: float) -> None:
+        """Advance ``dt`` s as a differential-drive base (planar): forward speed and turn rate
+        track the commanded v (body linear.x) and omega (angular.z) with the lag; the pose moves
+        on the exact arc; it never moves sideways."""
+        from scipy.spatial.transform import Rotation
+
+        follow = self._follow(dt)
+        mat = self.rot.as_matrix()
+        heading = math.atan2(mat[1, 0], mat[0, 0])
+        speed = float(mat[:, 0] @ self.v) + follow * (v - float(mat[:, 0] @ self.v))
+        turn = self.w[2] + follow * (omega - self.w[2])
+        p, heading = unicycle_step(self.p, heading, speed, turn, dt)
+        self.p[:2] = p
+        self.rot = Rotation.from_rotvec([0.0, 0.0, heading])
+        self.v = speed * np.array([math.cos(heading), math.sin(heading), 0.0])
+        self.w = np.array([0.0, 0.0, turn])
+
     def body_twist(self) -> tuple[np.ndarray, np.ndarray]:
         """(linear, angular) velocity in the robot's own frame (an Odometry message's twist)."""
         mat = self.rot.as_matrix()
@@ -186,7 +208,8 @@ class RobotNode:
         assert gs is not None  # the scene's initial state has every group
         rot = model.rotations.to_matrices(model.rotations.take(gs.rot, [row]))[0]
         self.robot = SimulatedRobot(
-            gs.x[row] + scene.origin, rot, model.dim == 2, params["lag"],
+            positions(gs.x[[row]], scene.formation, scene.origin, np.array([params["agent"]]))[0],
+            rot, model.dim == 2, params["lag"],
             params["max_linear_speed"], params["max_angular_speed"],
         )
         self.second_order = model.order == 2
@@ -256,6 +279,8 @@ class RobotNode:
                 self.robot.step(dt, np.zeros(3), np.zeros(3))
             elif self.second_order:
                 self.robot.accelerate(dt, linear, angular, frame)
+            elif self.params["drive"] == "unicycle":
+                self.robot.roll(dt, linear[0], angular[2])
             else:
                 self.robot.step(dt, linear, angular, frame)
             last = now

@@ -56,6 +56,7 @@ def agent_args(bridge: BridgeOptions, order: int) -> list[str]:
     out = [
         "-p", f"max_linear_speed:={bridge.max_linear_speed!r}",
         "-p", f"max_angular_speed:={bridge.max_angular_speed!r}",
+        "-p", f"drive:={bridge.drive}",
     ]
     if order == 2:
         out += ["-p", "pose_type:=odometry",
@@ -90,6 +91,7 @@ def robots(plan: RunPlan, env: dict[str, str]) -> list[Child]:
             "-p", f"position_noise:={bridge.position_noise!r}",
             "-p", f"angle_noise:={bridge.angle_noise!r}",
             "-p", "rate:=30.0",
+            "-p", f"drive:={bridge.drive}",
         ]
         if plan.scene.model.order == 2:
             argv += ["-p", "pose_type:=odometry"]

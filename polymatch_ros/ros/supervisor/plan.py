@@ -72,6 +72,7 @@ class BridgeOptions:
     max_linear_accel: float
     max_angular_accel: float
     robot_log: str | None      # a directory for the robots' pose logs
+    drive: str = "holonomic"   # holonomic | unicycle (differential-drive robots)
 
 
 @dataclass(frozen=True)
