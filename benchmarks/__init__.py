@@ -10,6 +10,7 @@
     python -m benchmarks lossy        three namespace hosts: realtime error, lockstep rate vs loss
     python -m benchmarks bridge       simulated robots in the loop: error vs pose noise and lag
     python -m benchmarks faults       process deaths: a realtime soak with kills, lockstep resumes
+    python -m benchmarks leftovers    /dev/shm after a run; rounds/s with and without its clean-up
     python -m benchmarks basins       basins of consensus on rings and random graphs, d = 2, 3, 4
     python -m benchmarks all --out DIR [--only A,B]   every family, one report DIR/report.md
 
@@ -66,6 +67,7 @@ FAMILIES = {
     "realtime": "benchmarks.realtime",
     "reductions": "benchmarks.reductions",
     "faults": "benchmarks.faults",
+    "leftovers": "benchmarks.leftovers",
 }
 
 

@@ -1,9 +1,12 @@
 """The bare transport's all-to-all lockstep exchange: the limit for the agents' round rate.
 
     python -m benchmarks.bare_exchange INDEX K ROUNDS [PAYLOAD] [--executor single|events]
+        [--message untyped|typed]
 
-Process INDEX of K publishes one std_msgs/Float64MultiArray of PAYLOAD doubles per
-round on /polymatch_bare/p<INDEX> and waits, spinning the same executor with the
+Process INDEX of K publishes one message of PAYLOAD doubles per round on
+/polymatch_bare/p<INDEX> (untyped: a std_msgs/Float64MultiArray; typed: the run's own
+polymatch_interfaces/msg/StageRows, the round in its step field and the doubles in its
+rotations, as a lockstep agent fills it) and waits, spinning the same executor with the
 same QoS and the same lean node and executor as the agents' lockstep stages
 (RELIABLE, VOLATILE; readers KEEP_ALL),
 until it has every other process's message of that round.  No numerics.  It waits
@@ -11,7 +14,7 @@ for discovery exactly as an agent does (its readers matched a writer of every pe
 its writer matched K - 1 readers) and prints one line; as an agent's, its rate counts the
 rounds after the first, which waits for the last peer to start:
 
-    bare 3/8: 512.3 rounds/s over 400 rounds; matched after 0.84 s
+    bare typed 3/8: 512.3 rounds/s over 400 rounds; matched after 0.84 s
 """
 
 import array
@@ -19,38 +22,78 @@ import sys
 import time
 
 
+def _option(argv, name, default):
+    """(the value of ``--name`` or ``default``, argv without it)."""
+    if name not in argv:
+        return default, argv
+    i = argv.index(name)
+    return argv[i + 1], argv[:i] + argv[i + 2:]
+
+
 def _parse(argv):
-    """(INDEX, K, ROUNDS, PAYLOAD, executor kind) from the command line."""
-    executor_kind = "single"
-    if "--executor" in argv:
-        i = argv.index("--executor")
-        executor_kind = argv[i + 1]
-        argv = argv[:i] + argv[i + 2:]
+    """(INDEX, K, ROUNDS, PAYLOAD, executor kind, message kind) from the command line."""
+    executor_kind, argv = _option(argv, "--executor", "single")
+    message_kind, argv = _option(argv, "--message", "untyped")
     payload = int(argv[3]) if len(argv) > 3 else 10
-    return int(argv[0]), int(argv[1]), int(argv[2]), payload, executor_kind
+    return int(argv[0]), int(argv[1]), int(argv[2]), payload, executor_kind, message_kind
 
 
-def _endpoints(node, me, k, inbox):
+class Untyped:
+    """Float64MultiArray: the round as the first double."""
+
+    def __init__(self):
+        from std_msgs.msg import Float64MultiArray
+
+        self.type = Float64MultiArray
+
+    def fill(self, msg, r, filler):
+        msg.data = array.array("d", [float(r)] + filler)
+
+    @staticmethod
+    def round_of(msg):
+        return int(msg.data[0])
+
+
+class Typed:
+    """StageRows: the round in ``step``, the doubles in ``rotations`` (one agent's row)."""
+
+    def __init__(self):
+        from polymatch_interfaces.msg import StageRows
+
+        self.type = StageRows
+        self.agents = array.array("I", [0])
+
+    def fill(self, msg, r, filler):
+        msg.step, msg.t, msg.agents = r, float(r), self.agents
+        msg.rotations = array.array("d", [float(r)] + filler)
+
+    @staticmethod
+    def round_of(msg):
+        return msg.step
+
+
+MESSAGES = {"untyped": Untyped, "typed": Typed}
+
+
+def _endpoints(node, me, k, inbox, kind):
     """This process's writer and a reader of every peer's topic; a reader files each round's
     message under ``inbox[round]``."""
-    from std_msgs.msg import Float64MultiArray
-
     from polymatch_ros.ros import wire
     from polymatch_ros.ros.nodes.exchange import quiet_events
 
     pub_events, sub_events = quiet_events()
     qos = wire.qos_profiles()
-    pub = node.create_publisher(Float64MultiArray, f"/polymatch_bare/p{me}", qos["stage"],
+    pub = node.create_publisher(kind.type, f"/polymatch_bare/p{me}", qos["stage"],
                                 event_callbacks=pub_events)
 
     def callback(peer):
         def receive(msg):
-            inbox.setdefault(int(msg.data[0]), set()).add(peer)
+            inbox.setdefault(kind.round_of(msg), set()).add(peer)
         return receive
 
     subs = [
         node.create_subscription(
-            Float64MultiArray,
+            kind.type,
             f"/polymatch_bare/p{p}",
             callback(p),
             qos["stage_in"],
@@ -82,16 +125,14 @@ def _wait_matched(executor, pub, subs, k):
     return time.monotonic() - t_node
 
 
-def _exchange(executor, pub, inbox, k, rounds, payload):
+def _exchange(executor, pub, inbox, k, rounds, payload, kind):
     """``rounds`` lockstep rounds: publish, then spin until every peer's message of the round
     is in; the wall seconds."""
-    from std_msgs.msg import Float64MultiArray
-
-    msg = Float64MultiArray()
+    msg = kind.type()
     filler = [0.5] * (payload - 1)
     t0 = time.perf_counter()
     for r in range(rounds):
-        msg.data = array.array("d", [float(r)] + filler)
+        kind.fill(msg, r, filler)
         pub.publish(msg)
         while len(inbox.get(r, ())) < k - 1:
             executor.spin_once(timeout_sec=1.0)
@@ -102,7 +143,8 @@ def _exchange(executor, pub, inbox, k, rounds, payload):
 
 
 def main(argv=None):
-    me, k, rounds, payload, executor_kind = _parse(sys.argv[1:] if argv is None else argv)
+    me, k, rounds, payload, executor_kind, message_kind = _parse(
+        sys.argv[1:] if argv is None else argv)
     t_start = time.monotonic()
     import rclpy
     from rclpy.duration import Duration
@@ -111,15 +153,16 @@ def main(argv=None):
     from polymatch_ros.ros.nodes.exchange import lean_node
     node, executor = lean_node(f"bare_{me}")
     inbox = {}
-    pub, subs = _endpoints(node, me, k, inbox)
+    kind = MESSAGES[message_kind]()
+    pub, subs = _endpoints(node, me, k, inbox, kind)
     if executor_kind == "events":
         executor = _events_executor(node, executor)
     matched = _wait_matched(executor, pub, subs, k)
-    wall = _exchange(executor, pub, inbox, k, rounds, payload)
+    wall = _exchange(executor, pub, inbox, k, rounds, payload, kind)
     pub.wait_for_all_acked(Duration(seconds=5))
     print(
-        f"bare {me}/{k}: {(rounds - 1) / wall:.1f} rounds/s over {rounds} rounds; matched after "
-        f"{matched:.2f} s "
+        f"bare {message_kind} {me}/{k}: {(rounds - 1) / wall:.1f} rounds/s over {rounds} rounds; "
+        f"matched after {matched:.2f} s "
         f"({time.monotonic() - t_start - wall:.2f} s from process start)",
         flush=True,
     )

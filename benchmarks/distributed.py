@@ -6,6 +6,8 @@ that the machine's drift hits both alike):
   bare     ``python -m benchmarks.bare_exchange``: N processes exchanging one
            Float64MultiArray per round all-to-all with the agents' stage QoS, node and
            executor, no numerics — the transport's limit;
+  typed    the same with the run's own typed message (polymatch_interfaces StageRows)
+           carrying the same doubles: what the typed protocol costs against the untyped one;
   agents   N agent processes started directly (no runner, no monitor): congruent
            triangles, first-order model, rkmk4 (4 rounds per step), the same number of rounds;
   deployed the same through ``polymatch run`` with the monitor (what the demo runs); its
@@ -63,7 +65,7 @@ def _parallel(argvs, env, timeout):
     return outs
 
 
-def _bare(n, rounds, env, timeout):
+def _bare(n, rounds, env, timeout, message="untyped"):
     outs = _parallel(
         [
             [
@@ -73,6 +75,8 @@ def _bare(n, rounds, env, timeout):
                 str(i),
                 str(n),
                 str(rounds),
+                "--message",
+                message,
             ]
             for i in range(n)
         ],
@@ -171,6 +175,7 @@ class _SizeRuns:
     rounds: int
     path: str
     bare: list = field(default_factory=list)
+    typed: list = field(default_factory=list)
     agents: list = field(default_factory=list)
     deployed: list = field(default_factory=list)
     bare_match: list = field(default_factory=list)
@@ -187,6 +192,8 @@ def _repeat(runs, r, env, deployed, failures):
     rates, matched = _bare(n, runs.rounds, env, timeout)
     runs.bare.append(_mean_if_all(rates, n))
     runs.bare_match += matched
+    rates, _ = _bare(n, runs.rounds, env, timeout, "typed")
+    runs.typed.append(_mean_if_all(rates, n))
     rates, matched = _agents(n, runs.path, env, timeout, 1000 + r)
     runs.agents.append(_mean_if_all(rates, n))
     runs.agents_match += matched
@@ -202,9 +209,12 @@ def _repeat(runs, r, env, deployed, failures):
 def _size_row(n, runs, repeats, deployed):
     bare, agents, dep = _finished(runs.bare), _finished(runs.agents), _finished(runs.deployed)
     (b_best, b_med), (a_best, a_med), (d_best, d_med) = _stats(bare), _stats(agents), _stats(dep)
+    typed = _finished(runs.typed)
+    t_med = _stats(typed)[1]
     return [
         n,
         f"{b_best:.1f} / {b_med:.1f}",
+        f"{t_med / b_med:.0%}" if bare and typed else "-",
         f"{a_best:.1f} / {a_med:.1f}",
         f"{a_med / b_med:.0%}" if bare and agents else "-",
         f"{d_best:.1f} / {d_med:.1f}" if deployed else "-",
@@ -222,7 +232,7 @@ def _measure_size(n, rounds, repeats, deployed, workdir, env, log, failures):
     path = write_scene(workdir, f"bench_{n}.yaml", _scene_yaml(n, max(1, rounds // 4), 0.01))
     runs = _SizeRuns(n, rounds, path)
     for r in range(repeats):
-        log(f"N = {n}, repeat {r + 1}/{repeats}: bare, agents"
+        log(f"N = {n}, repeat {r + 1}/{repeats}: bare, typed bare, agents"
             + (", deployed" if deployed else ""))
         _repeat(runs, r, env, deployed, failures)
     return _size_row(n, runs, repeats, deployed)
@@ -233,6 +243,7 @@ def _table(report, rows, rounds, repeats):
         [
             "processes",
             "bare rounds/s best / median",
+            "typed / untyped bare (medians)",
             "agents rounds/s best / median",
             "agents / bare (medians)",
             "deployed (runner + monitor)",

@@ -1,10 +1,20 @@
 #!/usr/bin/env bash
-# System tools the multi-host tests use: iproute2 (network namespaces), nftables (packet loss),
-# tcpdump (proof that no DDS packet leaves the namespaces).  Idempotent: installs with apt-get
-# only what is missing, only as root; prints one line saying what it did.
+# System tools a command needs, by what it runs:
+#   demo (the default)  cmake and g++: they build the interface package (build-interfaces.sh)
+#   test                the same, and iproute2 (network namespaces), nftables (packet loss),
+#                       tcpdump (proof that no DDS packet leaves the namespaces) for the
+#                       multi-host tests
+# Idempotent: installs with apt-get only what is missing, only as root; prints one line saying
+# what it did.
 set -euo pipefail
 
-wanted=(iproute2 nftables tcpdump)
+purpose=${1:-demo}
+case "$purpose" in
+    demo) wanted=(cmake g++) ;;
+    test) wanted=(cmake g++ iproute2 nftables tcpdump) ;;
+    *) echo "install-system-packages.sh: unknown purpose '$purpose' (demo or test)" >&2
+       exit 2 ;;
+esac
 missing=()
 for pkg in "${wanted[@]}"; do
     if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
@@ -18,7 +28,7 @@ if [ ${#missing[@]} -eq 0 ]; then
 fi
 if [ "$(id -u)" -ne 0 ] || ! command -v apt-get >/dev/null 2>&1; then
     echo "system packages: missing ${missing[*]} (not installed: needs root and apt-get;" \
-         "the multi-host tests will skip)"
+         "the interface package needs cmake and g++, the multi-host tests skip without the rest)"
     exit 0
 fi
 log=$(mktemp)

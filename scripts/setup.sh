@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # All set-up, idempotent and quick once done: the system packages (install-system-packages.sh),
-# a virtual environment in .venv, and requirements.txt installed into it; pip runs again only
+# a virtual environment in .venv, requirements.txt installed into it, and the interface package
+# polymatch_interfaces built into it (build-interfaces.sh); pip runs again only
 # when requirements.txt, setup.py or setup.cfg changed (their hash is kept in .venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,3 +19,4 @@ if [ "$(cat "$stamp" 2>/dev/null || true)" != "$wanted" ]; then
 else
     echo "python packages: requirements.txt already installed in .venv"
 fi
+bash scripts/build-interfaces.sh

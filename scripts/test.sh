@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Set up (scripts/setup.sh), then the whole test suite: what CI runs (.ci/run).  Extra
+# Set up (scripts/setup.sh), the system tools of the multi-host tests
+# (install-system-packages.sh test), then the whole test suite: what CI runs (.ci/run).  Extra
 # arguments go to pytest (e.g. -m "not ros and not hosts").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+bash scripts/install-system-packages.sh test
 exec .venv/bin/python -m pytest -q test "$@"

@@ -1,15 +1,20 @@
 """The suite's layout, markers and shared fixtures.
 
     test/core/        the numerical core against the paper's claims (no ROS process)
-    test/contract/    the input and wire contracts, fuzzed
-    test/code/        the code's own rules: lint, types, layering, sizes, docs
-    test/ros/         the ROS layer: nodes, the runner, multi-process runs   (marker ``ros``)
+    test/contract/    the input, wire and process contracts: parameters, discovery specs, the
+                      runner's recovery and packing, reception times (no ROS process)
+    test/code/        the code's own rules: lint, types, layering, sizes, docs; the benchmark
+                      tool's numeric families (marker ``slow``)
+    test/ros/         ROS worlds: nodes, the runner, multi-process runs      (marker ``ros``)
     test/hosts/       several hosts in network namespaces                    (marker ``hosts``)
-    test/benchmarks/  every benchmark family runs (--quick)        (markers ``ros``, ``slow``)
+    test/benchmarks/  the benchmark families that start ROS processes (--quick)
+                                                                   (markers ``ros``, ``slow``)
     test/support/     helpers and the scripts the tests start (not collected)
 
 Markers follow the folders, so ``pytest -m "not ros and not hosts" test`` runs the fast part.
-``ros`` gives a test its own loopback-only ROS world (support/ros_harness.py).
+The ``ros`` fixture gives a test its own loopback-only ROS world (support/ros_harness.py), the
+``net`` fixtures of test/hosts namespace hosts; every test in test/ros, test/hosts and
+test/benchmarks takes one of them, and only those tests get a rerun (test/code/test_reruns.py).
 """
 
 import compileall
@@ -97,19 +102,26 @@ def pytest_ignore_collect(collection_path, config):
 FOLDER_MARKERS = {"ros": ("ros",), "hosts": ("hosts",), "benchmarks": ("ros", "slow")}
 
 
-# Tests that run ROS processes on the wall clock (discovery, round timeouts, realtime ticks,
-# robots) on two shared cores get one rerun (pytest-rerunfailures; ``-raR`` lists each rerun):
-# a test that fails twice fails the run.
-RERUN_FOLDERS = {"ros", "hosts", "benchmarks"}
+# Tests that start a ROS world (ROS processes on the wall clock: discovery, round timeouts,
+# realtime ticks, robots; on two shared cores) get one rerun (pytest-rerunfailures; ``-raR``
+# lists each rerun): a test that fails twice fails the run.  A test of pure code gets none, so
+# a flake there fails the run.
+ROS_WORLD_FIXTURES = frozenset({"ros", "net"})
+
+
+def starts_a_ros_world(item) -> bool:
+    """Whether a collected test takes a ROS world (``ROS_WORLD_FIXTURES``)."""
+    return bool(ROS_WORLD_FIXTURES & set(getattr(item, "fixturenames", ())))
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark every test by its folder (``FOLDER_MARKERS``); one rerun in ``RERUN_FOLDERS``."""
+    """Mark every test by its folder (``FOLDER_MARKERS``); one rerun for a test that starts a
+    ROS world (``starts_a_ros_world``)."""
     for item in items:
         folder = pathlib.Path(item.fspath).resolve().relative_to(HERE).parts[0]
         for name in FOLDER_MARKERS.get(folder, ()):
             item.add_marker(getattr(pytest.mark, name))
-        if folder in RERUN_FOLDERS:
+        if starts_a_ros_world(item):
             item.add_marker(pytest.mark.flaky(reruns=1))
 
 

@@ -20,6 +20,7 @@ test/core/test_extremes.py states its own expectations and checks them on its ow
     collinear      nearly collinear triangles in R^2 and R^3
     dt_gt_t_end    dt larger than t_end
     one_agent      a single agent, every integrator
+    explain_large  `polymatch explain` at N = 10^4, 10^5, 10^6: checks in O(N log N)
 
 ``--quick`` runs every extreme at toy sizes (seconds); ``--only a,b`` selects extremes.
 
@@ -40,6 +41,7 @@ from .geometry import (
     dt_gt_t_end,
     equilibrium,
     equilibrium_verdict,
+    explain_large,
     explicit_at_1e9,
     huge_coords,
     large_n,
@@ -70,7 +72,7 @@ HELP = "stability at the extremes: expectation, what happened, pass/fail and wal
 KEYS = ("stiff_mass", "undamped", "stiff_coupling", "large_n", "dim10", "long_horizon",
         "huge_coords",
         "scale_ratios", "equilibria", "d0_random", "coincident", "collinear", "dt_gt_t_end",
-        "one_agent")
+        "one_agent", "explain_large")
 
 #: the detail table of an extreme: (caption, formatted with Variant.fields(), header)
 DETAILS = {
@@ -101,6 +103,8 @@ DETAILS = {
                    "(second order, kappa_2 = 0.5, L = 3)",
                    ["eps", "separation at t = 0", "separation > 1 at t", "separation at t_end",
                     "t_end"]),
+    "explain_large": ("`polymatch explain SCENE` as a process: load, plan, preflight, certificate",
+                      ["N", "d", "rotations", "exit", "wall s", "certificate"]),
     "collinear": ("Nearly collinear triangles (length 1, height h), explicit vertices, "
                   "5 agents, first order",
                   ["d", "height", "outcome"]),
@@ -211,6 +215,8 @@ CASES = (
     *(C("one_agent", f"one agent, order {o}", "trivially converged, no crash", one_agent,
         (("order", o),))
       for o in (1, 2)),
+    C("explain_large", "explain, N = 10^4, 10^5, 10^6, d = 2 and 3",
+      "at most 5 s at N = 10^6 (uniform rotations)", explain_large),
 )
 
 

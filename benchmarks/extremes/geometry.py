@@ -258,3 +258,37 @@ def one_agent(v, order):
     return Outcome(
         f"{count} runs (d = {', '.join(map(str, dims))}, every integrator): diameter 0, converged "
         "at t = 0", ok)
+
+
+def explain_large(v):
+    """`polymatch explain` (a process, as a user runs it) at N = 10^4 .. 10^6: scene loading,
+    plan, preflight and the certificate, which takes O(N log N) diameters (core.diameters)."""
+    import os
+    import subprocess
+    import sys
+    import tempfile
+    import time
+    sizes = (10**3, 10**4) if v.quick else (10**4, 10**5, 10**6)
+    rows, worst = [], {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for dim, rotations in ((2, "uniform"), (3, "uniform"), (3, "{within: 0.2}")):
+            for n in sizes:
+                path = os.path.join(tmp, f"explain_{dim}_{n}.yaml")
+                shape = "triangle" if dim == 2 else "tetrahedron"
+                with open(path, "w", encoding="utf-8") as fh:
+                    fh.write(f"name: explain_{n}\ndimension: {dim}\nseed: 1\nmodel: {{order: 1}}\n"
+                             f"integrator: {{method: rkmk4, dt: 0.05}}\ntime: {{t_end: 30}}\n"
+                             f"groups:\n  - {{name: g, shape: {shape},"
+                             f" count: {n}, rotations: {rotations}}}\n")
+                t0 = time.perf_counter()
+                out = subprocess.run(["timeout", "600", sys.executable, "-m", "polymatch_ros.cli",
+                                      "explain", path], capture_output=True, text=True)
+                wall = time.perf_counter() - t0
+                last = (out.stdout.strip().splitlines() or [out.stderr.strip()])[-1]
+                rows.append((n, dim, rotations, out.returncode, f"{wall:.2f}", last))
+                if rotations == "uniform":
+                    worst[n] = max(worst.get(n, 0.0), wall)
+    top = max(sizes)
+    return Outcome(
+        "; ".join(f"N = {n}: {worst[n]:.1f} s" for n in sizes) + " (uniform rotations, slowest d)",
+        worst[top] <= 5.0 and all(r[3] == 0 for r in rows), tuple(rows))

@@ -121,12 +121,16 @@ def host_argv(scene, only, lead, *options, timeout=100):
     return argv + ([] if lead else ["--no-monitor"])
 
 
-def host_environment(domain):
+def host_environment(domain, directory=None):
     """The environment of every host's runner: the shared domain, data over UDPv4 only (shared
-    memory would bypass the network between the namespaces)."""
+    memory would bypass the network between the namespaces); with ``directory``, its temporary
+    folder (TMPDIR) there: a runner that is killed leaves its own folder in the run's, not in
+    /tmp."""
     env = {k: v for k, v in os.environ.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}
     env.update(ROS_DOMAIN_ID=str(domain), FASTDDS_BUILTIN_TRANSPORTS="UDPv4",
                PYTHONUNBUFFERED="1")
+    if directory is not None:
+        env["TMPDIR"] = str(directory)
     return env
 
 
@@ -172,7 +176,7 @@ def run_on_hosts(net, directory, argvs, during=None, seconds=120, cwd=None):
 
     procs, found = Processes(str(directory), cwd), None
     with domain_id() as domain, Capture(str(directory), root_interfaces()) as root:
-        env = host_environment(domain)
+        env = host_environment(domain, directory)
         try:
             started = [procs.start(argv, env, seconds, f"h{i}", prefix=net.prefix(i))
                        for i, argv in enumerate(argvs)]

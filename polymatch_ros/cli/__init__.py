@@ -34,6 +34,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from ..core.errors import PolymatchError
+from .node_help import node_help, wants_help
 
 #: the modules whose ``add_parser(sub)`` adds subcommands, in ``--help`` order; a module that
 #: fails to import is an error, never a subcommand silently missing
@@ -78,7 +79,8 @@ def build_parser() -> Parser:
     for name in NODES:
         sub.add_parser(name, help=f"one {name} node (ROS 2); takes the same arguments as "
                                   f"`ros2 run polymatch_ros {name}`, "
-                                  f"e.g. --ros-args -p scene:=FILE")
+                                  f"e.g. --ros-args -p scene:=FILE; "
+                                  f"`polymatch {name} --help` lists its parameters")
     return parser
 
 
@@ -86,6 +88,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """The ``polymatch`` command: its exit code (errors as one line on stderr)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv and argv[0] in NODES:
+        if wants_help(argv[1:]):
+            print(node_help(argv[0]))
+            return 0
         main_of = importlib.import_module(NODES[argv[0]]).main
         return main_of([f"polymatch {argv[0]}"] + argv[1:])
     parser = build_parser()

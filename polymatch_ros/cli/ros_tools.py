@@ -10,6 +10,7 @@ Their arguments are checked here; rclpy is imported when the command runs.
 from __future__ import annotations
 
 import argparse
+import os
 
 from ..core.errors import ParameterError
 from ..ros.nodes.params import RUNTIME
@@ -19,8 +20,12 @@ def cmd_echo(args: argparse.Namespace) -> int:
     """Print the messages of ``args.topic`` (``ros.nodes.echo.echo``); its exit code."""
     if not args.topic.startswith("/"):
         raise ParameterError(f"topic must be absolute (start with /), got {args.topic!r}")
+    if args.timeout is not None and not args.timeout > 0:
+        raise ParameterError(f"--timeout must be > 0 s, got {args.timeout:g}")
     from ..ros.nodes.echo import echo
+    from ..ros.supervisor.environment import ros_environment
 
+    os.environ.update(ros_environment())  # the discovery of `polymatch run` unless set otherwise
     return echo(args.topic, args.count, args.until_below, args.timeout)
 
 
@@ -37,12 +42,14 @@ def cmd_set(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """The ``echo`` and ``set`` subcommands."""
     p = sub.add_parser("echo", help="print messages of a topic (stand-in for `ros2 topic echo`)")
-    p.add_argument("topic")
+    p.add_argument("topic", help="absolute topic name, e.g. /polymatch/diameter")
     p.add_argument("--count", type=int, help="exit after this many messages")
     p.add_argument(
         "--until-below", type=float, metavar="X", help="exit 0 once a Float64 value is below X"
     )
-    p.add_argument("--timeout", type=float, help="give up after this many seconds (exit 1)")
+    p.add_argument("--timeout", type=float, metavar="S",
+                   help="give up after S seconds (exit 1); default: give up when no message came "
+                   "within 10 s, saying which ROS domain and discovery range it listened in")
     p.set_defaults(func=cmd_echo)
 
     p = sub.add_parser("set", help="set a runtime parameter (kappa, gamma, mass, rate, limits) on "

@@ -2,9 +2,10 @@
 
 Every option is checked here, before any process starts (one line, exit 2): the scene and the
 integrator, --save writable, --agents-per-process, the ensemble's namespace, --only, the
-discovery spec, the ROS_DOMAIN_ID a run across hosts needs, and the bridge mode's robots.  The
-runner (``polymatch_ros.ros.supervisor.runner``) then takes the plan as it is.  ROS modules are
-imported when the command runs, not when the parser is built.
+discovery spec, the ROS_DOMAIN_ID (the user's, which a run across hosts needs set; --isolated:
+a private one), and the bridge mode's robots.  The runner (``polymatch_ros.ros.supervisor.runner``)
+then takes the plan as it is.  ROS modules are imported when the command runs, not when the
+parser is built.
 """
 
 from __future__ import annotations
@@ -14,10 +15,12 @@ import os
 
 from ..console import add_number_options, positive_float, writable_output
 from ..core.errors import ParameterError, PolymatchError
-from ..core.scene import Scene, load_scene, resolve_scene_path
+from ..core.scene import Scene, resolve_scene_path
 from ..core.simulate import plan as numerical_plan
+from ..ros.nodes.params import CMD_TYPES
 from ..ros.supervisor.plan import MODES, BridgeOptions, Hosts, Outputs, RunPlan, Timing
 from ..ros.supervisor.recovery import POLICIES, RestartPolicy
+from .scene_commands import check_integrator_option, load_scene_options, naming_dt_option
 
 # (flag, type, default, help) of the options that set how the agents step and wait
 RUN_OPTIONS = (
@@ -56,8 +59,9 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def build_plan(args: argparse.Namespace) -> RunPlan:
     """The checked ``RunPlan`` of the parsed ``polymatch run`` arguments; one-line errors."""
+    check_integrator_option(args.integrator)
     scene_path = resolve_scene_path(args.scene)
-    scene = load_scene(scene_path, {"time.t_end": args.t_end})
+    scene = load_scene_options(scene_path, args.t_end)
     bridge = None
     if args.mode == "bridge":
         from ..ros.supervisor import bridge_run
@@ -66,7 +70,8 @@ def build_plan(args: argparse.Namespace) -> RunPlan:
         scene = bridge_run.prepare(scene, bridge, args.only)  # the noise-floor tolerance
     timing = _timing(args, bridge is not None)
     dt = timing.time_scale / timing.rate if args.mode != "lockstep" else args.dt
-    numerics = numerical_plan(scene, args.integrator, dt, distributed=True)  # errors first
+    with naming_dt_option(args.dt if args.mode == "lockstep" else None):  # errors first
+        numerics = numerical_plan(scene, args.integrator, dt, distributed=True)
     outputs = Outputs(
         save=writable_output(args.save, ".npz") if args.save else None,  # before a long run
         records=args.records,
@@ -116,6 +121,7 @@ def _bridge_options(args: argparse.Namespace) -> BridgeOptions:
         max_angular_accel=args.max_angular_accel,
         robot_log=args.robot_log,
         drive=args.drive,
+        cmd_vel_type=args.cmd_vel_type,
     )
 
 
@@ -135,8 +141,21 @@ def _hosts(args: argparse.Namespace, scene: Scene, bridge: bool) -> Hosts:
         raise ParameterError(
             "--only: set the same ROS_DOMAIN_ID on every host (e.g. export ROS_DOMAIN_ID=17)"
         )
+    if len(agents) < n and args.isolated:
+        raise ParameterError("--isolated: a run across hosts (--only) needs the same "
+                             "ROS_DOMAIN_ID on every host, not a private one")
+    if not args.isolated:
+        from ..ros.supervisor.environment import user_domain_id
+
+        try:
+            user_domain_id()
+        except ValueError as exc:
+            raise ParameterError(str(exc)) from None
     lead = args.monitor or len(agents) == n
-    return Hosts(args.ensemble, agents, args.monitor, lead, spec, requested, args.agent_nodes)
+    if args.run_id is not None and not 1 <= args.run_id < 2**63:
+        raise ParameterError(f"--run-id: {args.run_id} is not in 1 .. 2^63 - 1")
+    return Hosts(args.ensemble, agents, args.monitor, lead, spec, requested, args.agent_nodes,
+                 args.isolated, args.run_id)
 
 
 def check_ensemble(name: str) -> None:
@@ -193,8 +212,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="stop once the diameter stayed under the tolerance this long (simulated s)",
     )
     _add_ensemble_options(p)
+    _add_host_options(p)
     _add_bridge_options(p)
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true",
+                   help="no first line and no progress; the summary and errors only")
     p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
     p.add_argument("--records", metavar="JSONL",
                    help="write every process's run record (JSON, one a line) to this file")
@@ -208,12 +229,40 @@ def _add_bridge_options(p: argparse.ArgumentParser) -> None:
     """The options of the simulated robots (bridge mode)."""
     g = p.add_argument_group("bridge mode (simulated robots)")
     add_number_options(g, ROBOT_OPTIONS)
+    g.add_argument("--cmd-vel-type", choices=CMD_TYPES, default=CMD_TYPES[0],
+                   help="first order: the robots' cmd_vel message, twist_stamped "
+                   "(geometry_msgs/TwistStamped, as Jazzy's diff_drive_controller takes; default) "
+                   "or twist (geometry_msgs/Twist)")
     g.add_argument("--robot-log", metavar="DIR",
                    help="each robot writes its true and measured pose at every step to "
                    "DIR/robot_<i>.txt")
     g.add_argument("--drive", choices=("holonomic", "unicycle"), default="holonomic",
                    help="the simulated robots' base: unicycle = differential drive, driven by "
                    "the point ahead of its axle (first order, 2-D)")
+
+
+def _add_host_options(p: argparse.ArgumentParser) -> None:
+    """Which agents run on this host, the run's id, and how DDS discovers the others."""
+    p.add_argument(
+        "--only",
+        metavar="RANGE",
+        help="run only these agents on this host, e.g. 0-7,12 (the others run on other hosts "
+        "with the same ROS_DOMAIN_ID, --ensemble and --discovery)",
+    )
+    p.add_argument(
+        "--run-id",
+        type=int,
+        metavar="ID",
+        help="the run id every message of the run carries (1 .. 2^63 - 1), for agents started "
+        "by other programs or hosts (default: chosen, the same on every host of an --only run)",
+    )
+    p.add_argument(
+        "--discovery",
+        default="localhost",
+        metavar="SPEC",
+        help="DDS discovery: localhost (default), subnet, server[:HOST:PORT] (bare: a server "
+        "of this run on 127.0.0.1), peers:ADDR,...",
+    )
 
 
 def _add_ensemble_options(p: argparse.ArgumentParser) -> None:
@@ -235,23 +284,17 @@ def _add_ensemble_options(p: argparse.ArgumentParser) -> None:
         "--ensemble", default="polymatch", help="ensemble namespace (default polymatch)"
     )
     p.add_argument(
+        "--isolated",
+        action="store_true",
+        help="run in a fresh ROS domain of its own, which nothing else hears (tests, "
+        "benchmarks); default: your ROS graph (your ROS_DOMAIN_ID, or ROS's default 0), which a "
+        "second shell sees",
+    )
+    p.add_argument(
         "--no-monitor",
         dest="monitor",
         action="store_false",
         help="do not start the monitor (on every host but one of a run across hosts)",
-    )
-    p.add_argument(
-        "--only",
-        metavar="RANGE",
-        help="run only these agents on this host, e.g. 0-7,12 (the others run on other hosts "
-        "with the same ROS_DOMAIN_ID, --ensemble and --discovery)",
-    )
-    p.add_argument(
-        "--discovery",
-        default="localhost",
-        metavar="SPEC",
-        help="DDS discovery: localhost (default), subnet, server[:HOST:PORT] (bare: a server "
-        "of this run on 127.0.0.1), peers:ADDR,...",
     )
     p.add_argument(
         "--no-compare",

@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 import os
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any, cast
 
 import numpy as np
@@ -26,11 +28,12 @@ from ..console import (
     writable_output,
 )
 from ..core.certificate import certify
-from ..core.errors import PolymatchError
+from ..core.checks import did_you_mean
+from ..core.errors import ParameterError, PolymatchError, SceneError, StabilityError
 from ..core.limits import Limits
 from ..core.model import GroupState
 from ..core.preflight import check_run
-from ..core.scene import Scene, load_scene, shipped_config_dirs
+from ..core.scene import INTEGRATOR_NAMES, Scene, load_scene, shipped_config_dirs
 from ..core.simulate import Trajectory, convergence_verdict
 
 
@@ -38,12 +41,50 @@ def _limits(args: argparse.Namespace) -> Limits | None:
     return Limits(memory=args.memory_limit) if getattr(args, "memory_limit", None) else None
 
 
+def check_integrator_option(name: str | None) -> None:
+    """``--integrator NAME``: one of the known names, or an error that names the option."""
+    if name is not None and name not in INTEGRATOR_NAMES:
+        raise ParameterError(f"--integrator: unknown integrator {name!r}; known: "
+                             f"{', '.join(INTEGRATOR_NAMES)}"
+                             f"{did_you_mean(name, INTEGRATOR_NAMES)}")
+
+
+def load_scene_options(name: str, t_end: float | None, limits: Limits | None = None) -> Scene:
+    """The scene with ``--t-end`` applied; a refusal that only ``--t-end`` causes (a limit of
+    samples or steps it exceeds) names the option and its value."""
+    try:
+        return load_scene(name, {"time.t_end": t_end}, limits=limits)
+    except SceneError as exc:
+        if t_end is None:
+            raise
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                load_scene(name, limits=limits)
+        except PolymatchError:
+            raise exc from None                 # the scene's own problem, as the scene says
+        raise ParameterError(f"--t-end {t_end:g}: {exc}") from None
+
+
+@contextmanager
+def naming_dt_option(dt: float | None) -> Iterator[None]:
+    """A stability refusal of the step ``--dt`` gave names ``--dt``."""
+    try:
+        yield
+    except StabilityError as exc:
+        if dt is None or exc.dt != dt:
+            raise
+        raise StabilityError(f"--dt: {exc}", method=exc.method, dt=exc.dt, limit=exc.limit,
+                             cause=exc.cause) from None
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     """A centralised run of a scene: progress, summary table, verdict; npz and figure."""
-    from ..core.simulate import explain, simulate
+    from ..core.simulate import explain, plan, simulate
     save = writable_output(args.save, ".npz") if args.save else None
     figure = writable_output(args.figure, ".png") if args.figure else None
-    scene = load_scene(args.scene, {"time.t_end": args.t_end}, limits=_limits(args))
+    check_integrator_option(args.integrator)
+    scene = load_scene_options(args.scene, args.t_end, limits=_limits(args))
     samples: Any = None  # sample times (an array), or the scene's
     if figure:
         samples = np.unique(np.concatenate([scene.samples,
@@ -54,11 +95,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.explain:
         print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
         print(certificate_line(scene))
+        with naming_dt_option(args.dt):      # a refusal: its error, exit 2
+            plan(scene, args.integrator, args.dt, args.tolerance)
         return 0
     progress = Progress(scene.t_end, args.quiet)
-    traj = simulate(scene, args.integrator, args.dt, args.tolerance, samples=samples,
-                    keep_states=bool(save or figure), progress=progress,
-                    stop_when_converged=args.stop_when_converged)
+    with naming_dt_option(args.dt):
+        traj = simulate(scene, args.integrator, args.dt, args.tolerance, samples=samples,
+                        keep_states=bool(save or figure), progress=progress,
+                        stop_when_converged=args.stop_when_converged)
     progress.done()
     p = traj.plan
     print(f"scene {scene.name}: {scene.model.n_agents} agents, d = {scene.dim}, "
@@ -108,14 +152,18 @@ def save_npz(traj: Trajectory, path: str) -> None:
 
 
 def cmd_explain(args: argparse.Namespace) -> int:
-    """Which model, representation and integrator a scene uses, and why."""
-    from ..core.simulate import explain
+    """Which model, representation and integrator a scene uses, and why; then, for a run
+    that ``simulate`` would refuse, the refusal as an error (exit code 2)."""
+    from ..core.simulate import explain, plan
+    check_integrator_option(args.integrator)
     scene = load_scene(args.scene, limits=_limits(args))
     check_run(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed,
               limits=_limits(args))
     print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance,
                             distributed=args.distributed)))
     print(certificate_line(scene))
+    with naming_dt_option(args.dt):
+        plan(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed)
     return 0
 
 
@@ -140,8 +188,10 @@ def cmd_integrators(args: argparse.Namespace) -> int:
 
 
 def cmd_scenes(args: argparse.Namespace) -> int:
-    """The shipped scenes as a table."""
-    rows = []
+    """The shipped scenes as a table; ``simulate`` says whether the scene runs as shipped or is
+    kept to show a refusal (``polymatch simulate`` exits 2 with the reason)."""
+    from ..core.simulate import plan
+    rows: list[list[object]] = []
     for d in shipped_config_dirs()[:1]:
         for sub in ("", "extremes"):
             folder = os.path.join(d, sub)
@@ -155,10 +205,18 @@ def cmd_scenes(args: argparse.Namespace) -> int:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
                         s = load_scene(os.path.join(folder, f))
-                    rows.append([name, s.dim, s.model.n_agents, s.model.order, s.description])
                 except PolymatchError as exc:
-                    rows.append([name, "?", "?", "?", f"invalid: {exc}"])
-    print(format_table(rows, ["scene", "d", "N", "order", "description"]))
+                    rows.append([name, "?", "?", "?", "invalid", f"invalid: {exc}"])
+                    continue
+                try:
+                    plan(s)
+                    runs = "runs"
+                except PolymatchError:
+                    runs = "refused"             # kept to show how a refusal reads
+                rows.append([name, s.dim, s.model.n_agents, s.model.order, runs, s.description])
+    print(format_table(rows, ["scene", "d", "N", "order", "simulate", "description"]))
+    print("refused: kept to show a refusal; `polymatch simulate SCENE` names the cause "
+          "and exits 2")
     return 0
 
 
@@ -190,7 +248,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("explain",
                        help="which model, representation and integrator a scene uses, and why")
-    p.add_argument("scene")
+    p.add_argument("scene", help="scene file or shipped scene name")
     add_integrator_options(p)
     p.add_argument("--distributed", action="store_true", help="as the ROS node set would run it")
     p.set_defaults(func=cmd_explain)

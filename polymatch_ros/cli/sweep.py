@@ -70,9 +70,14 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_int_in(0, 2**62), default=0, help="first seed (default 0)")
     p.add_argument("--d0", type=_list(float, 0.0, "a rotation diameter"), metavar="LO,HI",
                    help="redraw rotations at D0 = max |O_i - O_j|_F uniform in [LO, HI]")
-    p.add_argument("--dimension", type=_list(int, 2, "a dimension"), default=(None,))
-    p.add_argument("--agents", type=_list(int, 2, "an agent count"), default=(None,))
-    p.add_argument("--order", type=_list(int, 1, "a model order"), default=(None,))
+    p.add_argument("--dimension", type=_list(int, 2, "a dimension"), default=(None,),
+                   metavar="D,D", help="comma-separated dimensions d >= 2 (default: the scene's)")
+    p.add_argument("--agents", type=_list(int, 2, "an agent count"), default=(None,),
+                   metavar="N,N",
+                   help="comma-separated agent counts N >= 2 (default: the scene's)")
+    p.add_argument("--order", type=_list(int, 1, "a model order"), default=(None,),
+                   metavar="1,2", help="comma-separated model orders: 1 (A-2), 2 (A-1) "
+                   "(default: the scene's)")
     for name in ("kappa", "gamma", "mass"):
         p.add_argument(f"--{name}", type=_list(float, 0.0, name), default=(None,),
                        help=f"comma-separated {name} values (default: the scene's)")

@@ -42,7 +42,14 @@ D_x(tau) + 2 R sin(min(A0, sqrt(2 V e^{-2 c sinc(A0) lambda_2 tau} / min b)) / 2
 Everything else is "not certified", with the reason: the second-order model (Prop 2.2 (i)
 gives no rate; the centroids' rate of Prop 2.1 (i) is reported), D_O >= 1 in d >= 3 (or outside
 a half-circle in 2-D), similar (F-1) or mixed (F-2) ensembles (the paper proves nothing),
-directed or disconnected graphs, graphs in d >= 3.  Independent groups (no F-2 potential)
+directed or disconnected graphs, graphs in d >= 3.
+
+Over ``diameters.EXACT_PAIRS_UP_TO`` agents the diameters D_x and D_O come from
+``core.diameters`` in O(N log N): exact where the convex hull or the phases' arc gives them,
+else as bounds.  The bounds above increase with D_x and D_O, so an upper bound in their place
+still bounds the diameter (the certificate's line names the values that are bounds); a lower
+bound D_O >= 1 refuses Thm 4.2, and bounds that straddle 1 leave it undecided (not
+certified).  Independent groups (no F-2 potential)
 are certified each; the ensemble's time is the latest.  ``CertificateKeeper`` grants a run's
 certificate once and never withdraws it (a breach of the bound is reported, not hidden).
 """
@@ -55,8 +62,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .diameters import EXACT_PAIRS_UP_TO, Diameter, circle_arc, diameter, planar_rotation_diameter
 from .graph import DENSE_SPECTRUM_LIMIT
-from .metrics import point_set_diameter
 
 if TYPE_CHECKING:
     from .model import Group, GroupState, Model, State
@@ -76,6 +83,7 @@ class LoheBound:
     centroids: float     # D_x at t0
     rotations: float     # D_O = max |O_i - O_j|_F at t0, < 1
     radius: float        # R = max_a |r_a|
+    bounded: tuple[str, ...] = ()  # values above that are upper bounds, not exact diameters
 
     def __call__(self, tau: float | np.ndarray) -> float | np.ndarray:
         e = np.exp(-self.rate * np.asarray(tau, dtype=float))
@@ -95,6 +103,7 @@ class HalfCircleBound:
     sinc: float          # sin(A0) / A0
     radius: float
     exact_centroids: bool  # complete graph: D_x e^{-c tau} (Prop 2.1 (ii))
+    bounded: tuple[str, ...] = ()  # values above that are upper bounds, not exact diameters
 
     def __call__(self, tau: float | np.ndarray) -> float | np.ndarray:
         tau = np.asarray(tau, dtype=float)
@@ -136,10 +145,14 @@ class Certificate:
         return float(vals) if np.ndim(vals) == 0 else vals
 
     def line(self) -> str:
-        """One line for people: ``certified: ... by t <= T (...)`` or ``not certified: ...``."""
+        """One line for people: ``certified: ... by t <= T (...)`` or ``not certified: ...``;
+        a bound built on diameters' upper bounds (large groups) says which."""
         if self.certified and self.time is not None:
+            bounded = [text for b in self.bounds for text in b.bounded]
+            upper = (f"; from upper bounds, not exact diameters (over {EXACT_PAIRS_UP_TO} "
+                     f"agents): {', '.join(bounded)}" if bounded else "")
             return (f"certified: matching diameter < {self.tolerance:g} by t <= "
-                    f"{ceil_significant(self.time)} ({self.theorem})")
+                    f"{ceil_significant(self.time)} ({self.theorem}{upper})")
         return f"not certified: {self.reason}"
 
 
@@ -213,30 +226,46 @@ def _group_bound(model: Model, g: Group, gs: GroupState) -> Bound | str:
                 "consensus needs the union graph connected over time, which no bound here checks")
     if graph is not None and int(graph.components.max(initial=0)) > 0:
         return "disconnected graph: its components need not match"
-    grp = model.rotations
     radius = float(np.max(np.linalg.norm(g.reference, axis=1), initial=0.0))
-    d_x = point_set_diameter(gs.x)
     c = model.kappa / model.gamma
     lohe_reason = None
     if graph is None:
-        d_o = point_set_diameter(grp.flat(gs.rot))
-        if d_o < 1.0:
-            return LoheBound(c, d_x, d_o, radius)
-        lohe_reason = f"D0 = {d_o:.3g} >= 1 (Thm 4.2 needs max |O_i - O_j|_F < 1)"
+        d_o = rotation_diameter(model, gs)
+        if d_o.upper < 1.0:
+            d_x = diameter(gs.x)
+            bounded = tuple(f"{name} <= {d.upper:.3g}"
+                            for name, d in (("D_x", d_x), ("D0", d_o)) if not d.exact)
+            return LoheBound(c, d_x.upper, d_o.upper, radius, bounded)
+        if d_o.lower >= 1.0:
+            shown = f"D0 = {d_o.upper:.3g}" if d_o.exact else f"D0 >= {d_o.lower:.3g} (a bound)"
+            lohe_reason = f"{shown} >= 1 (Thm 4.2 needs max |O_i - O_j|_F < 1)"
+        else:
+            lohe_reason = (f"{d_o.text('D0')}: the O(N) bounds over {EXACT_PAIRS_UP_TO} agents "
+                           f"do not decide Thm 4.2's max |O_i - O_j|_F < 1")
     if model.dim != 2:
         return lohe_reason or f"graph in d = {model.dim}: no result is cited (only for 2-D)"
-    half = _half_circle(model, g, gs, c, d_x, radius)
+    half = _half_circle(model, g, gs, c, radius)
     if isinstance(half, str):
         return half if lohe_reason is None else f"{lohe_reason}; {half}"
     return half
 
 
-def _half_circle(model: Model, g: Group, gs: GroupState, c: float, d_x: float,
+def rotation_diameter(model: Model, gs: GroupState) -> Diameter:
+    """max_{i,j} |O_i - O_j|_F of a group: exact, or bounds over EXACT_PAIRS_UP_TO agents
+    (in 2-D exact from the phases' arc while it is under a half-circle)."""
+    grp = model.rotations
+    if model.dim == 2 and grp.count(gs.rot) > EXACT_PAIRS_UP_TO:
+        mats = grp.to_matrices(gs.rot)
+        return planar_rotation_diameter(np.arctan2(mats[:, 1, 0], mats[:, 0, 0]))
+    return diameter(grp.flat(gs.rot))
+
+
+def _half_circle(model: Model, g: Group, gs: GroupState, c: float,
                  radius: float) -> HalfCircleBound | str:
     """The 2-D half-circle bound of group g, or why not (phases spread over >= pi)."""
     mats = model.rotations.to_matrices(gs.rot)
     theta = np.arctan2(mats[:, 1, 0], mats[:, 0, 0])
-    lifted, arc = _lift_to_arc(theta)
+    lifted, arc = circle_arc(theta)
     if arc >= math.pi:
         return f"phases spread over {arc:.3g} >= pi (not within an open half-circle)"
     if g.graph is None:
@@ -253,7 +282,10 @@ def _half_circle(model: Model, g: Group, gs: GroupState, c: float, d_x: float,
     energy_o = _spread(lifted[:, None], b)
     energy_x = 0.0 if g.graph is None else _spread(gs.x, b)
     sinc = math.sin(arc) / arc if arc > 0 else 1.0
-    return HalfCircleBound(c * lam, d_x, energy_x, arc, energy_o, sinc, radius, g.graph is None)
+    d_x = diameter(gs.x)
+    bounded = () if d_x.exact else (f"D_x <= {d_x.upper:.3g}",)
+    return HalfCircleBound(c * lam, d_x.upper, energy_x, arc, energy_o, sinc, radius,
+                           g.graph is None, bounded)
 
 
 def _spread(values: np.ndarray, b: np.ndarray) -> float:
@@ -261,19 +293,6 @@ def _spread(values: np.ndarray, b: np.ndarray) -> float:
     mean = (b @ values) / b.sum()
     dev = values - mean
     return math.sqrt(2.0 * float(b @ np.einsum("ij,ij->i", dev, dev)) / float(b.min()))
-
-
-def _lift_to_arc(theta: np.ndarray) -> tuple[np.ndarray, float]:
-    """Phases lifted to reals inside the shortest arc holding them all, and its length."""
-    t = np.mod(theta, 2 * math.pi)
-    order = np.sort(t)
-    if len(order) < 2:
-        return t, 0.0
-    gaps = np.diff(np.concatenate([order, [order[0] + 2 * math.pi]]))
-    k = int(np.argmax(gaps))
-    start = order[(k + 1) % len(order)]          # the arc begins after the largest gap
-    lifted = np.mod(t - start, 2 * math.pi)
-    return lifted, float(2 * math.pi - gaps[k])
 
 
 def _time_below(bound: Bound, tolerance: float) -> float | None:

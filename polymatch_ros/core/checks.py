@@ -5,6 +5,7 @@ Types are strict: a number is a YAML number (``"2"`` in quotes is text), a name 
 before anything is allocated from it.
 """
 
+import difflib
 import math
 from collections.abc import Collection
 from typing import Any
@@ -47,7 +48,8 @@ class Map:
                              f"got {describe(data)}")
         for key, value in data.items():
             if key not in allowed:
-                raise SceneError(f"{join(path, str(key))}: unknown key "
+                raise SceneError(f"{join(path, str(key))}: unknown key"
+                                 f"{did_you_mean(str(key), allowed)} "
                                  f"(allowed: {', '.join(allowed)})")
             if value is None:
                 raise SceneError(f"{join(path, key)}: no value (null); leave the key out for "
@@ -83,6 +85,12 @@ class Map:
         if not isinstance(value, bool):
             raise SceneError(f"{self.at(key)}: expected true or false, got {describe(value)}")
         return value
+
+
+def did_you_mean(word: str, allowed: Collection[str]) -> str:
+    """``; did you mean 'rotations'?`` when one allowed name is close to ``word``, else ''."""
+    close = difflib.get_close_matches(word, list(allowed), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
 
 
 def join(path: str, key: object) -> str:

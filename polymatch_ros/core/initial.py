@@ -76,7 +76,6 @@ def check_rotation(m: np.ndarray, path: str) -> np.ndarray:
 def random_rotation_within(dim: int, count: int, angle: float,
                            rng: np.random.Generator) -> np.ndarray:
     """Rotations exp(theta A), A a random unit-spectral-norm skew matrix, theta ~ U[0, angle]."""
-    from scipy.linalg import expm
     out = np.empty((count, dim, dim))
     for start in range(0, count, 4096):             # batched: the draws match one at a time
         n = min(4096, count - start)
@@ -87,8 +86,23 @@ def random_rotation_within(dim: int, count: int, angle: float,
             a[i] = g - g.T
             theta[i] = rng.uniform(0.0, angle)
         a /= np.linalg.norm(a, 2, axis=(1, 2))[:, None, None]
-        out[start:start + n] = expm(theta[:, None, None] * a)
+        out[start:start + n] = _skew_exp(theta[:, None, None] * a)
     return out
+
+
+def _skew_exp(w: np.ndarray) -> np.ndarray:
+    """exp of skew matrices (n, d, d): closed forms in d = 2 (cos, sin) and d = 3
+    (Rodrigues, scipy's Rotation), scipy's expm (one Pade evaluation a matrix) above."""
+    dim = w.shape[-1]
+    if dim == 2:
+        angle = w[:, 1, 0]
+        c, s = np.cos(angle), np.sin(angle)
+        return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+    if dim == 3:
+        from scipy.spatial.transform import Rotation
+        return Rotation.from_rotvec(np.stack([w[:, 2, 1], w[:, 0, 2], w[:, 1, 0]], -1)).as_matrix()
+    from scipy.linalg import expm
+    return expm(w)
 
 
 def rotations(raw: object, path: str, dim: int, count: int,

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from . import graph
-from .checks import Map, describe, number, vector
+from .checks import Map, describe, did_you_mean, number, vector
 from .errors import SceneError
 from .formation import check_separation, parse_formation
 from .integrators import METHODS
@@ -155,6 +155,8 @@ def _apply_overrides(data: Any, overrides: dict[str, Any]) -> Any:
     return data
 
 
+#: model.representation's values (``so.group_for``)
+REPRESENTATIONS = ("auto", "angle", "so3", "so3-cayley", "so3-exp", "matrix")
 MODEL_KEYS = ("order", "kappa", "gamma", "mass", "kappa_2", "L", "representation", "centroids")
 TOP_KEYS = ("name", "description", "dimension", "seed", "model", "integrator", "time",
             "convergence", "groups", "figure", "graph", "formation", "safety")
@@ -231,6 +233,10 @@ def _model_params(mm, dim):
     out["L"] = mm.number("L", 0.0, minimum=0, maximum=MAX_LENGTH)
     out["has_L"] = mm.has("L")
     representation = mm.text("representation", "auto")
+    if representation not in REPRESENTATIONS:
+        raise SceneError(f"model.representation: unknown rotation representation "
+                         f"{representation!r}{did_you_mean(representation, REPRESENTATIONS)} "
+                         f"(allowed: {', '.join(REPRESENTATIONS)})")
     try:
         out["rotations"] = group_for(dim, representation)
     except ValueError as exc:
@@ -296,11 +302,15 @@ def model_rates(model: Model) -> list[tuple[str, float]]:
     return [("(kappa * max s_k/s_i + kappa_2) / m", fastest / m), ("gamma / m", gamma / m)]
 
 
+#: what integrator.method and --integrator accept
+INTEGRATOR_NAMES = (*sorted(METHODS), "adaptive", "auto")
+
+
 def _integrator_spec(im, t_end):
     method = im.text("method", "auto")
     if method not in ("auto", "adaptive") and method not in METHODS:
-        raise SceneError(f"integrator.method: unknown integrator {method!r}; known: auto, "
-                         f"adaptive, {', '.join(sorted(METHODS))}")
+        raise SceneError(f"integrator.method: unknown integrator {method!r}; known: "
+                         f"{', '.join(INTEGRATOR_NAMES)}{did_you_mean(method, INTEGRATOR_NAMES)}")
     dt = im.number("dt", 0.0, positive=True) if im.has("dt") else None
     tol = tolerance_value(im.raw("tolerance"), "integrator.tolerance") \
         if im.has("tolerance") else None
@@ -361,7 +371,8 @@ def _sample_times(tm, t_end):
             n = t_end / every
             if not n <= MAX_SAMPLES:
                 raise SceneError(f"{sm.at('every')}: every {every:g} over t_end = {t_end:g} is "
-                                 f"{n:.3g} samples, more than {MAX_SAMPLES}")
+                                 f"{n:.3g} samples, more than the limit of {MAX_SAMPLES} "
+                                 f"samples a run")
             times = every * np.arange(int(math.floor(n + 1e-9)) + 1)
             return np.unique(np.append(times[times <= t_end], t_end))
         count = sm.number("count", integer=True, minimum=2, maximum=MAX_SAMPLES)

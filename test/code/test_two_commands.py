@@ -1,5 +1,7 @@
-"""README's set-up is two commands, each doing all set-up first: one runs the main demo, one
-the whole suite, and CI runs exactly the second."""
+"""README's first screen: the paper, the fastest way in without ROS, then the demo and the
+tests, each command doing all set-up first; CI runs exactly the test command.  The demo's
+set-up installs only what builds the interface package (cmake, g++); the test command installs the
+multi-host tests' tools."""
 
 import pathlib
 import re
@@ -16,11 +18,29 @@ def readme_setup_blocks():
     return [[line for line in block.splitlines() if line.strip()] for block in blocks]
 
 
-def test_readme_sets_up_with_two_commands_demo_and_tests():
+NO_ROS = ("bash scripts/setup.sh && .venv/bin/polymatch simulate congruent_triangles "
+          "--figure fig1.png")
+
+
+def test_readme_shows_no_ros_path_then_demo_then_tests():
     blocks = readme_setup_blocks()
-    assert blocks[:2] == [["bash scripts/demo.sh"], ["bash scripts/test.sh"]]
-    later = "\n".join(line for block in blocks[2:] for line in block)
+    assert blocks[:3] == [[NO_ROS], ["bash scripts/demo.sh"], ["bash scripts/test.sh"]]
+    later = "\n".join(line for block in blocks[3:] for line in block)
     assert "pip install" not in later and "venv .venv" not in later
+
+
+def test_readme_first_screen_links_the_paper_and_says_what_each_command_prints():
+    text = (ROOT / "README.md").read_text()
+    first = text.split("## A short tour", 1)[0]
+    assert "https://arxiv.org/abs/2006.11533" in "\n".join(first.splitlines()[:10])
+    assert first.index(NO_ROS) < first.index("bash scripts/demo.sh") < \
+        first.index("bash scripts/test.sh")
+    for said in ("converged: matching", "about 2 s", "about a minute", "about 10 minutes"):
+        assert said in first.replace("\n", " "), said
+    for internal in ("slot", "priority", "repeat_tests", "20 times", "twenty times"):
+        assert internal not in text, internal        # the testing page's business
+    assert "docs/guide/testing.md" in first
+    assert "testing.md" in (ROOT / "docs" / "guide" / "index.md").read_text()
 
 
 def test_ci_runs_readme_test_command():
@@ -36,6 +56,21 @@ def test_both_commands_set_up_first_then_run():
         assert body.index("bash scripts/setup.sh") < body.index(runs), name
     setup = (ROOT / "scripts" / "setup.sh").read_text()
     assert "install-system-packages.sh" in setup and "pip install" in setup
+
+
+def test_demo_installs_only_the_interface_build_tools_and_tests_install_theirs():
+    script = (ROOT / "scripts" / "install-system-packages.sh").read_text()
+    assert "demo) wanted=(cmake g++) ;;" in script
+    assert "test) wanted=(cmake g++ iproute2 nftables tcpdump) ;;" in script
+    out = subprocess.run(["bash", str(ROOT / "scripts" / "install-system-packages.sh"), "demo"],
+                         capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0 and out.stdout.startswith("system packages: "), out
+    assert "nftables" not in out.stdout and "tcpdump" not in out.stdout, out
+    test_sh = (ROOT / "scripts" / "test.sh").read_text()
+    assert "bash scripts/install-system-packages.sh test" in test_sh
+    assert "nftables" not in (ROOT / "scripts" / "demo.sh").read_text()
+    setup = (ROOT / "scripts" / "setup.sh").read_text()
+    assert "install-system-packages.sh test" not in setup
 
 
 def test_scripts_parse():

@@ -113,6 +113,25 @@ def test_run_logs_into_a_file_is_one_line_and_exit_2_before_anything_starts(tmp_
         assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
 
 
+@pytest.mark.parametrize("domain,argv,words", [
+    ("abc", [], "ROS_DOMAIN_ID='abc' is not a domain id (an integer 0..232)"),
+    ("233", [], "ROS_DOMAIN_ID='233' is not a domain id"),
+    ("17", ["--isolated", "--only", "0-3"], "--isolated: a run across hosts (--only) needs"),
+])
+def test_run_domain_options_are_one_line_and_exit_2_before_anything_starts(monkeypatch, domain,
+                                                                          argv, words):
+    """The run's domain (the user's ROS_DOMAIN_ID, or --isolated) is checked with the options."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", domain)
+    code, out, err = run_main(["run", "congruent_triangles", *argv], 60)
+    assert code == 2 and err.startswith("polymatch: error: ") and words in err, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+
+
+def test_echo_timeout_must_be_positive():
+    code, out, err = run_main(["echo", "/polymatch/diameter", "--timeout", "0"], 60)
+    assert code == 2 and err == "polymatch: error: --timeout must be > 0 s, got 0\n", err
+
+
 SUBPROCESS_CASES = [
     ("binary", bytes(range(256)) * 64, []),
     ("billion_laughs", bomb(), []),
@@ -169,3 +188,14 @@ def test_mutated_scenes_keep_the_contract_property_based():
     assert sum(stats.values()) >= 300
     assert any(k.startswith("ran") for k in stats)          # mutations do not break everything
     assert sum(v for k, v in stats.items() if k.startswith("refused")) > 100
+
+
+@pytest.mark.parametrize("argv,want", [
+    (["-i", "rk5"], "--integrator: unknown integrator 'rk5'; known: "),
+    (["--t-end", "1e300"], "--t-end 1e+300: time.samples.every: "),
+    (["--dt", "10", "--t-end", "100"], "--dt: rkmk4 is unstable at dt = 10"),
+])
+def test_run_names_the_option_before_any_process_starts(argv, want):
+    code, out, err = run_main(["run", "congruent_triangles", *argv], 20.0)
+    assert code == 2 and err.count("\n") == 1, err
+    assert err.startswith("polymatch: error: " + want), err

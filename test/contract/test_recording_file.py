@@ -7,6 +7,7 @@ types) and by ``recording_read`` (states and diameters equal to ``core.metrics``
 states written).
 """
 
+import math
 import re
 from pathlib import Path
 
@@ -216,3 +217,127 @@ def test_read_recording_of_an_unfinished_file_says_so(tmp_path):
         read_recording(str(path))
     out.finish()
     assert Path(path).stat().st_size > 0
+
+
+# -- the run's own messages (polymatch_interfaces) and the writers' QoS, as rosbag2 keeps them --
+
+INTERFACES = Path(__file__).resolve().parents[2] / "polymatch_interfaces" / "msg"
+INFINITE = {"sec": 9223372036, "nsec": 854775807}  # RMW_DURATION_INFINITE
+
+
+def msg_file_typestore():
+    """Jazzy's standard types plus every polymatch_interfaces type, parsed by rosbags from the
+    repository's .msg files (not from anything the package writes)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    types = {}
+    for path in sorted(INTERFACES.glob("*.msg")):
+        types.update(get_types_from_msg(path.read_text(), f"polymatch_interfaces/msg/{path.stem}"))
+    store.register(types)
+    return store, sorted(types)
+
+
+def interface_messages():
+    """(topic, type, QOS key, message, the fields expected after decoding) of messages of the
+    interface package, with values chosen here."""
+    from builtin_interfaces.msg import Time
+    from std_msgs.msg import Header
+
+    from polymatch_interfaces.msg import AgentState, ControlCommand, NamedValue, RunRecord
+
+    # second order: every float64 sequence holds numbers (rclpy's serialize_message pads an
+    # empty float64[] in its buffer, which DDS does not send and rosbags rejects as too long)
+    state = AgentState(header=Header(stamp=Time(sec=1, nanosec=250_000_000), frame_id="world"),
+                       run_id=2**40 + 7, agent=3, centroid=[1.5, -2.0],
+                       rotation=[0.0, -1.0, 1.0, 0.0], velocity=[0.5, 0.25],
+                       angular_velocity=[0.0, -0.125, 0.125, 0.0])
+    record = RunRecord(role="monitor", mode="lockstep", t=0.75, agents=[0, 1, 2], finished=True,
+                       ms_per_round=[NamedValue(name="publish", value=0.125)],
+                       diameter=float("nan"), n_agents=3, resumed_at=-1)
+    command = ControlCommand(command=ControlCommand.PAUSE, epoch=Time(sec=1_700_000_000))
+    return [
+        ("/polymatch/agent_3/state", "polymatch_interfaces/msg/AgentState", "pose", state,
+         {"run_id": 2**40 + 7, "agent": 3, "centroid": [1.5, -2.0],
+          "rotation": [0.0, -1.0, 1.0, 0.0], "velocity": [0.5, 0.25],
+          "angular_velocity": [0.0, -0.125, 0.125, 0.0]}),
+        ("/polymatch/status", "polymatch_interfaces/msg/RunRecord", "status", record,
+         {"role": "monitor", "mode": "lockstep", "t": 0.75, "agents": [0, 1, 2],
+          "finished": True, "n_agents": 3, "resumed_at": -1}),
+        ("/polymatch/control", "polymatch_interfaces/msg/ControlCommand", "control", command,
+         {"command": 2}),
+    ]
+
+
+def test_interface_messages_and_offered_qos_read_back_with_rosbags(tmp_path):
+    """A player needs the writers' profiles (rosbag2's offered_qos_profiles) to replay a latched
+    topic as transient-local, and a reader without the package needs the complete schemas:
+    rosbags reads both; the messages decode, with the types of the .msg files, to the values
+    written, and the embedded schemas define the same types as the .msg files."""
+    from rclpy.serialization import serialize_message
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import QosDurability, QosHistory, QosReliability
+
+    from polymatch_ros.ros.wire.recording import RecordingWriter
+    from polymatch_ros.ros.wire.topics import qos_profiles
+
+    cases = interface_messages()
+    path = tmp_path / "typed.mcap"
+    out = RecordingWriter(str(path))
+    for topic, type_, key, msg, _ in cases:
+        channel = out.channel(topic, type_, [qos_profiles()[key]])
+        out.write(channel, serialize_message(msg), 5, 5)
+    out.finish()
+
+    store, names = msg_file_typestore()
+    # the writers' profiles, as topics.QOS states them in prose: (history depth, reliable, latched)
+    want = {"/polymatch/agent_3/state": (100, QosReliability.RELIABLE, QosDurability.VOLATILE),
+            "/polymatch/status": (1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL),
+            "/polymatch/control": (10, QosReliability.RELIABLE, QosDurability.VOLATILE)}
+    with AnyReader([path]) as reader:
+        for c in reader.connections:
+            (qos,) = c.ext.offered_qos_profiles
+            assert (qos.depth, qos.reliability, qos.durability) == want[c.topic], c.topic
+            assert qos.history == QosHistory.KEEP_LAST
+            assert tuple(qos.deadline) == tuple(INFINITE.values())
+        embedded = reader.typestore.fielddefs
+        for name in names:
+            if name in embedded:
+                assert embedded[name] == store.fielddefs[name], name
+        assert {t for _, t, *_ in cases} <= set(embedded)
+        decoded = {c.topic: store.deserialize_cdr(raw, c.msgtype)
+                   for c, _, raw in reader.messages()}
+    for topic, _, _, _, fields in cases:
+        for name, value in fields.items():
+            got = getattr(decoded[topic], name)
+            assert (got.tolist() if hasattr(got, "tolist") else got) == value, (topic, name)
+    assert decoded["/polymatch/agent_3/state"].header.stamp.nanosec == 250_000_000
+    assert decoded["/polymatch/status"].ms_per_round[0].value == 0.125
+    assert math.isnan(decoded["/polymatch/status"].diameter)
+
+
+def test_offered_qos_profiles_are_rosbag2s_yaml():
+    """The metadata text, parsed as YAML, has rosbag2's (version 9) layout: one mapping per
+    writer, the policies by name, durations as {sec, nsec}; a reference written here."""
+    import yaml
+    from rclpy.duration import Duration
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from polymatch_ros.ros.wire.recording import offered_qos_profiles
+
+    latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    lossy = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT,
+                       lifespan=Duration(seconds=2, nanoseconds=500))
+    assert yaml.safe_load(offered_qos_profiles([latched, lossy])) == [
+        {"history": "keep_last", "depth": 1, "reliability": "reliable",
+         "durability": "transient_local", "deadline": INFINITE, "lifespan": INFINITE,
+         "liveliness": "system_default", "liveliness_lease_duration": INFINITE,
+         "avoid_ros_namespace_conventions": False},
+        {"history": "keep_last", "depth": 5, "reliability": "best_effort",
+         "durability": "volatile", "deadline": INFINITE, "lifespan": {"sec": 2, "nsec": 500},
+         "liveliness": "system_default", "liveliness_lease_duration": INFINITE,
+         "avoid_ros_namespace_conventions": False},
+    ]
+    assert offered_qos_profiles([]) == ""

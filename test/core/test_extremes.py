@@ -43,6 +43,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -54,11 +55,13 @@ from core_testlib import (
     brute_matching_diameter,
     brute_rotation_diameter,
     defect,
+    lohe_torque,
     make_scene,
     rot_matrices,
     rotation_energy,
     state_error,
     vertices,
+    written_out_states,
 )
 from scipy.spatial import ConvexHull
 from scipy.spatial.distance import pdist
@@ -89,6 +92,7 @@ EXTREME_CASES = {
     "collinear": "test_extreme_nearly_collinear_",
     "dt_gt_t_end": "test_extreme_dt_larger_than_t_end_",
     "one_agent": "test_extreme_one_agent_",
+    "explain_large": "test_extreme_explain_large_",
 }
 
 #: the non-consensus equilibria: the rate of their unstable mode at first order, / kappa
@@ -228,25 +232,28 @@ def test_extreme_stiff_mass_m_1e_8_lie_verlet_refuses_at_coupling_frequency_prop
 
 
 def test_extreme_stiff_mass_m_1e_8_etd2_runs_matches_first_order_limit_A_2():
-    """etd2 at dt = 0.04 / 0.02 / 0.01 against an accurate first-order (A-2) reference:
-    error = O(m/gamma) + O(dt^2) with m/gamma = 5e-9, so second order in dt."""
+    """etd2 at dt = 0.04 / 0.02 / 0.01 against the first-order model (A-2) written out and
+    solved by scipy's DOP853 (``written_out_states``): error = O(m/gamma) + O(dt^2) with
+    m/gamma = 5e-9, so second order in dt; diameters against brute force on that reference."""
     samples = [0.0, 1.0, 2.0]
     first = _stiff_scene(1, samples=samples)
-    ref = simulate(first, "rkmk4", 0.005)     # its own error ~2e-13: 1e7 below the finest etd2's
+    ref = written_out_states(first, samples)
+    ref_diameters = [brute_matching_diameter(first.model, st, 0) for st in ref]
     errs = []
     for dt in (0.04, 0.02, 0.01):
         a = simulate(_stiff_scene(2, samples=samples), "etd2", dt)
         assert all_finite(a)
         assert a.final.t == pytest.approx(2.0)
-        err = state_error(first, ref.final, a.scene, a.final)
+        err = state_error(first, ref[-1], a.scene, a.final)
         assert err["x"] < 1e-7                    # exact centroid flow: O(m/gamma) only
-        diam = max(abs(p.diameter - q.diameter) for p, q in zip(a.metrics, ref.metrics))
+        assert a.times == pytest.approx(samples) and len(a.metrics) == len(samples)
+        diam = max(abs(p.diameter - q) for p, q in zip(a.metrics, ref_diameters))
         errs.append(max(err["rot"], diam))
     assert errs[0] < 1e-3
     for coarse, fine in zip(errs, errs[1:]):
         assert 3.0 < coarse / fine < 5.0, errs    # O(dt^2)
     etd1 = simulate(_stiff_scene(2, samples=samples), "etd1", 0.02)   # also runs (first order)
-    assert state_error(first, ref.final, etd1.scene, etd1.final)["rot"] < 0.05
+    assert state_error(first, ref[-1], etd1.scene, etd1.final)["rot"] < 0.05
 
 
 def test_extreme_stiff_mass_m_1e_8_auto_picks_etd2_prop_2_1():
@@ -532,6 +539,13 @@ def test_extreme_huge_coordinates_1e9_explicit_vertices_load_within_input_precis
     a = rot_matrices(scene.model.rotations, scene.initial.groups[0].rot)
     b = rot_matrices(near.model.rotations, near.initial.groups[0].rot)
     assert np.max(np.abs(a - b)) < 1e-6
+    # the triangles as built (turned by 0.3, 1.2, 2.0 rad about centroids (0, 0), (3, -2),
+    # (-1, 4)): relative turns and centroid gaps within the input's precision (1e9 eps ~ 2e-7)
+    turns = np.arctan2(a[:, 1, 0], a[:, 0, 0])
+    np.testing.assert_allclose(np.angle(np.exp(1j * (turns[1:] - turns[0]))), [0.9, 1.7],
+                               rtol=0, atol=1e-6)
+    x = scene.initial.groups[0].x
+    np.testing.assert_allclose(x[1:] - x[0], [[3.0, -2.0], [-1.0, 4.0]], rtol=0, atol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -657,6 +671,13 @@ def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
     traj = simulate(scene)
     assert not traj.converged and traj.stationarity < 1e-10
     assert traj.metrics[0].groups[0].rotation_diameter >= 1.0
+    # an equilibrium that is not consensus, checked on the model written out: the torque
+    # kappa/(2N) sum_k (O_k O_i^T - O_i O_k^T) vanishes for every agent, and the rotations stay
+    # D_O >= 1 apart (brute force), so the polytopes do not match
+    mats = rot_matrices(scene.model.rotations, traj.final.groups[0].rot)
+    assert np.max(np.abs(lohe_torque(mats, scene.model.kappa))) < 1e-10
+    assert brute_rotation_diameter(mats) >= 1.0
+    assert brute_matching_diameter(scene.model, traj.final, 0) > 100 * scene.tolerance
     code, msg = convergence_verdict(replace(scene, expect_convergence=True), traj.diameters[-1],
                                     traj.converged_at, traj.stationarity)
     assert code == 3 and "not consensus" in msg
@@ -890,3 +911,24 @@ def test_extreme_cli_dt_larger_than_t_end_one_warning_line_section_5():
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 2 and "warning" in lines[0] and lines[1].startswith("polymatch: error:")
     assert "dt < 2.79" in lines[1]
+
+
+# ---------------------------------------------------------------------------------------------
+# explain at large N: every check before integrating is O(N log N) (core.diameters)
+
+
+def test_extreme_explain_large_n_in_seconds_and_refused_rightly_thm_4_2(tmp_path):
+    """10^5 Haar-random tetrahedra: `polymatch explain` (load, plan, preflight, certificate)
+    answers within seconds (the exact pairwise diameters took 7 s at 10^5, quadratic), and its
+    refusal of Thm 4.2 is right: already 200 of the rotations have a pair >= 1 apart."""
+    path = tmp_path / "large.yaml"
+    path.write_text("dimension: 3\nseed: 2\nmodel: {order: 1}\ntime: {t_end: 10}\n"
+                    "groups:\n  - {shape: tetrahedron, count: 100000}\n")
+    start = time.perf_counter()
+    out = run_cli("explain", path)
+    assert out.returncode == 0, out.stderr
+    assert time.perf_counter() - start < 15.0
+    assert "not certified: D0 >= " in out.stdout
+    sc = load_scene(str(path))
+    mats = sc.model.rotations.to_matrices(sc.initial.groups[0].rot)[:200].reshape(200, -1)
+    assert pdist(mats).max() >= 1.0

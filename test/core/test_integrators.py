@@ -3,10 +3,18 @@ stability."""
 
 import functools
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from core_testlib import defect, make_scene, rot_matrices, skew_matrices, state_error
+from core_testlib import (
+    defect,
+    make_scene,
+    rot_matrices,
+    skew_matrices,
+    state_error,
+    written_out_states,
+)
 
 from polymatch_ros.core import (
     METHODS,
@@ -179,11 +187,15 @@ SAME_PROBLEM_AS = {"A-1 3d so3-exp": "A-1 3d", "A-1 3d matrix": "A-1 3d"}
 
 @functools.cache
 def _reference(kind):
-    """rkmk4 at dt = 1/256, once per problem.  Its own error (16/15 of its distance to the run at
-    dt = 1/512) is at most 8e-4 of an error it measures (A-2 2d rk4_proj rot: 5.8e-13 against
-    7.2e-10), which moves an observed order by < 0.003 of the 0.3 allowed (measured: 0.001)."""
-    return simulate(_order_scene(kind), "rkmk4", 1.0 / 256, samples=[0.0],
-                    keep_states=False, metrics=False)
+    """The state at t = 1: for A-1 and A-2, scipy's DOP853 of the model written out
+    (``core_testlib.written_out_states``); for F-1 and F-2 (their weights and inter-group
+    potential are not written out), rkmk4 at dt = 1/256 (its own error at most 8e-4 of an error
+    it measures)."""
+    scene = _order_scene(kind)
+    if kind.startswith("F-"):
+        return simulate(scene, "rkmk4", 1.0 / 256, samples=[0.0], keep_states=False,
+                        metrics=False)
+    return SimpleNamespace(scene=scene, final=written_out_states(scene, [1.0])[0])
 
 
 @pytest.mark.parametrize("kind,method", ORDER_CASES,
@@ -302,6 +314,10 @@ def test_stability_error_fields_match_its_message():
     err = exc.value
     assert err.method == "rkmk4" and err.dt == 0.01 and 0 < err.limit < 0.01
     assert f"dt < {err.limit:.3g} ({err.cause}" in str(err)
+    # the damping mode -gamma/m is the fastest: RK4's real boundary (2.785) times m/gamma
+    rk4 = _rk_real_stability_boundary([1.0, 1.0, 1 / 2, 1 / 6, 1 / 24])
+    assert rk4 == pytest.approx(2.785293563, rel=1e-8)
+    assert err.limit == pytest.approx(rk4 * 1e-8 / 2.0, rel=1e-3)
 
 
 def test_adaptive_final_state_at_t_end_like_fixed_step_theorem_4_2():

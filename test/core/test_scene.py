@@ -100,8 +100,8 @@ def test_scene_rejects_invalid_integration_settings_section_5(path, data):
 
 @pytest.mark.parametrize("path", sorted(CONFIG.glob("*.yaml")), ids=lambda p: p.stem)
 def test_config_initial_data_satisfy_constraints_B_4(path):
-    """O^{i0} in SO(d), O'^{i0} O^{i0 T} skew (B-4), centroids stored as offsets from their
-    mean."""
+    """O^{i0} in SO(d) (B-4), centroids stored as offsets from their mean (the angular
+    velocities, O'^{i0} O^{i0 T} = W^{i0}: test_explicit_angular_velocities_are_the_hat_map)."""
     scene = load_scene(path)
     rep = scene.model.rotations
     offsets = np.concatenate([gs.x for gs in scene.initial.groups])
@@ -113,12 +113,37 @@ def test_config_initial_data_satisfy_constraints_B_4(path):
         assert np.all(np.linalg.det(mats) > 0)
         np.testing.assert_allclose(g.reference.mean(axis=0), 0.0, atol=1e-12)   # sum_a r_a = 0
         if scene.model.order == 2:
-            w = skew_matrices(rep, gs.w)
-            np.testing.assert_allclose(w + np.swapaxes(w, 1, 2), 0.0, atol=0)
-            assert gs.v.shape == gs.x.shape
+            assert gs.v.shape == gs.x.shape and gs.w is not None
         else:
             # (A-2) carries no velocities
             assert gs.v is None and gs.w is None
+
+
+# a regular tetrahedron of vertex radius 1 (a shape's vertices are scaled to radius 1)
+TETRA = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0],
+                  [-1.0, -1.0, 1.0]]) / np.sqrt(3.0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_explicit_angular_velocities_are_the_hat_map(dim):
+    """An agent given angular_velocity w starts with O' O^T = W = hat(w), skew (B-4): in 3-D
+    W a = w x a for every a (numpy's cross product), in 2-D W = [[0, -w], [w, 0]]."""
+    shape = TRI if dim == 2 else TETRA
+    rng = np.random.default_rng(dim)
+    omegas = rng.normal(size=(3, 1 if dim == 2 else 3))
+    agents = [{"vertices": (shape + rng.normal(size=dim)).tolist(),
+               "angular_velocity": w.tolist(), "velocity": [0.0] * dim} for w in omegas]
+    data = _base(dimension=dim, model={"order": 2, "kappa": 1.0, "gamma": 1.0, "mass": 0.5},
+                 groups=[{"shape": {"vertices": shape.tolist()}, "agents": agents}])
+    scene = load_scene(data)
+    got = skew_matrices(scene.model.rotations, scene.initial.groups[0].w)
+    for w, mat in zip(omegas, got):
+        np.testing.assert_allclose(mat, -mat.T, rtol=0, atol=0)
+        if dim == 2:
+            np.testing.assert_allclose(mat, [[0.0, -w[0]], [w[0], 0.0]], rtol=0, atol=1e-15)
+        else:
+            for a in rng.normal(size=(4, 3)):
+                np.testing.assert_allclose(mat @ a, np.cross(w, a), rtol=0, atol=1e-14)
 
 
 def test_explicit_vertices_round_trip_section_3():

@@ -5,11 +5,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from input_fuzz import run_main
+from scipy.integrate._ivp import dop853_coefficients
 
 from polymatch_ros.core import METHODS, simulate
 from polymatch_ros.core.rk import RKMK
 from polymatch_ros.core.sweep.batch import HalfAngles, pair_diameters
-from polymatch_ros.core.sweep.chart_rk import RKMK8
 from polymatch_ros.core.sweep.run import batch_plan, classify, run_batch
 from polymatch_ros.core.sweep.scenes import Cell, cell_scenes, rotations_at_diameter, template
 
@@ -60,12 +60,16 @@ def _assert_equals_simulate_runs(scenes, result, method=None, dt=None):
 @pytest.mark.parametrize("name,cell", CASES)
 def test_rkmk8_batch_equals_separate_runs_of_its_tableau(name, cell, monkeypatch):
     """rkmk8 over a batch (stage sums as matrix products, ``ChartRK``) = B `simulate` runs
-    of the plain RKMK of DOP853's tableau (one array update per stage term), to round-off.
+    of the plain RKMK of DOP853's tableau as scipy ships it (``dop853_coefficients``: one array
+    update per stage term), to round-off.
     Three ensembles (the 12-stage separate runs are the cost): in every cell some leave the
     batch while others go on (leaving at t = 7.5, 8, never; 7.5, 7, 8; 7.5, never, never;
     4.5, 4.5, 4)."""
-    monkeypatch.setitem(METHODS, "dop853_tableau", RKMK("dop853_tableau", RKMK8.a, RKMK8.b,
-                                                        8, "the plain RKMK of rkmk8's tableau"))
+    stages = dop853_coefficients.N_STAGES
+    a = [list(row) for row in dop853_coefficients.A[:stages, :stages]]
+    b = list(dop853_coefficients.B)
+    monkeypatch.setitem(METHODS, "dop853_tableau", RKMK("dop853_tableau", a, b, 8,
+                                                        "the plain RKMK of scipy's DOP853"))
     scenes = _short_scenes(name, cell, ensembles=3)
     result = run_batch(scenes, "rkmk8", 0.25)
     assert (result.method, result.dt, result.rhs_evals) == ("rkmk8", 0.25, 12 * result.steps)

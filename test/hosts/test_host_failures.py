@@ -35,6 +35,7 @@ from host_runs import (
     wait_for_record,
 )
 from ros_harness import needs_ros, scene_path
+from shm_watch import ShmWatch
 
 from benchmarks.hosts.runs import argv_of, descendants, lockstep_argvs, node_name, scene_with
 from polymatch_ros.core.scene import load_scene
@@ -65,6 +66,8 @@ def kill_and_restart_host(net, argv):
     records, the index of the first after the kill, the restarted run, its output)."""
 
     def during(procs, started, env):
+        # the /dev/shm entries of every process of this test, noted while they live
+        shm = ShmWatch(lambda: [p.pid for p in procs.procs if p.poll() is None])
         echo_env = discovery.discovery_environments("subnet").for_role("client", env)
         echo = procs.start([sys.executable, "-m", "polymatch_ros.cli", "echo",
                             "/polymatch/status", "--timeout", str(TIMEOUT)], echo_env,
@@ -72,6 +75,7 @@ def kill_and_restart_host(net, argv):
                            prefix=net.prefix(2))
         assert wait_for_record(procs, echo, lambda r: r.agents_heard == AGENTS
                                and r.t >= 2.0 * TIME_SCALE, 90), procs.output(echo)[-2000:]
+        shm.look()
         kill_tree(started[KILLED_HOST].pid)
         killed = len(status_records(procs, echo))
         others = AGENTS - AGENTS // 3
@@ -82,7 +86,8 @@ def kill_and_restart_host(net, argv):
                             prefix=net.prefix(KILLED_HOST))
         for proc in (started[0], started[2], again):
             proc.wait(timeout=TIMEOUT + 20)
-        return status_records(procs, echo), killed, again, procs.output(again)
+        shm.stop()
+        return status_records(procs, echo), killed, again, procs.output(again), shm
 
     return during
 
@@ -93,7 +98,7 @@ def test_realtime_host_killed_then_run_again_rejoins_and_matches(net, tmp_path):
     out = tmp_path / "final.npz"
     argvs = realtime_argvs(scene_file, out, t_end=T_END, timeout=TIMEOUT)
     during = kill_and_restart_host(net, argvs[KILLED_HOST])
-    procs, texts, root, (records, killed, again, again_text) = run_on_hosts(
+    procs, texts, root, (records, killed, again, again_text, shm) = run_on_hosts(
         net, tmp_path, argvs, during, seconds=TIMEOUT + 10, check=False)
     assert procs[KILLED_HOST].returncode == -signal.SIGKILL, procs[KILLED_HOST].returncode
     others = AGENTS - AGENTS // 3
@@ -111,6 +116,10 @@ def test_realtime_host_killed_then_run_again_rejoins_and_matches(net, tmp_path):
     tolerance = load_scene(scene_file).tolerance
     assert saved_diameter(scene_file, out) < tolerance
     assert root.matched() == 0, "the root namespace's interfaces saw DDS packets"
+    # nothing left behind: the killed runner's temporary folder is in the run's own folder
+    # (the three others removed theirs), and no process of the run left a file in /dev/shm
+    assert len(list(tmp_path.glob("polymatch_run_*"))) == 1, sorted(tmp_path.iterdir())
+    assert shm.left() == [], shm.left()
     print(f"\nrealtime, {AGENTS} agents on 3 hosts, h{KILLED_HOST} killed and run again: "
           f"{time.monotonic() - started:.1f} s")
 

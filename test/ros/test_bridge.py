@@ -1,51 +1,21 @@
-"""Robots in the loop: the bridge's command is the first-order model (A-2) (pure tests), and
-simulated robots driven by bridged agents match, stop when their pose goes stale, and take
-gains changed while running (multi-process tests)."""
+"""Robots in the loop: simulated robots driven by bridged agents match (their logged true
+poses), stop when their pose goes stale, and take gains changed while running (the command
+itself: test/core/test_bridge_command.py)."""
 
 import math
 import os
 import re
 import textwrap
 import time
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
-import yaml
 from ros_harness import PY, REPO, needs_ros, scene_path
+from scipy.spatial.transform import Rotation
 
-from polymatch_ros.core.command import (
-    ZERO,
-    bridge_model,
-    bridge_system,
-    command_from_ensemble,
-    noise_floor,
-    saturate,
-    twist_command,
-)
-from polymatch_ros.core.errors import ParameterError
-from polymatch_ros.core.metrics import ensemble_metrics
-from polymatch_ros.core.model import GroupState, State
 from polymatch_ros.core.scene import load_scene
-from polymatch_ros.core.simulate import simulate
-from polymatch_ros.ros.nodes.bridge import BridgeAgent
-from polymatch_ros.ros.nodes.params import AGENT, check
-from polymatch_ros.ros.nodes.robot import SimulatedRobot
-from polymatch_ros.ros.nodes.runtime_params import validate
 
-SCENE_3D = """\
-name: tetrahedra_3d
-description: congruent tetrahedra in R^3, first order (A-2)
-dimension: 3
-seed: 5
-model: {order: 1, kappa: 1.5, gamma: 1.0}
-integrator: {method: rkmk4, dt: 0.01}
-time: {t_end: 1.0, samples: {every: 0.5}}
-convergence: {tolerance: 1.0e-6}
-groups:
-  - {name: tetrahedra, shape: tetrahedron, count: 5, centroids: {box: [-2.0, 2.0]},
-     rotations: uniform}
-"""
+PARAMS_FILE = os.path.join(REPO, "config", "params", "bridge_agent.yaml")
 
 # four triangles close to each other: robots reach the noise floor in a few seconds
 PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "support",
@@ -71,158 +41,27 @@ def _scene(tmp_path, text, name="scene.yaml"):
     return str(path)
 
 
-def _arrays(scene):
-    """The initial ensemble as group arrays (what a bridged agent assembles from its peers)."""
-    return tuple(SimpleNamespace(x=gs.x, rot=gs.rot, v=None, index=None)
-                 for gs in scene.initial.groups)
 
 
-def _direct_a2(model, x, mats, i):
-    """(A-2) written out: xbar_i' = kappa/(gamma N) sum_k (xbar_k - xbar_i),
-    W_i = kappa/(2 gamma N) (S O_i^T - O_i S^T), S = sum_k O_k."""
-    n, gain = len(x), model.kappa / model.gamma
-    s = mats.sum(axis=0)
-    w = gain / (2 * n) * (s @ mats[i].T - mats[i] @ s.T)
-    return gain / n * (x - x[i]).sum(axis=0), w
 
 
-@pytest.mark.parametrize("which", ["2d", "3d"])
-def test_command_is_the_first_order_model_a2(tmp_path, which):
-    path = scene_path("congruent_triangles") if which == "2d" else _scene(tmp_path, SCENE_3D)
-    scene = load_scene(path)
-    model, grp = scene.model, scene.model.rotations
-    gs = scene.initial.groups[0]
-    mats = grp.to_matrices(gs.rot)
-    central = bridge_system(model, None).rates(  # the core's own right-hand side
-        State(0.0, (GroupState(gs.x, gs.rot),)), bridge_system(model, None).couple(_arrays(scene))
-    )[0]
-    central_w = grp.algebra_to_skew(central[0])
-    for i in range(model.n_agents):
-        system = bridge_system(model, [np.array([i])])
-        twist = command_from_ensemble(system, 0, i, _arrays(scene), mats[i])
-        velocity, w = _direct_a2(model, gs.x, mats, i)
-        lin = np.zeros(3)
-        lin[: model.dim] = velocity
-        np.testing.assert_allclose(twist.linear, lin, atol=1e-12)
-        np.testing.assert_allclose(twist.linear[: model.dim], central[1][i], atol=1e-12)
-        axial = [w[2, 1], w[0, 2], w[1, 0]] if model.dim == 3 else [0.0, 0.0, w[1, 0]]
-        np.testing.assert_allclose(twist.angular, axial, atol=1e-12)
-        np.testing.assert_allclose(central_w[i], w, atol=1e-12)
-        assert not twist.saturated
 
 
-def test_saturation_keeps_the_direction_and_body_frame_is_r_transpose():
-    rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
-    skew = np.array([[0.0, -0.3, 0.2], [0.3, 0.0, -0.1], [-0.2, 0.1, 0.0]])
-    world = twist_command(np.array([3.0, 4.0, 0.0]), skew, rot)
-    np.testing.assert_allclose(world.angular, [0.1, 0.2, 0.3])
-    body = twist_command(np.array([3.0, 4.0, 0.0]), skew, rot, frame="body")
-    np.testing.assert_allclose(body.linear, rot.T @ world.linear)
-    np.testing.assert_allclose(body.angular, rot.T @ world.angular)
-    cut = twist_command(np.array([3.0, 4.0, 0.0]), skew, rot, max_linear=1.0, max_angular=0.1)
-    assert cut.saturated
-    np.testing.assert_allclose(cut.linear, [0.6, 0.8, 0.0])
-    np.testing.assert_allclose(np.linalg.norm(cut.angular), 0.1)
-    np.testing.assert_allclose(cut.angular / 0.1, world.angular / np.linalg.norm(world.angular))
-    vec, was_cut = saturate(np.array([0.3, 0.4]), 1.0)
-    assert not was_cut and np.allclose(vec, [0.3, 0.4])
-    with pytest.raises(ParameterError, match="frame"):
-        twist_command(np.zeros(2), np.zeros((2, 2)), np.eye(2), frame="robot")
 
 
-def test_bridge_refuses_d4():
-    with pytest.raises(ParameterError, match="d = 4"):
-        bridge_model(load_scene(scene_path("simplices_4d")).model)
 
 
-@pytest.mark.parametrize("frame", ["world", "body"])
-def test_ideal_robots_driven_by_the_command_follow_the_model(tmp_path, frame):
-    """Robots without lag or noise, commanded every dt, reproduce (A-2) to O(dt)."""
-    scene = load_scene(_scene(tmp_path, SCENE_3D))
-    model, grp = scene.model, scene.model.rotations
-    gs = scene.initial.groups[0]
-    robots = [SimulatedRobot(gs.x[i], m, False, 0.0, math.inf, math.inf)
-              for i, m in enumerate(grp.to_matrices(gs.rot))]
-    dt = 1e-3
-    for _ in range(int(round(scene.t_end / dt))):
-        x = np.array([r.p for r in robots])
-        mats = np.array([r.rot.as_matrix() for r in robots])
-        arrays = (SimpleNamespace(x=x, rot=grp.from_matrices(mats), v=None, index=None),)
-        twists = [command_from_ensemble(bridge_system(model, [np.array([i])]), 0, i, arrays,
-                                        mats[i], frame) for i in range(len(robots))]
-        for r, tw in zip(robots, twists):
-            r.step(dt, tw.linear, tw.angular, frame)
-    final = State(scene.t_end, (GroupState(np.array([r.p for r in robots]), grp.from_matrices(
-        np.array([r.rot.as_matrix() for r in robots]))),))
-    ref = simulate(scene).states[-1]
-    np.testing.assert_allclose(final.groups[0].x, ref.groups[0].x, atol=5e-3)
-    np.testing.assert_allclose(grp.to_matrices(final.groups[0].rot),
-                               grp.to_matrices(ref.groups[0].rot), atol=5e-3)
-    d0 = ensemble_metrics(model, scene.initial).diameter
-    assert ensemble_metrics(model, final).diameter < 0.8 * d0
 
 
-def test_second_order_hold_brakes_a_moving_robot_then_sends_one_zero():
-    """Pause (or a non-finite command): the damped stop each tick while the measured velocity is
-    fresh and above STILL, then one zero and quiet; a stale pose: one zero at once."""
-    model = bridge_model(load_scene(scene_path("congruent_triangles_second_order")).model)
-    grp, sent = model.rotations, []
-    agent = object.__new__(BridgeAgent)  # the hold logic alone, without a node
-    agent.model, agent.grp, agent.zero_sent, agent.holding = model, grp, False, ""
-    agent.params = check(AGENT, {"scene": "x", "mode": "bridge", "pose_type": "odometry"})
-    agent.cmd_pub = SimpleNamespace(publish=sent.append)
-    agent._message = lambda command: command
-    agent.log = SimpleNamespace(warning=lambda text: None)
-
-    def measure(v, omega, heard):
-        w = grp.algebra_from_skew(np.array([[[0.0, -omega], [omega, 0.0]]]))
-        agent.measured = SimpleNamespace(x=np.zeros(2), rot=grp.from_matrices(np.eye(2)[None]),
-                                         v=np.array(v), w=w, heard=heard)
-
-    measure([0.4, 0.0], 0.5, time.monotonic())
-    agent._hold("paused", brake=True)
-    rate = model.gamma / model.mass
-    np.testing.assert_allclose(sent[-1].linear, [-rate * 0.4, 0.0, 0.0])
-    np.testing.assert_allclose(sent[-1].angular, [0.0, 0.0, -rate * 0.5])
-    measure([0.0, 1e-4], 0.0, time.monotonic())  # at rest: one zero, then quiet
-    agent._hold("paused", brake=True)
-    agent._hold("paused", brake=True)
-    assert len(sent) == 2 and sent[-1] is ZERO and agent.holding == "paused"
-    measure([0.4, 0.0], 0.5, time.monotonic() - 10.0)  # stale: no velocity to brake on
-    agent.zero_sent = False
-    agent._hold("measured pose older than 0.5 s", brake=True)
-    assert len(sent) == 3 and sent[-1] is ZERO
 
 
-def test_noise_floor_grows_with_the_noise():
-    assert noise_floor(0.0, 0.0, 1.0, 2) == 0.0
-    assert noise_floor(0.01, 0.0, 1.0, 2) < noise_floor(0.02, 0.0, 1.0, 2)
-    assert noise_floor(0.0, 0.01, 1.0, 3) < noise_floor(0.0, 0.01, 2.0, 3)
 
 
 PARAMS_FILE = os.path.join(REPO, "config", "params", "bridge_agent.yaml")
 
 
-def test_shipped_params_file_is_a_valid_bridge_agent_configuration():
-    with open(PARAMS_FILE) as fh:
-        values = yaml.safe_load(fh)["/**"]["ros__parameters"]
-    assert values["mode"] == "bridge" and set(values) <= {p.name for p in AGENT}
-    checked = check(AGENT, dict(values, scene="congruent_triangles"))
-    assert checked["max_linear_speed"] == 0.5
 
 
-def test_runtime_parameters_are_checked_against_their_ranges():
-    def change(name, value):
-        return SimpleNamespace(name=name, value=value)
-
-    assert validate([change("kappa", 2.5), change("rate", 20)]) == (
-        {"kappa": 2.5, "rate": 20.0}, None)
-    accepted, reason = validate([change("kappa", -1.0)])
-    assert accepted is None and "out of range" in reason
-    accepted, reason = validate([change("max_linear_speed", "fast")])
-    assert accepted is None and "expected a number" in reason
-    accepted, reason = validate([change("scene", "other.yaml")])
-    assert accepted is None and "read-only" in reason
 
 
 # -- robots in the loop (multi-process) ----------------------------------------------
@@ -362,31 +201,67 @@ def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
     )
 
 
+def _floor(sigma_p, sigma_theta, radius, dim):
+    """The noise floor written out: two agents' measured vertices differ by two position errors
+    (sigma_p per coordinate) and two orientation errors times the vertex radius, standard
+    deviation sqrt(2) (sigma_p sqrt(d) + sigma_theta r); six of them cover the pairs' maximum."""
+    return 6.0 * math.sqrt(2.0) * (sigma_p * math.sqrt(dim) + sigma_theta * radius)
+
+
+def _true_diameters(log_dir, count, reference):
+    """The matching diameter of the robots' true poses in their pose logs (time, x y z, quaternion
+    x y z w, then the measured pose), brute force over pairs of robots and vertices: at the
+    first line each robot logged and at its last."""
+    dim = reference.shape[1]
+    ends = []
+    for row in (0, -1):
+        verts = []
+        for agent in range(count):
+            line = np.loadtxt(log_dir / f"robot_{agent}.txt", ndmin=2)[row]
+            rot = Rotation.from_quat(line[4:8]).as_matrix()[:dim, :dim]
+            verts.append(line[1:1 + dim] + reference @ rot.T)
+        ends.append(max(float(np.linalg.norm(verts[i] - verts[j], axis=1).max())
+                        for i in range(count) for j in range(i + 1, count)))
+    return ends
+
+
+def _check_matched_to_the_floor(text, scene, log_dir, count):
+    """The runner states the noise floor as its tolerance and converged below it; the robots'
+    logged true poses (not what the agents measured) end below it, from well above it."""
+    found = re.search(r"converged: matching diameter < (\S+) from t = (\S+)", text)
+    assert found, text[-3000:]
+    reference = scene.model.groups[0].reference
+    floor = _floor(0.002, 0.002, float(np.linalg.norm(reference, axis=1).max()), scene.model.dim)
+    assert float(found.group(1)) == pytest.approx(floor, rel=1e-5)
+    final = re.search(rf"^triangles +{count} +\S+ +\S+ +(\S+) ", text, re.M)
+    assert final and float(final.group(1)) < floor, text[-2000:]
+    first, last = _true_diameters(log_dir, count, reference)
+    assert first > 10 * floor and last < floor, (first, last, floor)
+
+
 @needs_ros
-def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
+@pytest.mark.parametrize("cmd_vel_type", ["twist_stamped", "twist"])
+def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path, cmd_vel_type):
     """Eight first-order robots (A-2), each driven by its bridged agent, match to the noise
-    floor (Theorem 4.2 up to the measurement noise)."""
+    floor (Theorem 4.2 up to the measurement noise), with commands on cmd_vel of either type
+    (robots that took no command would not move): their logged true poses end below it."""
     count = 8
     scene = _scene(tmp_path, SCENE_ROBOTS.format(t_end=25.0, count=count))
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene, "--mode", "bridge",
                       "--rate", "10", "--position-noise", "0.002", "--angle-noise", "0.002",
-                      "--lag", "0.2", "--timeout", "90"], timeout=110)
+                      "--lag", "0.2", "--cmd-vel-type", cmd_vel_type, "--robot-log", str(tmp_path),
+                      "--timeout", "90"],
+                     timeout=110)
     rc = ros.wait(proc, 120)
     text = ros.output(proc)
     assert rc == 0, text[-3000:]
-    found = re.search(r"converged: matching diameter < (\S+) from t = (\S+)", text)
-    assert found, text[-3000:]
-    tolerance = float(found.group(1))
-    radius = np.linalg.norm(load_scene(scene).model.groups[0].reference, axis=1).max()
-    assert tolerance == pytest.approx(noise_floor(0.002, 0.002, radius, 2), rel=1e-5)
-    final = re.search(rf"^triangles +{count} +\S+ +\S+ +(\S+) ", text, re.M)
-    assert final and float(final.group(1)) < tolerance, text[-2000:]
+    _check_matched_to_the_floor(text, load_scene(scene), tmp_path, count)
 
 
 @needs_ros
 def test_second_order_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
     """The shipped second-order scene (A-1): 8 double-integrator robots commanded accelerations
-    on cmd_accel from their Odometry, matched to the noise floor; every robot moved."""
+    on cmd_accel from their Odometry, matched to the noise floor (their logged true poses)."""
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", "congruent_triangles_second_order",
                       "--mode", "bridge", "--t-end", "30", "--rate", "10", "--position-noise",
                       "0.002", "--angle-noise", "0.002", "--lag", "0.2", "--robot-log",
@@ -394,16 +269,8 @@ def test_second_order_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path)
     rc = ros.wait(proc, 120)
     text = ros.output(proc)
     assert rc == 0, text[-3000:]
-    found = re.search(r"converged: matching diameter < (\S+) from t = (\S+)", text)
-    assert found, text[-3000:]
     scene = load_scene(scene_path("congruent_triangles_second_order"))
-    radius = np.linalg.norm(scene.model.groups[0].reference, axis=1).max()
-    assert float(found.group(1)) == pytest.approx(noise_floor(0.002, 0.002, radius, 2), rel=1e-5)
-    final = re.search(r"^triangles +8 +\S+ +\S+ +(\S+) ", text, re.M)
-    assert final and float(final.group(1)) < float(found.group(1)), text[-2000:]
-    for agent in range(8):
-        true_x = np.loadtxt(tmp_path / f"robot_{agent}.txt")[:, 1:3]
-        assert np.linalg.norm(true_x[-1] - true_x[0]) > 0.1, f"robot {agent} did not move"
+    _check_matched_to_the_floor(text, scene, tmp_path, 8)
 
 
 SCENE_CROSSING = """\

@@ -14,9 +14,13 @@ import time
 
 import numpy as np
 import pytest
-from ros_harness import PY, cli_argv, needs_ros, scene_path
+from exactness import central_vertices, received_vertices
+from ros_harness import PY, cli_argv, needs_ros, placed_vertices, scene_path
+from shm_watch import ShmWatch
 
 from benchmarks.hosts.runs import argv_of, children, descendants, node_name, scene_with
+from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.simulate import plan, simulate
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros
@@ -104,7 +108,28 @@ def _zombie(pid):
         return False
 
 
-def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
+def _lockstep_scene(dt, t_end):
+    """SCENE at the run's step and end time, and the method its distributed run uses."""
+    scene = load_scene(scene_path(SCENE), {"integrator.dt": dt, "time.t_end": t_end})
+    return scene, plan(scene, None, None, distributed=True).name
+
+
+def _assert_saved_equal_centralised(save, dt, t_end=None):
+    """The final poses the runner saved are at t_end (if given: else where the run stopped) and,
+    vertex by vertex (brute force over agents and vertices), within 1e-9 of the centralised
+    run's at that time."""
+    t = float(np.load(save)["t"])
+    if t_end is not None:
+        assert t == pytest.approx(t_end)
+    scene, method = _lockstep_scene(dt, t)
+    t, got = received_vertices(scene, save)
+    want = central_vertices(scene, method, t)
+    dev = max(float(np.max(np.linalg.norm(a - b, axis=-1))) for a, b in zip(got, want))
+    assert dev <= 1e-9, f"saved poses {dev:.3e} from the centralised run"
+
+
+
+def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros, tmp_path):
     """Lockstep, four processes (round timeout 4 s): one hangs 2 s (SIGSTOP, SIGCONT) and is
     waited for; then, together, one is killed (SIGKILL) and one hangs for good, taken for dead
     after the round timeout.  The two are restarted and resume from their checkpoints (one
@@ -113,7 +138,10 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     with them, is restarted; the rounds never wait for it."""
     # t_end 6 (300 steps): the probes that time the faults need a few seconds each, and the
     # four processes make about 150 rounds/s
-    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--round-timeout", "4")
+    save = tmp_path / "final.npz"
+    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--round-timeout", "4",
+               "--save", save)
+    shm = ShmWatch(lambda: [run.pid])  # the run's processes' /dev/shm entries
     _until(ros, 0.3, run)
     slow = _process(run, "agents_4_5")
     os.kill(slow, signal.SIGSTOP)
@@ -122,11 +150,13 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     victim, hung = _process(run, "agents_2_3"), _process(run, "agents_0_1")
     _until(ros, 0.8, run)
     monitor = _process(run, "monitor")
+    shm.look()
     os.kill(monitor, signal.SIGKILL)
     os.kill(victim, signal.SIGKILL)
     os.kill(hung, signal.SIGSTOP)
     before = descendants(run.pid)
     rc, out = _finish(ros, run)
+    shm.stop()
     assert rc == 3 and "did not converge" in out, out[-3000:]  # t_end 6 is before matching
     assert float(DEVIATION.search(out).group(1)) <= 1e-9, out[-3000:]
     failures = FAILURE.findall(out)
@@ -139,15 +169,21 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros):
     assert len(steps) == 2 and all(40 <= s < 300 for s in steps), out[-3000:]
     assert "failures: 3 process death(s), 3 restarted" in out
     assert _gone(before + [int(f[4]) for f in failures])
+    # the killed processes' Fast DDS segments (seen while they ran) are gone with the others'
+    assert shm.of(victim) and shm.of(monitor), shm.seen
+    assert shm.left() == [], shm.left()
+    _assert_saved_equal_centralised(save, 0.02, 6.0)
 
 
-def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_4_2(ros):
+def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_4_2(ros,
+                                                                                     tmp_path):
     """Lockstep, four processes, the monitor stopped (SIGSTOP) before the end: no agent is
     told 'received', so each holds its final poses.  SIGKILL of one of them once the runner
     has every final state: it is listed, not restarted (a restarted one would begin a step
     its peers have ended), the monitor is not waited for, and the run ends as it would have:
     equal to the centralised run, exit 3 (t_end 6 is before matching), nothing left over."""
-    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2")
+    save = tmp_path / "final.npz"
+    run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--save", save)
     _until(ros, 0.3, run)
     monitor = _process(run, "monitor")
     os.kill(monitor, signal.SIGSTOP)
@@ -166,6 +202,7 @@ def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_
     assert AFTER_RUN.findall(out) == [("agents_2_3", str(victim), "6")], out[-3000:]
     assert "failures: 1 process death(s), 0 restarted" in out, out[-3000:]
     assert _gone(before)
+    _assert_saved_equal_centralised(save, 0.02, 6.0)
 
 
 def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_path):
@@ -254,32 +291,27 @@ def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_
     assert bool(data["partial"]) and 0.5 <= float(data["t"]) < 500
     times = data["group0_times"]
     assert times.shape == (n,) and np.all(times >= 0.5) and np.all(times < 500)
+    assert float(data["t"]) == times.min()              # the earliest agent's time
     rotations = data["group0_rotations"]
     assert np.allclose(rotations @ rotations.transpose(0, 2, 1), np.eye(2), atol=1e-12)
+    assert np.allclose(np.linalg.det(rotations), 1.0, atol=1e-12)
+    if mode == "lockstep":
+        _assert_each_agent_at_its_time_is_the_centralised_run(data, times)
     assert _gone(before)
 
 
-def test_a_partial_state_from_a_projection_methods_checkpoint_is_in_the_scenes_rotations():
-    """A 2-D projection integrator's agents checkpoint matrices (``core.simulate.prepare``)
-    where the scene keeps angles: the partial state holds each agent's checkpointed rotation
-    in the scene's representation (an agent without a checkpoint: its initial one)."""
-    from polymatch_ros.core.model import GroupState, State
-    from polymatch_ros.core.scene import load_scene
-    from polymatch_ros.core.simulate import plan, prepare
-    from polymatch_ros.ros.nodes.checkpoint import Checkpoint
-    from polymatch_ros.ros.supervisor.partial import last_state
-
-    scene = load_scene(scene_path(SCENE))
-    computed = prepare(scene, plan(scene, "rk4_proj", 0.05, distributed=True), distributed=True)
-    grp = computed.model.rotations
-    assert (scene.model.rotations.name, grp.name) == ("angle", "matrix")
-    angles = np.array([0.25, -2.75])
-    local = State(1.5, (GroupState(np.array([[1.0, 2.0], [3.0, 4.0]]),
-                                   grp.from_matrices(scene.model.rotations.to_matrices(angles))),))
-    state, times = last_state(scene, {}, [((2, 3), Checkpoint(30, 1.5, local, 7))], grp)
-    assert times[2] == times[3] == 1.5 and times[0] == 0.0
-    assert np.allclose(state.groups[0].rot[2:4], angles, rtol=0, atol=1e-15)
-    assert state.groups[0].rot[0] == scene.initial.groups[0].rot[0]
+def _assert_each_agent_at_its_time_is_the_centralised_run(data, times):
+    """Lockstep: agent i's saved pose is the centralised run's agent i at its own time t_i (the
+    agents of a process share a step, processes may be a step apart), vertex by vertex."""
+    scene, method = _lockstep_scene(0.02, float(times.max()))
+    traj = simulate(scene, method, 0.02, samples=sorted(set(times.tolist())), metrics=False)
+    at = {round(t, 9): st for t, st in zip(traj.times, traj.states)}
+    reference = scene.model.groups[0].reference
+    for i, t in enumerate(times):
+        state = at[round(float(t), 9)]
+        want = placed_vertices(traj.scene.model, state.groups, scene.origin)[0]  # vertex, agent
+        got = data["group0_centroids"][i] + reference @ data["group0_rotations"][i].T
+        assert np.max(np.linalg.norm(got - want[:, i], axis=-1)) <= 1e-9, (i, t)
 
 
 def _progress_past(ros, run, t):
@@ -303,12 +335,13 @@ SERVER_RUNS = {
 
 
 @pytest.mark.parametrize("mode", list(SERVER_RUNS))
-def test_a_restarted_discovery_server_is_found_again_by_a_restarted_agent(ros, mode):
+def test_a_restarted_discovery_server_is_found_again_by_a_restarted_agent(ros, tmp_path, mode):
     """``--discovery server``: SIGKILL of the run's discovery server, then of an agent process;
     the server is restarted on its address, the agent's new process discovers its peers
     through it, and the run converges (lockstep: still equal to the centralised run)."""
     options, server_at, agent_at = SERVER_RUNS[mode]
-    run = _run(ros, *options, "-k", "4", "--discovery", "server")
+    save = tmp_path / "final.npz"
+    run = _run(ros, *options, "-k", "4", "--discovery", "server", "--save", save)
     _progress_past(ros, run, server_at)  # a probe with loopback discovery would not see this run
     os.kill(_server(run), signal.SIGKILL)
     _progress_past(ros, run, agent_at)
@@ -320,3 +353,4 @@ def test_a_restarted_discovery_server_is_found_again_by_a_restarted_agent(ros, m
         out[-3000:])
     if mode == "lockstep":
         assert float(DEVIATION.search(out).group(1)) <= 1e-9, out[-3000:]
+        _assert_saved_equal_centralised(save, 0.05)

@@ -13,7 +13,6 @@ import pytest
 from exactness import central_vertices, received_vertices
 from ros_harness import PY, needs_ros
 
-from polymatch_ros.core.model import System
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.ros.nodes.exchange import Layout
 from polymatch_ros.ros.wire import run_records
@@ -60,33 +59,6 @@ def initial_vertices(scene):
         out.append(gs.x + scene.origin
                    + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2))
     return out
-
-
-def test_layout_on_a_ring_needs_the_in_neighbours_and_complete_scenes_everyone(tmp_path):
-    ring = load_scene(write_scene(tmp_path, "{ring: 2}", 2, 1, "rkmk4", 8))
-    model = ring.model
-    assert model.centroids_exact        # the scene as written: exact centroids ...
-    layout = Layout(model, [0])         # ... whose flow reads everyone at a step's start
-    assert layout.sparse and layout.peers == list(range(1, 8))
-    integrated = load_scene(write_scene(tmp_path, "{ring: 2}", 2, 1, "rkmk4", 8),
-                            {"model.centroids": "integrated"}).model
-    layout = Layout(integrated, [0, 1], agents_per_process=2)
-    assert layout.peers == [2, 3, 6, 7]
-    assert set(System(integrated).sources(0, 0, True)["x"]) == {1, 2, 6, 7}
-    # processes of two: agent 2 is heard by 0, 1 (process 0), 3 (its own) and 4 (process 2);
-    # agent 0 by 1 (its own), 2 (process 1), 6 and 7 (process 3)
-    assert layout.expected_subscribers(2) == 2 and layout.expected_subscribers(0) == 2
-    assert Layout(integrated, [4, 5], agents_per_process=2).expected_subscribers(5) == 2
-    complete = load_scene(write_scene(tmp_path, "complete", 2, 1, "rkmk4", 8)).model
-    layout = Layout(complete, [0, 1], agents_per_process=2)
-    assert not layout.sparse and layout.peers == list(range(2, 8))
-    assert layout.expected_subscribers(0) == 3
-    # packed, the process's rows travel as block 0 to the three other processes ...
-    assert layout.blocks and layout.local_blocks() == {0: [0, 1]}
-    assert layout.peer_blocks() == [1, 2, 3] and layout.expected_block_subscribers(0) == 3
-    # ... and on the ring of two, blocks 1 and 3 hold the in-neighbours 2, 3, 6 and 7
-    ring_layout = Layout(integrated, [0, 1], agents_per_process=2)
-    assert ring_layout.peer_blocks() == [1, 3] and ring_layout.expected_block_subscribers(0) == 2
 
 
 @pytest.mark.parametrize("graph,dim,order,method,count,k", CASES)

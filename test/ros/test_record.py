@@ -32,7 +32,7 @@ TYPES = {
     "/polymatch/diameter/rotation": "std_msgs/msg/Float64",
     "/polymatch/markers": "visualization_msgs/msg/MarkerArray",
     "/polymatch/certificate": "diagnostic_msgs/msg/DiagnosticStatus",
-    "/polymatch/status": "std_msgs/msg/String",
+    "/polymatch/status": "polymatch_interfaces/msg/RunRecord",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
 
@@ -50,6 +50,16 @@ def read_with_rosbags(path):
     return out
 
 
+def offered(path):
+    """{topic: [(reliability, durability) of each writer]} of the channels' offered QoS
+    profiles, as rosbags parses them."""
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([Path(path)]) as reader:
+        return {c.topic: [(q.reliability.name, q.durability.name)
+                          for q in c.ext.offered_qos_profiles] for c in reader.connections}
+
+
 def planar(msg):
     """A PoseStamped -> (t, centroid, rotation matrix), computed here from the quaternion."""
     q, p = msg.pose.orientation, msg.pose.position
@@ -65,7 +75,7 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
     # beside the run, in its domain: `polymatch record`, types and QoS from the graph
     other = tmp_path / "other.mcap"
     standalone = ros.start(cli_argv("record", "/polymatch/diameter", "/polymatch/status",
-                                    "-o", other), timeout=150)
+                                    "/clock", "-o", other), timeout=150)
     # one agent process (-k 3): the runner, the monitor, the recorder and it
     proc = ros.start(cli_argv("run", scene_file, "-k", 3, "--record", mcap, "--save", saved,
                               "--records", records, "--no-compare", "--timeout", 120),
@@ -80,6 +90,14 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
 
     got = read_with_rosbags(mcap)
     assert {t: v[0] for t, v in got.items()} == TYPES
+    # what the writers offer (the topic table's profiles): latched headline values and records,
+    # volatile poses and diagnostics, so a player replays each as it was published
+    profiles = offered(mcap)
+    latched = ("/polymatch/diameter", "/polymatch/diameter/centroid",
+               "/polymatch/diameter/rotation", "/polymatch/certificate", "/polymatch/status")
+    for topic in TYPES:
+        durability = "TRANSIENT_LOCAL" if topic in latched else "VOLATILE"
+        assert profiles[topic] == [("RELIABLE", durability)], topic
     total = sum(len(v[1]) for v in got.values())
     assert f"recorded {total} messages on {len(TYPES)} of {len(TYPES)} topics to {mcap}" in out
     final = np.load(saved)
@@ -114,6 +132,12 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
     assert ros.wait(standalone, 30) == 0, ros.output(standalone)
     beside = read_with_rosbags(other)
     assert beside["/polymatch/diameter"][0] == "std_msgs/msg/Float64"
+    # found in the graph: the profile its one writer (the monitor) offers
+    assert offered(other)["/polymatch/diameter"] == [("RELIABLE", "TRANSIENT_LOCAL")]
+    assert offered(other)["/clock"] == [("BEST_EFFORT", "VOLATILE")]  # lockstep's /clock
+    assert beside["/clock"][0] == "rosgraph_msgs/msg/Clock"
+    ticks = [m.clock.sec * 10**9 + m.clock.nanosec for _, m in beside["/clock"][1]]
+    assert ticks and all(a < b for a, b in zip(ticks, ticks[1:])), ticks
     assert beside["/polymatch/diameter"][1][-1][1].data == mon.diameter  # latched: the last
     statuses = run_records([m.data for _, m in beside["/polymatch/status"][1]])
     # the monitor's last report, as the run's --records has it

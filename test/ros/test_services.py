@@ -144,8 +144,8 @@ def test_a_run_stopped_by_the_stop_service_says_so_and_exits_4(ros):
 STOP_TIME = """
 import sys
 import rclpy
-from std_msgs.msg import String
 from polymatch_ros.core.scene import load_scene
+from polymatch_ros.ros.nodes.control import command_message
 from polymatch_ros.ros.supervisor.watcher import Watcher
 from polymatch_ros.ros.wire import RunRecord
 
@@ -153,11 +153,11 @@ monitor_t, agents_t = float(sys.argv[2]), [float(t) for t in sys.argv[3:]]
 rclpy.init()
 watcher = Watcher(load_scene(sys.argv[1]), "polymatch", run_id=7)
 def status(**record):
-    watcher._status(String(data=RunRecord(mode="lockstep", run_id=7, **record).to_json()))
+    watcher._status(RunRecord(mode="lockstep", run_id=7, **record).to_msg())
 status(role="monitor", t=monitor_t)
 for a, t in enumerate(agents_t):
     status(role="agent", agents=(a,), t=t)
-watcher._control(String(data="stop"))
+watcher._control(command_message("stop"))
 print(f"STOP {watcher.stop_requested_at!r}", flush=True)
 watcher.node.destroy_node()
 rclpy.shutdown()

@@ -42,39 +42,14 @@ def test_loopback_participants_listen_on_udp_only_never_on_shared_memory(ros):
     assert not [t for t in threads if re.fullmatch(r"dds\.shm\.\d+", t)], threads
 
 
-def _fast_dds_library():
-    """The libfastrtps that rmw_fastrtps_cpp loads, found beside this interpreter's ROS."""
-    import pathlib
-    import sys
-
-    found = sorted(pathlib.Path(sys.prefix, "lib").glob("libfastrtps.so.*"))
-    return found[-1] if found else None
-
-
-def test_the_wheels_fast_dds_has_no_security_plugins():
-    """docs/guide/hosts-and-graphs.md, "Security on the wire": the PyPI Fast DDS carries none of
-    the DDS Security builtin plugins (authentication PKI-DH, access control, AES-GCM-GMAC) and
-    says "security is disabled"; a wheel that brings them makes this fail, and the guide's
-    advice wants updating."""
-    import pytest
-
-    library = _fast_dds_library()
-    if library is None:
-        pytest.skip("Fast DDS is not installed as a PyPI wheel here")
-    data = library.read_bytes()
-    assert b"but security is disabled" in data
-    for plugin in (b"PKI-DH", b"Access-Permissions", b"AES-GCM-GMAC"):
-        assert plugin not in data, plugin
-
-
 EVENTS = textwrap.dedent("""
     import rclpy
     from polymatch_ros.ros import wire
     rclpy.init()
     node = rclpy.create_node("events_probe")
     bare = len(list(node.waitables))  # the node's own rosout and parameter-event writers'
-    per_agent = [wire.publisher(node, "exchange", 2, 0), wire.publisher(node, "pose", 2, 0),
-                 wire.subscription(node, "final_exchange", print, 2, 0)]
+    per_agent = [wire.publisher(node, "state", 2, 0), wire.publisher(node, "pose", 2, 0),
+                 wire.subscription(node, "final_state", print, 2, 0)]
     own = [wire.publisher(node, "status"), wire.subscription(node, "control", print)]
     print("EVENTS", [len(e.event_handlers) for e in per_agent],
           [len(e.event_handlers) for e in own], len(list(node.waitables)) - bare,

@@ -186,3 +186,62 @@ def triangles_yaml(name, *, seed, count, method, dt, t_end, box=3.0, gamma=1.0,
     if snapshots is not None:
         data["figure"] = {"snapshots": snapshots}
     return yaml.safe_dump(data, sort_keys=False)
+
+
+def lohe_torque(mats, kappa):
+    """kappa/(2N) sum_k (O_k O_i^T - O_i O_k^T) for every agent i (the coupling of A-1/A-2)."""
+    total = mats.sum(axis=0)
+    return kappa / (2 * len(mats)) * (total @ np.swapaxes(mats, 1, 2)
+                                       - mats @ total.T)
+
+
+def written_out_model(scene):
+    """The right-hand side of the scene's model, written out from the paper on flat arrays:
+    (A-2) gamma O_i' = torque_i O_i, gamma x_i' = kappa/N sum_k (x_k - x_i); (A-1) O_i' = W_i O_i,
+    m W_i' = -gamma W_i + torque_i, x_i' = v_i, m v_i' = -gamma v_i + kappa/N sum_k (x_k - x_i)."""
+    model = scene.model
+    n, d = scene.initial.groups[0].x.shape
+    kappa, gamma, mass = model.kappa, model.gamma, model.mass
+    sizes = [n * d * d, n * d] + ([n * d * d, n * d] if model.order == 2 else [])
+
+    def rhs(_t, y):
+        parts = np.split(y, np.cumsum(sizes)[:-1])
+        mats, x = parts[0].reshape(n, d, d), parts[1].reshape(n, d)
+        torque = lohe_torque(mats, kappa)
+        pull = kappa / n * (x.sum(axis=0) - n * x)
+        if model.order == 1:
+            return np.concatenate([(torque @ mats).ravel() / gamma, pull.ravel() / gamma])
+        w, v = parts[2].reshape(n, d, d), parts[3].reshape(n, d)
+        return np.concatenate([(w @ mats).ravel(), v.ravel(),
+                               ((torque - gamma * w) / mass).ravel(),
+                               ((pull - gamma * v) / mass).ravel()])
+
+    return rhs
+
+
+def written_out_states(scene, times):
+    """The scene's one-group A-1 or A-2 run at ``times``: scipy's DOP853 (``solve_ivp``,
+    rtol 3e-14, atol 1e-15) of ``written_out_model`` on the flat rotation matrices, as States in
+    the scene's representation (centroid offsets as the scene keeps them)."""
+    from scipy.integrate import solve_ivp
+
+    from polymatch_ros.core.model import GroupState, State
+
+    grp, gs = scene.model.rotations, scene.initial.groups[0]
+    n, d = gs.x.shape
+    second = scene.model.order == 2
+    y0 = [rot_matrices(grp, gs.rot).ravel(), gs.x.ravel()]
+    if second:
+        y0 += [skew_matrices(grp, gs.w).ravel(), gs.v.ravel()]
+    sol = solve_ivp(written_out_model(scene), (0.0, max(times)), np.concatenate(y0),
+                    method="DOP853", t_eval=sorted(times), rtol=3e-14, atol=1e-15)
+    assert sol.success, sol.message
+    states = []
+    for k, t in enumerate(sol.t):
+        parts = np.split(sol.y[:, k], np.cumsum([n * d * d, n * d, n * d * d])[:len(y0) - 1])
+        extra = ((parts[3].reshape(n, d), grp.algebra_from_skew(parts[2].reshape(n, d, d)))
+                 if second else ())
+        states.append(State(float(t), (GroupState(parts[1].reshape(n, d),
+                                                  grp.from_matrices(parts[0].reshape(n, d, d)),
+                                                  *extra),)))
+    return states

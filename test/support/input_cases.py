@@ -164,6 +164,34 @@ CASES = [
     (14, "coincident_vertices_path", scene(groups="  - agents: [{vertices: [[0,1],[0,1],[1,0]]}]"),
      [], "groups[0].agents[0].vertices: vertices 0 and 1 coincide"),
     (14, "top_level_list", b"- 1\n- 2\n", [], "scene: expected a mapping of keys, got a list"),
+    # 16. errors about what was typed: the option, the near miss, the allowed values
+    (16, "cli_integrator_unknown", BASE, ["-i", "rk5"],
+     "--integrator: unknown integrator 'rk5'; known: etd1, etd2, euler_proj, lie_euler, "
+     "lie_heun, lie_verlet, rk4_proj, rkmk4, adaptive, auto"),
+    (16, "explain_integrator_near_miss", BASE, ["EXPLAIN", "--integrator", "rkmk5"],
+     "--integrator: unknown integrator 'rkmk5'; known: etd1, etd2, euler_proj, lie_euler, "
+     "lie_heun, lie_verlet, rk4_proj, rkmk4, adaptive, auto; did you mean 'rkmk4'?"),
+    (16, "cli_t_end_past_the_samples_limit", scene("time: {t_end: 2.0, samples: {every: 0.5}}"),
+     ["--t-end", "1e300"], "--t-end 1e+300: time.samples.every: every 0.5 over t_end = 1e+300 "
+     "is 2e+300 samples, more than the limit of 100000 samples a run"),
+    (16, "cli_dt_unstable", scene("time: {t_end: 100.0}"), ["--dt", "10"],
+     "--dt: rkmk4 is unstable at dt = 10"),
+    (16, "explain_dt_unstable", scene("time: {t_end: 100.0}"), ["EXPLAIN", "--dt", "10"],
+     "--dt: rkmk4 is unstable at dt = 10"),
+    (16, "key_near_miss_rotation", scene(groups="  - {shape: triangle, count: 3, "
+                                                "rotation: uniform}"), [],
+     "groups[0].rotation: unknown key; did you mean 'rotations'? (allowed: name, shape, size, "
+     "count, centroids, rotations, scales"),
+    (16, "key_near_miss_kapa", scene("model: {order: 1, kapa: 2.0}"), [],
+     "model.kapa: unknown key; did you mean 'kappa'? (allowed: order, kappa, gamma"),
+    (16, "key_far_from_any", scene("model: {order: 1, zzz: 2.0}"), [],
+     "model.zzz: unknown key (allowed: order, kappa"),
+    (16, "representation_lists_the_allowed", scene("model: {order: 1, representation: angles}"),
+     [], "model.representation: unknown rotation representation 'angles'; did you mean "
+         "'angle'? (allowed: auto, angle, so3, so3-cayley, so3-exp, matrix)"),
+    (16, "scene_integrator_near_miss", scene("integrator: {method: rkmk5, dt: 0.05}"), [],
+     "integrator.method: unknown integrator 'rkmk5'; known: etd1, etd2, euler_proj, lie_euler, "
+     "lie_heun, lie_verlet, rk4_proj, rkmk4, adaptive, auto; did you mean 'rkmk4'?"),
 ]
 
 # 15: command-line parse errors: (test id, argv, expected start of the message)

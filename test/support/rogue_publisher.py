@@ -3,9 +3,9 @@
     python test/support/rogue_publisher.py ENSEMBLE AGENT SECONDS [STAMP]
 
 Sends, at ~100 Hz each: PoseStamped with NaN positions, PoseStamped with a quaternion of
-norm 2, lockstep stage messages with NaN data, a foreign run id, or no header, exchange
-messages (``wire.exchange``) with NaN data or a foreign run id, and another run's final state
-on the latched ``final_exchange``.  With STAMP it sends instead, at 20 Hz, well-formed states
+norm 2, lockstep stage rows with NaN data, a foreign run id, or no rows, agent states
+(``wire.exchange``) with NaN data or a foreign run id, and another run's final state on the
+latched ``final_state``.  With STAMP it sends instead, at 20 Hz, well-formed states
 of a 2-D agent far away (centroid (50, 0), rotation 0.3 rad) stamped STAMP (late in the run:
 newer than any real pose), on the agent's pose topic and on its exchange with a foreign run
 id, and a monitor's run record of that run on the status topic: agents all heard, matched
@@ -22,8 +22,8 @@ import numpy as np
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from std_msgs.msg import Float64MultiArray, String
 
+from polymatch_interfaces.msg import AgentState, StageRows
 from polymatch_ros.core.so import SO2
 from polymatch_ros.ros import wire
 
@@ -39,9 +39,9 @@ def well_formed(pose, exchange, status, agent, stamp):
     grp = SO2()
     record = wire.RunRecord(role="monitor", mode="realtime", t=stamp, diameter=0.0,
                             agents_heard=AGENTS, reports=1, run_id=FOREIGN_RUN)
-    status.publish(String(data=record.to_json()))
+    status.publish(record.to_msg())
     pose.publish(wire.pose_message(grp, stamp, np.array(FAR), np.array([ANGLE]), "world"))
-    exchange.publish(wire.encode_exchange(Float64MultiArray(), grp, FOREIGN_RUN, agent, stamp,
+    exchange.publish(wire.encode_exchange(AgentState(), grp, FOREIGN_RUN, agent, stamp,
                                           np.array(FAR), np.array([ANGLE])))
 
 
@@ -59,17 +59,16 @@ def malformed(pose, stage, exchange, final, agent, k):
         p.pose.orientation.w = 2.0                      # quaternion far from unit norm
     pose.publish(p)
     fields = {"x": [0.0, 0.0], "rot": [math.nan if k % 2 else 0.3]}
-    msg = wire.encode_stage(Float64MultiArray(), FOREIGN_RUN if k % 2 == 0 else 0, agent, k, 0,
+    msg = wire.encode_stage(StageRows(), FOREIGN_RUN if k % 2 == 0 else 0, agent, k, 0,
                             0, 0.0, fields)
     stage.publish(msg)
-    junk = Float64MultiArray()                          # no header at all
-    junk.data = [1.0, 2.0]
-    stage.publish(junk)
+    stage.publish(StageRows(sender=agent, t=0.0))       # no rows at all
+
     grp = SO2()
     x = np.array([math.nan if k % 2 else 0.0, 0.0])
-    exchange.publish(wire.encode_exchange(Float64MultiArray(), grp, FOREIGN_RUN, agent, 0.0, x,
+    exchange.publish(wire.encode_exchange(AgentState(), grp, FOREIGN_RUN, agent, 0.0, x,
                                           np.array([0.3])))
-    final.publish(wire.encode_exchange(Float64MultiArray(), grp, FOREIGN_RUN, agent, 1.0,
+    final.publish(wire.encode_exchange(AgentState(), grp, FOREIGN_RUN, agent, 1.0,
                                        np.array(FAR), np.array([ANGLE])))
 
 
@@ -80,13 +79,14 @@ def main():
     node = Node("rogue")
     qos = wire.qos_profiles()
     pose = node.create_publisher(PoseStamped, wire.full_name(ensemble, "pose", agent), qos["pose"])
-    stage = node.create_publisher(Float64MultiArray, wire.full_name(
+    stage = node.create_publisher(StageRows, wire.full_name(
         ensemble, "stage", agent), qos["stage"])
-    exchange = node.create_publisher(Float64MultiArray, wire.full_name(
-        ensemble, "exchange", agent), qos["pose"])
-    final = node.create_publisher(Float64MultiArray, wire.full_name(
-        ensemble, "final_exchange", agent), qos["latched"])
-    status = node.create_publisher(String, wire.full_name(ensemble, "status"), qos["status"])
+    exchange = node.create_publisher(AgentState, wire.full_name(
+        ensemble, "state", agent), qos["pose"])
+    final = node.create_publisher(AgentState, wire.full_name(
+        ensemble, "final_state", agent), qos["latched"])
+    status = node.create_publisher(wire.message_type("record"), wire.full_name(ensemble, "status"),
+                                   qos["status"])
     end = time.monotonic() + seconds
     k = 0
     while time.monotonic() < end:

@@ -2,13 +2,13 @@
 
 Every process started here runs with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST,
 a ROS_DOMAIN_ID reserved for the test alone (domain_coordinator), under
-`timeout -k`, and is ended by its own PID when the test finishes.  Fast DDS
-shared-memory segments left behind by processes a test SIGKILLs are removed
-afterwards (only new ones that no live process still maps).
+`timeout -k`, and is ended by its own PID when the test finishes.  The Fast DDS
+shared-memory segments its processes (and theirs) map are noted while they live
+(``shm_watch``); those left once they have ended (a process the test SIGKILLed)
+are removed, never one whose owner lives.
 """
 
 import contextlib
-import glob
 import os
 import shutil
 import signal
@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 import slot_use
 from proc_group import children as _children
+from shm_watch import ShmWatch
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CONFIG = os.path.join(REPO, "config")
@@ -42,19 +43,6 @@ def ros_available():
 needs_ros = pytest.mark.skipif(not ros_available(), reason="rclpy is not installed")
 
 
-def _mapped_shm():
-    held = set()
-    for maps in glob.glob("/proc/[0-9]*/maps"):
-        try:
-            with open(maps) as fh:
-                for line in fh:
-                    if "/dev/shm/" in line:
-                        held.add(line.split()[-1])
-        except OSError:
-            continue
-    return held
-
-
 class Ros:
     """A test's private ROS world: one domain id, loopback discovery, processes ended by PID."""
 
@@ -65,10 +53,11 @@ class Ros:
         self.env = private_ros_environment(domain)
         assert self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
         self.procs = []
-        self.shm_before = set(glob.glob("/dev/shm/fastrtps_*"))
+        self.shm = ShmWatch(lambda: [p.pid for p in self.procs if p.poll() is None])
 
-    def start(self, argv, timeout, name=""):
-        """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file.
+    def start(self, argv, timeout, name="", env=None):
+        """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file;
+        ``env``: another environment than the world's (with its ROS_DOMAIN_ID, ``domain``).
         With POLYMATCH_KEEP_LOGS, a `polymatch run` also writes its processes' output
         (``--logs``), kept beside its own when the test fails."""
         argv, run_logs = list(map(str, argv)), None
@@ -84,7 +73,7 @@ class Ros:
         )
         proc = subprocess.Popen(
             ["timeout", "-k", "5", str(timeout)] + list(argv),
-            env=self.env,
+            env=self.env if env is None else env,
             stdout=log,
             stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL,
@@ -123,6 +112,7 @@ class Ros:
 
     def kill(self, proc, sig=signal.SIGKILL):
         """Signal one process by PID: the `timeout` wrapper's child too, for SIGKILL."""
+        self.shm.look()  # the segments of what is about to end
         if proc.poll() is None:
             if sig == signal.SIGKILL:
                 for child in _children(proc.pid):
@@ -133,6 +123,7 @@ class Ros:
 
     def close(self, keep_logs=None):
         """End every process by PID; with ``keep_logs`` (a directory) keep each one's output."""
+        self.shm.look()
         for proc in self.procs:
             if proc.poll() is None:
                 self.kill(proc, signal.SIGINT)
@@ -154,11 +145,12 @@ class Ros:
                 shutil.rmtree(proc.run_logs, ignore_errors=True)
             with contextlib.suppress(OSError):
                 os.unlink(proc.log.name)
-        held = _mapped_shm()
-        for path in set(glob.glob("/dev/shm/fastrtps_*")) - self.shm_before:
-            if path not in held:
-                with contextlib.suppress(OSError):
-                    os.unlink(path)
+        self.shm.stop()
+        self.shm.remove_unheld()
+
+    def shm_left(self):
+        """The /dev/shm entries of this world's processes still there (``ShmWatch.left``)."""
+        return self.shm.left()
 
 
 def cli_argv(*args):

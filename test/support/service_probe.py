@@ -24,9 +24,9 @@ import time
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
+from polymatch_interfaces.msg import RunRecord as RunRecordMsg
 from polymatch_ros.ros.nodes.teardown import end_process, teardown_watchdog
 from polymatch_ros.ros.wire import RunRecord
 
@@ -43,10 +43,10 @@ class Probe:
             reliability=rclpy.qos.ReliabilityPolicy.RELIABLE,
             durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL,
         )
-        self.node.create_subscription(String, "/polymatch/status", self._status, latched)
+        self.node.create_subscription(RunRecordMsg, "/polymatch/status", self._status, latched)
 
     def _status(self, msg):
-        rec = RunRecord.from_json(msg.data)
+        rec = RunRecord.from_msg(msg)
         if rec is not None and rec.role == "agent":
             self.times[rec.agents] = rec.t
 

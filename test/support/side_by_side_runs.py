@@ -47,13 +47,13 @@ def default_transport_profile(directory):
 
 def start(profile, number, logs):
     env = dict(os.environ, FASTRTPS_DEFAULT_PROFILES_FILE=profile)
-    env.pop("ROS_DOMAIN_ID", None)  # each run reserves its own
+    env.pop("ROS_DOMAIN_ID", None)  # each run reserves its own (--isolated)
     log = open(os.path.join(logs, f"run_{number}.log"), "w", encoding="utf-8")
     log.write(f"profile {profile}\n")
     log.flush()
     proc = subprocess.Popen(
         ["timeout", "-k", "10", "200", sys.executable, "-m", "polymatch_ros.cli", "run",
-         "congruent_triangles", "-k", "2", "--timeout", "120"],
+         "congruent_triangles", "-k", "2", "--timeout", "120", "--isolated"],
         stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True,
     )
     return proc, log, time.monotonic()

@@ -23,7 +23,7 @@ from ...core.model import GroupState, State, System
 from ...core.simulate import plan, prepare
 from .. import wire
 from .checkpoint import CheckpointFile
-from .control import AgentControl, offer_agent_services, parse_command
+from .control import AgentControl, describe_command, offer_agent_services, parse_command
 from .exchange import DropCounter, Layout
 from .hosted import HostedAgents
 from .params import RUNTIME
@@ -116,9 +116,9 @@ class AgentBase(NodeApp):
         self.exchange_blocks = self.layout.local_blocks() if (
             self.mode == "lockstep" and self.layout.blocks) else None
         # writers by agent, or by block: (key of the per-step topic, of the final one), indices
-        keys, by = ("exchange", "final_exchange"), local
+        keys, by = ("state", "final_state"), local
         if self.exchange_blocks is not None:
-            keys, by = ("exchange_block", "final_exchange_block"), list(self.exchange_blocks)
+            keys, by = ("state_block", "final_state_block"), list(self.exchange_blocks)
         self.exchange_pubs = {i: wire.publisher(node, keys[0], dim, i) for i in by}
         self.final_exchange_pubs = {i: wire.publisher(node, keys[1], dim, i) for i in by}
         self.block_rows = self._block_rows()
@@ -149,9 +149,9 @@ class AgentBase(NodeApp):
 
     # -- control: the ensemble's commands (control topic) and this process's services -------
     def _control(self, msg: Any) -> None:
-        command = parse_command(msg.data)
+        command = parse_command(msg)
         if command is None:
-            self.drops("control", f"bad command {msg.data[:80]!r}")
+            self.drops("control", f"bad {describe_command(msg)}")
             return
         replays = self.control.replays
         _, message = self.control.command(*command)
@@ -195,9 +195,9 @@ class AgentBase(NodeApp):
 
     def _publish_exchange(self, pubs: dict[int, Publisher]) -> None:
         """Every local agent's state with the run's id (``wire.exchange``) on ``pubs``."""
-        from std_msgs.msg import Float64MultiArray
-
+        state_msg = wire.message_type("state")
         st, run_id, grp = self.state, self.params["run_id"], self.grp
+        frame = self.params["frame_id"]
         for gi in self.layout.local_groups:
             gs, g = st.groups[gi], self.model.groups[gi]
             assert gs is not None  # the state holds every local group
@@ -207,8 +207,8 @@ class AgentBase(NodeApp):
                 if gs.v is not None and gs.w is not None:  # second order: its velocities
                     v, w = gs.v[r], grp.algebra_take(gs.w, [r])
                 pubs[a].publish(wire.encode_exchange(
-                    Float64MultiArray(), grp, run_id, a, st.t, gs.x[r], grp.take(gs.rot, [r]),
-                    v, w))
+                    state_msg(), grp, run_id, a, st.t, gs.x[r], grp.take(gs.rot, [r]), v, w,
+                    frame))
 
     def _send_states(self, pubs: dict[int, Publisher]) -> None:
         """Every local agent's state on the run's exchange writers ``pubs``: a message per
@@ -233,8 +233,7 @@ class AgentBase(NodeApp):
                                  pubs: dict[int, Publisher]) -> None:
         """Every local agent's state with the run's id, one message per block on ``pubs``
         (``wire.encode_exchange_block``)."""
-        from std_msgs.msg import Float64MultiArray
-
+        block_msg = wire.message_type("state_block")
         st, grp, local = self.state, self.grp, self.layout.local_groups
         parts = [gs for gi in local if (gs := st.groups[gi]) is not None]  # every local group
         x = np.concatenate([gs.x for gs in parts])
@@ -248,9 +247,9 @@ class AgentBase(NodeApp):
         for b, members in blocks.items():
             rows = self.block_rows[b]
             msg = wire.encode_exchange_block(
-                Float64MultiArray(), grp, self.params["run_id"], b, st.t, members, x[rows],
+                block_msg(), grp, self.params["run_id"], b, st.t, members, x[rows],
                 grp.take(rot, rows), None if v is None else v[rows],
-                None if w is None else grp.algebra_take(w, rows))
+                None if w is None else grp.algebra_take(w, rows), self.params["frame_id"])
             pubs[b].publish(msg)
 
     def _publish_rows(
@@ -327,10 +326,9 @@ class AgentBase(NodeApp):
             return
         self._last_diag = now
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-        from std_msgs.msg import String
 
         rec = self.record()
-        self.status_pub.publish(String(data=rec.to_json()))
+        self.status_pub.publish(rec.to_msg())
         status = DiagnosticStatus(
             name=f"polymatch{self.node.get_fully_qualified_name()}",
             hardware_id=self.node.get_fully_qualified_name(),

@@ -13,9 +13,9 @@ node on a host that runs every agent and no monitor):
 Each agent offers the same four under its own node (``/<ensemble>/agent_3/pause``) for the
 agents of its process alone (a process hosting several agents offers them on its own node and
 on each agent's, ``hosted``).  A service is one-to-one and the ensemble is many: the
-ensemble's services broadcast one command on the ``control`` topic (std_msgs/String,
-RELIABLE; ``start <epoch>``, ``stop``, ``pause <epoch>``, ``resume <epoch>``,
-``reset <epoch>``), so that one wall-clock epoch reaches every agent.  The topic is the
+ensemble's services broadcast one command on the ``control`` topic
+(``polymatch_interfaces/msg/ControlCommand``, RELIABLE: START, STOP, PAUSE, RESUME, RESET with
+a wall-clock epoch, RECEIVED), so that one wall-clock epoch reaches every agent.  The topic is the
 services' transport and the runner's ``received`` handshake; people and programs call the
 services.
 """
@@ -43,20 +43,38 @@ START_LEAD = 0.5  # s between a start/reset request and the epoch it announces
 COMMANDS = ("start", "stop", "pause", "resume", "reset", "received")
 
 
-def parse_command(text: str) -> tuple[str, float | None] | None:
-    """(verb, epoch or None) of a control message; None if it is not one."""
-    words = text.strip().lower().split()
-    if not words or words[0] not in COMMANDS or len(words) > 2:
+EPOCH_VERBS = ("start", "pause", "resume", "reset")
+
+
+def command_message(verb: str, epoch: float | None = None) -> Any:
+    """The ``ControlCommand`` of a verb (``COMMANDS``) and, for EPOCH_VERBS, its wall-clock
+    epoch (s since the Unix epoch)."""
+    from polymatch_interfaces.msg import ControlCommand
+
+    msg = ControlCommand(command=COMMANDS.index(verb))
+    if epoch is not None:
+        msg.epoch.sec, msg.epoch.nanosec = divmod(int(round(epoch * 1e9)), 1_000_000_000)
+    return msg
+
+
+def parse_command(msg: Any) -> tuple[str, float | None] | None:
+    """(verb, epoch or None) of a ControlCommand; None if it is not a valid one."""
+    if msg.command >= len(COMMANDS) or msg.epoch.nanosec >= 1_000_000_000:
         return None
-    if (len(words) == 2) != (words[0] in ("start", "pause", "resume", "reset")):
-        return None
-    try:
-        epoch = float(words[1]) if len(words) == 2 else None
-    except ValueError:
-        return None
-    if epoch is not None and not epoch == epoch:  # NaN
-        return None
-    return words[0], epoch
+    verb = COMMANDS[msg.command]
+    epoch = msg.epoch.sec + 1e-9 * msg.epoch.nanosec
+    if verb not in EPOCH_VERBS:
+        return verb, None
+    return (verb, epoch) if epoch > 0 else None
+
+
+def describe_command(msg: Any) -> str:
+    """A ControlCommand as one line for a log (``pause 1764363000.123``)."""
+    command = parse_command(msg)
+    if command is None:
+        return f"command {msg.command} (epoch {msg.epoch.sec}.{msg.epoch.nanosec:09d})"
+    verb, epoch = command
+    return verb if epoch is None else f"{verb} {epoch:.3f}"
 
 
 LOCKSTEP_START = "lockstep agents start once every peer is matched"
@@ -204,11 +222,10 @@ class EnsembleControl:
             node.create_service(SetBool, "pause", _set_bool(self._pause)),
         ]
 
-    def _send(self, text: str) -> None:
-        from std_msgs.msg import String
-
-        self.pub.publish(String(data=text))
-        self.log.info(f"control: {text}")
+    def _send(self, verb: str, epoch: float | None = None) -> None:
+        msg = command_message(verb, epoch)
+        self.pub.publish(msg)
+        self.log.info(f"control: {describe_command(msg)}")
 
     def _start(self) -> Answer:
         if self.mode == "lockstep":
@@ -216,22 +233,26 @@ class EnsembleControl:
         again = self.epoch is not None
         if not again:
             self.epoch = time.time() + START_LEAD
-        self._send(f"start {self.epoch!r}")
+        self._send("start", self.epoch)
         return True, f"{'re-sent: ' if again else ''}t = 0 at {self.epoch:.3f}"
 
     def _stop(self) -> Answer:
         self._send("stop")
         return True, "stop sent to every agent"
 
+    def stop(self) -> Answer:
+        """What the ``stop`` service does (the ``match`` action's cancel calls it)."""
+        return self._stop()
+
     def _pause(self, on: bool) -> Answer:
-        self._send(f"{'pause' if on else 'resume'} {time.time()!r}")
+        self._send("pause" if on else "resume", time.time())
         return True, f"{'pause' if on else 'resume'} sent to every agent"
 
     def _reset(self) -> Answer:
         refusal = reset_refusal(self.mode)
         if refusal:
             return False, refusal
-        self._send(f"reset {time.time() + START_LEAD!r}")
+        self._send("reset", time.time() + START_LEAD)
         return True, "reset sent: realtime agents go back to their initial state"
 
 

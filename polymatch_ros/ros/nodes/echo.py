@@ -6,9 +6,12 @@
 
 The message type is read from the ROS graph (like ros2 topic echo) and the
 subscription adopts the publisher's durability, so a late echo of a latched
-topic still prints its last value.  It runs in the caller's ROS environment
-(ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE) and ends by itself: after
---count messages, --until-below, or --timeout seconds (exit 1 on timeout).
+topic still prints its last value.  It runs in the caller's ROS domain (ROS_DOMAIN_ID, ROS's
+default 0 when unset) with the discovery of `polymatch run` (loopback unless the caller set
+ROS_AUTOMATIC_DISCOVERY_RANGE), and ends by itself: after --count messages, --until-below,
+--timeout seconds (exit 1), or, without --timeout, when no message came within
+``FIRST_MESSAGE_SECONDS`` (exit 1; the error names the domain and discovery range it listened
+in).  Once the topic is heard and no --timeout was given, it prints until Ctrl-C.
 """
 
 from __future__ import annotations
@@ -25,6 +28,18 @@ from .process import ros_main
 if TYPE_CHECKING:
     from rclpy.qos import QoSProfile
     from rclpy.topic_endpoint_info import TopicEndpointInfo
+
+#: how long `polymatch echo` waits for a topic's first message when no --timeout is given (s)
+FIRST_MESSAGE_SECONDS = 10.0
+
+
+def listening_in() -> str:
+    """Where this process listens: its ROS domain and discovery range, as its errors say it."""
+    domain = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    where = f"ROS_DOMAIN_ID {domain}" if domain else (
+        "ROS_DOMAIN_ID 0 (ROS's default: ROS_DOMAIN_ID is not set)")
+    reach = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "SUBNET (ROS's default)"
+    return f"{where}, discovery range {reach}"
 
 
 def message_to_lines(msg: Any, indent: str = "") -> list[str]:
@@ -72,9 +87,12 @@ class Echo:
         from rclpy.node import Node
 
         self.node = Node(f"echo_{os.getpid()}")
-        self.topic, self.count, self.until_below, self.timeout = topic, count, until_below, timeout
+        self.topic, self.count, self.until_below = topic, count, until_below
+        # without --timeout: only the first message is waited for at most FIRST_MESSAGE_SECONDS
+        self.bounded = timeout is not None
+        self.timeout = timeout if timeout is not None else FIRST_MESSAGE_SECONDS
         self.stream = stream
-        self.deadline = None if timeout is None else time.monotonic() + timeout
+        self.deadline: float | None = time.monotonic() + self.timeout
         self.seen = 0
         self.done = False
 
@@ -91,7 +109,8 @@ class Echo:
         while not infos:
             infos = self.node.get_publishers_info_by_topic(self.topic)
             if self.deadline is not None and time.monotonic() > self.deadline:
-                raise PolymatchError(f"no publisher on {self.topic} within {self.timeout:g} s")
+                raise PolymatchError(f"no publisher on {self.topic} within {self.timeout:g} s in "
+                                     f"{listening_in()}")
             self._spin()
         latched = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
         reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
@@ -104,6 +123,8 @@ class Echo:
 
     def _receive(self, msg: Any) -> None:
         self.seen += 1
+        if not self.bounded:
+            self.deadline = None  # heard: print until --count, --until-below or Ctrl-C
         self.stream.write("\n".join(message_to_lines(msg)) + "\n---\n")
         self.stream.flush()
         if self.count is not None and self.seen >= self.count:
@@ -120,6 +141,9 @@ class Echo:
         self.node.create_subscription(cls, self.topic, self._receive, qos)
         while not self.done:
             if self.deadline is not None and time.monotonic() > self.deadline:
+                if not self.seen:
+                    raise PolymatchError(f"{self.topic}: no message within {self.timeout:g} s "
+                                         f"in {listening_in()}")
                 below = (
                     f", none below {self.until_below:g}" if self.until_below is not None else ""
                 )
@@ -137,7 +161,8 @@ class Echo:
 def echo(topic: str, count: int | None = None, until_below: float | None = None,
          timeout: float | None = None, stream: TextIO = sys.stdout) -> int:
     """Print the messages of ``topic`` (absolute) until ``count`` messages, a value below
-    ``until_below``, or ``timeout`` seconds (an error); the exit code."""
+    ``until_below``, or ``timeout`` seconds (an error; None: ``FIRST_MESSAGE_SECONDS`` without
+    a message); the exit code."""
     return ros_main(
         lambda argv: Echo(topic, count, until_below, timeout, stream), "polymatch", ["polymatch"]
     )

@@ -1,7 +1,8 @@
 """The monitor: hears every agent's pose and publishes the ensemble's diameters.
 
-It reads the run's exchange (``agent_<i>/exchange``, ``wire.exchange``), whose messages carry
-the run's id: a pose published on ``agent_<i>/pose`` by anything else does not reach it.
+It reads the run's states (``agent_<i>/state``, ``polymatch_interfaces/msg/AgentState``,
+``wire.exchange``), whose messages carry the run's id: a pose published on ``agent_<i>/pose``
+by anything else does not reach it.
 
     ros2 run polymatch_ros monitor --ros-args -r __ns:=/polymatch -r __node:=monitor \\
         -p scene:=config/congruent_triangles.yaml
@@ -12,7 +13,8 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
                                         (max over groups; similar groups at their mean scale)
   diameter/centroid   std_msgs/Float64  max_{i,j} |xbar_i - xbar_j| (max over groups)
   diameter/rotation   std_msgs/Float64  max_{i,j} |O_i - O_j|_F (max over groups)
-  status              std_msgs/String   its run record (JSON, ``wire.RunRecord``), latched
+  status              polymatch_interfaces/RunRecord  its run record (``wire.RunRecord``),
+                                        latched
   certificate         diagnostic_msgs/DiagnosticStatus  whether matching is guaranteed and by
                                         when (``core.certificate``), latched; granted once, in
                                         lockstep, and never withdrawn
@@ -24,6 +26,11 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
                       one colour per group, lifetime = peer_timeout so silent agents fade
   start, stop, reset  std_srvs/Trigger  the ensemble's services (``control``), broadcast
   pause               std_srvs/SetBool  to every agent on the control topic
+  match               polymatch_interfaces/action/Match  a goal until the diameter is below a
+                                        tolerance, with feedback at each report; its cancel
+                                        stops the ensemble (``match_action``)
+  /clock              rosgraph_msgs/Clock  lockstep: the simulated time of each step it
+                                        reports (``sim_clock``), for use_sim_time tools
 In lockstep it collects every step's poses and reports, at most ``report_rate`` times a
 second, the latest simulated time that every agent's pose has reached (its loop, at that rate,
 takes the poses that came since its last report and publishes it, so the last step is reported
@@ -53,9 +60,11 @@ from ...core.proximity import ComponentTracker
 from .. import wire
 from .control import EnsembleControl
 from .exchange import DropCounter, LeanReaders, received_at
+from .match_action import MatchServer
 from .monitor_output import certificate_status, diagnostics, markers
 from .params import MONITOR, declare, resolve_monitor
 from .process import NodeApp, ros_main
+from .sim_clock import SimClock
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -135,13 +144,15 @@ class MonitorNode(NodeApp):
         k = self.params["agents_per_process"]
         if self.lockstep and k > 1:  # packed lockstep processes: a message per block and step
             for b in range(-(-self.n // k)):
-                self.readers.subscribe("exchange_block", self._block_receiver(b, k), dim, b,
+                self.readers.subscribe("state_block", self._block_receiver(b, k), dim, b,
                                        "lockstep")
         else:
             for a in range(self.n):
-                self.readers.subscribe("exchange", self._receiver(a), dim, a,
+                self.readers.subscribe("state", self._receiver(a), dim, a,
                                        self.params["mode"])
         self.control = EnsembleControl(node, self.params["mode"])
+        self.match = MatchServer(node, self.scene.tolerance, self.n, self.control)
+        self.clock = SimClock(node) if self.lockstep else None  # /clock: the reported step's
 
     def _wait_for_report_readers(self) -> None:
         """Until ``report_readers`` readers matched every report writer (at most
@@ -274,6 +285,8 @@ class MonitorNode(NodeApp):
             t, rows, vel = self.unreported
             self.unreported = None
             self._publish(t, rows, vel)
+            if self.clock is not None:
+                self.clock.advance(self.completed)
 
     def _drain(self) -> None:
         """Take the poses and twists the readers hold (lockstep: up to their depth, 100 each)."""
@@ -303,7 +316,7 @@ class MonitorNode(NodeApp):
     def _publish(
         self, t: float, rows: Mapping[int, wire.Row], velocities: Mapping[int, Velocity]
     ) -> None:
-        from std_msgs.msg import Float64, String
+        from std_msgs.msg import Float64
 
         met, keep = self._evaluate(t, rows, velocities)
         statuses = component_statuses(self, t, rows)
@@ -319,8 +332,9 @@ class MonitorNode(NodeApp):
             arr = diagnostics(self, t, met, keep, len(rows))
             arr.status.extend(statuses)
             self.diag_pub.publish(arr)
-        self.status_pub.publish(String(data=self.record().to_json()))
+        self.status_pub.publish(self.record().to_msg())
         self._certify(t, rows, velocities, met.diameter)
+        self.match.report(t, met, len(rows), self.certificate)
         if self.marker_pub is not None and self.marker_pub.get_subscription_count():
             self.marker_pub.publish(markers(self, {a: (r.x, r.rot) for a, r in rows.items()}))
 
@@ -381,6 +395,7 @@ class MonitorNode(NodeApp):
                 self.report_due()
         if self.lockstep:
             self._report_completed()
+        self.match.close(self.executor)  # open goals end; their results go out
         return 0
 
     def _stop(self, sig: int, frame: FrameType | None) -> None:
@@ -388,6 +403,7 @@ class MonitorNode(NodeApp):
 
     def destroy(self) -> None:
         self.readers.destroy()
+        self.match.destroy()
         super().destroy()
 
     def final_record(self) -> wire.RunRecord | None:

@@ -34,6 +34,9 @@ MODES = ("lockstep", "realtime", "bridge")
 #: what a packed process gives each of its agents (``hosted``)
 AGENT_NODES = ("full", "lean", "none")  # not "off": a YAML boolean in -p
 MONITOR_MODES = ("lockstep", "realtime")
+#: a first-order bridge's command on cmd_vel: geometry_msgs/TwistStamped (the default: Jazzy's
+#: controllers) or Twist
+CMD_TYPES = ("twist_stamped", "twist")
 #: how a realtime or bridge agent fixes its t = 0: when it starts, on the ensemble's 'start'
 #: (control topic, ``/polymatch/start``), or at the given ``start_time``
 STARTS = ("now", "control", "at")
@@ -211,8 +214,9 @@ AGENT = (
     ),
     Param("pose_type", "pose", "bridge: measured_pose is pose (PoseStamped) | odometry "
           "(nav_msgs/Odometry; second order needs its twist)", choices=("pose", "odometry")),
-    Param("cmd_type", "twist", "bridge: cmd_vel is twist (Twist) | twist_stamped",
-          choices=("twist", "twist_stamped")),
+    Param("cmd_type", "twist_stamped", "bridge: cmd_vel is twist_stamped (geometry_msgs/"
+          "TwistStamped, what Jazzy's diff_drive_controller takes) | twist (Twist)",
+          choices=CMD_TYPES),
     Param("command_frame", "world", "bridge: cmd_vel / cmd_accel components in the world | body "
           "frame",
           choices=("world", "body")),
@@ -269,7 +273,7 @@ MONITOR = (
         "agents_per_process",
         1,
         "lockstep: K of the agents' partition; with K > 1 each process sends its agents' "
-        "states in one message a step (exchanges/block_<b>), and the monitor reads those",
+        "states in one message a step (states/block_<b>), and the monitor reads those",
         (1, 1_000_000),
     ),
     Param(

@@ -78,7 +78,7 @@ class PeerTable:
         # second-order safety filter (``of_agent``)
         self.want_v = velocities and self.model.order == 2
         for a in layout.peers:  # the run's exchange (wire.exchange): pinned to this run's id
-            self.readers.subscribe("exchange", self._receiver(a), dim, a, "realtime")
+            self.readers.subscribe("state", self._receiver(a), dim, a, "realtime")
 
     @classmethod
     def of_agent(cls, agent: AgentBase, clock: ClockOffsets | None = None) -> PeerTable:

@@ -7,9 +7,11 @@
 Every subscription is ``raw``: it takes the serialized CDR bytes, which go into the file as
 they came (``wire.recording.RecordingWriter``), stamped with the time they were received and
 the time they were sent.  A topic given with its type and writer profile (``types``, ``qos``;
-what ``polymatch run --record`` passes) is subscribed to at once, so a lockstep ensemble that
+what ``polymatch run --record`` passes) is subscribed to at once, its channel stating the
+table's profile as what its writers offer, so a lockstep ensemble that
 waits for its pose readers (``pose_subscribers``) loses no step; any other topic is taken
-with the type and QoS its publishers offer once they appear (as ``ros2 bag record`` does).
+with the type and QoS its publishers offer once they appear, its channel stating their
+profiles (as ``ros2 bag record`` does).
 
 The recorder ends on SIGINT or SIGTERM (its normal end, exit 0), after ``duration`` seconds,
 or at an error; it then takes what its readers still hold (at most ``DRAIN_SECONDS``),
@@ -37,7 +39,7 @@ from ..wire.recording import (
     message_class,
     recorder_qos,
 )
-from ..wire.topics import QOS
+from ..wire.topics import QOS, qos_profiles
 from .params import Param, declare
 from .process import NodeApp, ros_main
 
@@ -120,8 +122,10 @@ class Recorder(NodeApp):
         self.file = RecordingWriter(params["output"])
         self._attach_scene()
         self.waiting = [t for t in topics if not (t.type and t.qos)]
-        self.subscriptions = [self._subscribe(t.name, t.type, recorder_qos(t.qos))
-                              for t in topics if t.type and t.qos]
+        offered = qos_profiles()
+        self.subscriptions = [
+            self._subscribe(t.name, t.type, recorder_qos(t.qos), [offered[t.qos]])
+            for t in topics if t.type and t.qos]
         self.started = time.monotonic()
 
     def _stop(self, sig: int, frame: FrameType | None) -> None:
@@ -140,8 +144,11 @@ class Recorder(NodeApp):
         self.file.metadata({"scene": os.path.abspath(path), "t_end": repr(self.params["t_end"]),
                             "mode": self.params["mode"]})
 
-    def _subscribe(self, name: str, type_: str, qos: QoSProfile) -> Any:
-        channel = self.file.channel(name, type_)
+    def _subscribe(self, name: str, type_: str, qos: QoSProfile,
+                   offered: Sequence[QoSProfile]) -> Any:
+        """A raw reader of ``name`` with ``qos``, written to a channel whose writers offer
+        ``offered``."""
+        channel = self.file.channel(name, type_, offered)
         write = self.file.write
 
         def take(data: bytes, info: dict[str, Any]) -> None:
@@ -170,7 +177,8 @@ class Recorder(NodeApp):
                 else DurabilityPolicy.VOLATILE,
             )
             self.subscriptions.append(
-                self._subscribe(topic.name, topic.type or infos[0].topic_type, qos))
+                self._subscribe(topic.name, topic.type or infos[0].topic_type, qos,
+                                [i.qos_profile for i in infos]))
             self.waiting.remove(topic)
 
     def run(self) -> int:

@@ -3,12 +3,12 @@
     ros2 run polymatch_ros robot --ros-args -r __ns:=/polymatch/robot_3 \\
         -p scene:=FILE -p agent:=3 [-p lag:=0.1 -p position_noise:=0.001 ...]
 
-It receives ``cmd_vel`` (geometry_msgs/Twist or TwistStamped, world or body frame), tracks it
-with a first-order actuator lag (time constant ``lag``) under the speed limits, integrates its
-pose at ``rate`` Hz and publishes it with Gaussian noise on ``measured_pose`` (PoseStamped or
-nav_msgs/Odometry): the topics a real robot offers and receives.  It starts at agent
-``agent``'s initial pose of the scene.  A robot without a command for ``cmd_timeout`` s
-stops by itself, as robot drivers do.
+It receives ``cmd_vel`` (geometry_msgs/TwistStamped, or Twist with ``cmd_type:=twist``; world
+or body frame), tracks it with a first-order actuator lag (time constant ``lag``) under the
+speed limits, integrates its pose at ``rate`` Hz and publishes it with Gaussian noise on
+``measured_pose`` (PoseStamped or nav_msgs/Odometry): the topics a real robot offers and
+receives.  It starts at agent ``agent``'s initial pose of the scene.  A robot without a command
+for ``cmd_timeout`` s stops by itself, as robot drivers do.
 
 For a second-order scene (A-1) the robot is a double integrator: it receives ``cmd_accel``
 (geometry_msgs/AccelStamped, world or body frame), its acceleration tracks the command with the
@@ -36,7 +36,7 @@ from ...core.command import saturate
 from ...core.errors import ParameterError
 from ...core.formation import positions
 from ...core.unicycle import unicycle_step
-from .params import Param, declare, scene_file
+from .params import CMD_TYPES, Param, declare, scene_file
 from .process import ros_main
 
 if TYPE_CHECKING:
@@ -57,8 +57,8 @@ ROBOT = (
     Param("cmd_timeout", 0.5, "stop when no command came for this long (s)", (0.001, 1e6)),
     Param("pose_type", "pose", "measured_pose is pose (PoseStamped) | odometry (second order)",
           choices=("pose", "odometry")),
-    Param("cmd_type", "twist", "cmd_vel is twist (Twist) | twist_stamped (first order)",
-          choices=("twist", "twist_stamped")),
+    Param("cmd_type", "twist_stamped", "cmd_vel is twist_stamped (TwistStamped) | twist (Twist) "
+          "(first order)", choices=CMD_TYPES),
     Param("command_frame", "world", "cmd_vel / cmd_accel components in the world | body frame",
           choices=("world", "body")),
     Param("frame_id", "world", "frame_id of the measured pose"),

@@ -17,7 +17,6 @@ message that arrives (``on_stage``: ``wire.StageRows``, one row or a block's), o
 
 from __future__ import annotations
 
-import array
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -113,21 +112,22 @@ class _Links:
         if self._keys is None:  # the writers are made once, with the links
             self._keys = {id(pub): key for key, pub in self.pubs.items()}
         keys = self._keys
-        return tuple((turn, tuple((keys[id(pub)], msg.data.tobytes()) for pub, msg in sent))
+        from rclpy.serialization import serialize_message
+
+        return tuple((turn, tuple((keys[id(pub)], serialize_message(msg)) for pub, msg in sent))
                      for turn, sent in self.sent)
 
     def restore(self, kept: Kept) -> None:
         """A restarted process keeps again what it had sent before it died (``snapshot``): a
         peer that resumes a step earlier needs those rounds, and only this process has them."""
-        from std_msgs.msg import Float64MultiArray
+        from rclpy.serialization import deserialize_message
 
+        rows_msg = wire.message_type("stage")
         self.sent.clear()
         for turn, sent in kept:
             messages = []
             for key, data in sent:
-                values = array.array("d")
-                values.frombytes(data)
-                messages.append((self.pubs[key], Float64MultiArray(data=values)))
+                messages.append((self.pubs[key], deserialize_message(data, rows_msg)))
             self.sent.append((turn, messages))
 
     def missing_peers(self) -> list[int]:
@@ -153,11 +153,10 @@ class AgentLinks(_Links):
                  decode: Callable[[Any, int], tuple[wire.Stage | None, str | None]],
                  on_stage: OnStage, on_drop: OnDrop, keep: int = 2) -> None:
         super().__init__(node, resolver, layout, keep)
-        from std_msgs.msg import Float64MultiArray
-
+        rows_msg = wire.message_type("stage")
         self.pubs = {a: self._publisher("stage", a) for a in layout.local}
         self.expected = layout.expected_subscribers
-        self._out = {a: tuple(Float64MultiArray() for _ in range(self.keep))
+        self._out = {a: tuple(rows_msg() for _ in range(self.keep))
                      for a in layout.local}
         self.writers = {}  # peer -> its stage subscription
 
@@ -194,12 +193,11 @@ class BlockLinks(_Links):
                  decode_block: Callable[[Any, int], tuple[wire.StageRows | None, str | None]],
                  on_stage: OnStage, on_drop: OnDrop, keep: int = 2) -> None:
         super().__init__(node, resolver, layout, keep)
-        from std_msgs.msg import Float64MultiArray
-
+        rows_msg = wire.message_type("stage")
         self.local_blocks = layout.local_blocks()
         self.pubs = {b: self._publisher("stage_block", b) for b in self.local_blocks}
         self.expected = layout.expected_block_subscribers
-        self._out = {b: tuple(Float64MultiArray() for _ in range(self.keep))
+        self._out = {b: tuple(rows_msg() for _ in range(self.keep))
                      for b in self.local_blocks}
         peers = np.array(layout.peers, dtype=int)
 

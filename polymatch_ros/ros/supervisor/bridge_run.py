@@ -1,7 +1,8 @@
 """`polymatch run SCENE --mode bridge`: N simulated robots, N bridged agents and the monitor.
 
 Robot i runs in namespace ``/<ensemble>/robot_<i>`` (topics ``measured_pose``, ``cmd_vel``, or
-``cmd_accel`` and Odometry poses for a second-order scene); agent i is remapped onto them.  The
+``cmd_accel`` and Odometry poses for a second-order scene); agent i is remapped onto them, and
+both speak ``--cmd-vel-type`` on ``cmd_vel`` (TwistStamped unless ``twist`` is asked for).  The
 matching diameter the monitor reports comes from measured poses, so it cannot fall below what
 the noise makes: the run's tolerance is the larger of the scene's and the noise floor
 (``core.command.noise_floor``).  With ``--robot-log DIR`` each robot also writes its true and
@@ -57,6 +58,7 @@ def agent_args(bridge: BridgeOptions, order: int) -> list[str]:
         "-p", f"max_linear_speed:={bridge.max_linear_speed!r}",
         "-p", f"max_angular_speed:={bridge.max_angular_speed!r}",
         "-p", f"drive:={bridge.drive}",
+        "-p", f"cmd_type:={bridge.cmd_vel_type}",
     ]
     if order == 2:
         out += ["-p", "pose_type:=odometry",
@@ -92,6 +94,7 @@ def robots(plan: RunPlan, env: dict[str, str]) -> list[Child]:
             "-p", f"angle_noise:={bridge.angle_noise!r}",
             "-p", "rate:=30.0",
             "-p", f"drive:={bridge.drive}",
+            "-p", f"cmd_type:={bridge.cmd_vel_type}",
         ]
         if plan.scene.model.order == 2:
             argv += ["-p", "pose_type:=odometry"]

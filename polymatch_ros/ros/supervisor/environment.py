@@ -1,9 +1,11 @@
-"""Environment for every ROS process polymatch starts: loopback discovery, its own domain id.
+"""Environment for every ROS process polymatch starts: loopback discovery, the run's domain.
 
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` keeps DDS traffic on loopback; a
-fresh ``ROS_DOMAIN_ID`` (reserved through ``domain_coordinator``) keeps
-concurrent runs and tests from hearing each other.  Both are left alone when
-the user has set them.  The shipped Fast DDS profile shortens discovery.
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` keeps DDS traffic on loopback (left alone when
+the user has set it).  A run joins the user's ROS graph: the user's ``ROS_DOMAIN_ID``, or ROS's
+default domain (0) when none is set, so that a second shell sees it; ``--isolated`` reserves a
+fresh domain instead (through ``domain_coordinator``), private to the run: what every test and
+benchmark uses, so that concurrent runs never hear each other.  The shipped Fast DDS profile
+shortens discovery.
 """
 
 from __future__ import annotations
@@ -29,8 +31,10 @@ NETWORK_PROFILE: str = os.path.join(os.path.dirname(PROFILE), "fastdds_profile_n
 # in 44 runs over shared memory, none over UDP.  Under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 # FASTDDS_BUILTIN_TRANSPORTS does not remove shared memory (its listener threads and
 # /dev/shm segments are there), so the loopback profile (``PROFILE``) names the transport
-# itself: UDPv4 on 127.0.0.1 for discovery and data.  The variable still selects UDPv4 under the
-# network profile.  A user's own FASTDDS_BUILTIN_TRANSPORTS and profile file win.
+# itself: UDPv4 on 127.0.0.1 for discovery and data.  rmw_fastrtps still adds a shared-memory
+# transport of its own under LOCALHOST; it listens on no port but leaves a segment in /dev/shm
+# when its process dies (``shm``).  The variable still selects UDPv4 under the network profile.
+# A user's own FASTDDS_BUILTIN_TRANSPORTS and profile file win.
 TRANSPORTS: str = "UDPv4"
 
 
@@ -60,13 +64,43 @@ def private_ros_environment(domain_id: int) -> dict[str, str]:
     return ros_environment(domain_id, base=base)
 
 
+#: ROS's domain when ROS_DOMAIN_ID is not set
+DEFAULT_DOMAIN = 0
+#: the domain ids a ROS_DOMAIN_ID may name (Fast DDS's ports limit them to 0..232)
+DOMAIN_IDS = range(233)
+
+
+def user_domain_id() -> int:
+    """The user's ROS_DOMAIN_ID, or ROS's default (0) when it is not set; ValueError (one line)
+    if it is not a domain id."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not text:
+        return DEFAULT_DOMAIN
+    if not text.isdigit() or int(text) not in DOMAIN_IDS:
+        raise ValueError(f"ROS_DOMAIN_ID={text!r} is not a domain id (an integer 0..232)")
+    return int(text)
+
+
 @contextlib.contextmanager
-def reserved_domain_id() -> Iterator[int]:
-    """The user's ROS_DOMAIN_ID if set, else one reserved for as long as the context lasts."""
-    if os.environ.get("ROS_DOMAIN_ID"):
-        yield int(os.environ["ROS_DOMAIN_ID"])
+def run_domain_id(isolated: bool) -> Iterator[int]:
+    """The run's domain: ``user_domain_id()``, or, ``isolated``, one reserved for as long as the
+    context lasts (the user's ROS_DOMAIN_ID does not matter)."""
+    if not isolated:
+        yield user_domain_id()
         return
     from domain_coordinator import domain_id
 
     with domain_id() as dom:
         yield dom
+
+
+def describe_domain(domain: int, isolated: bool, discovery: str) -> str:
+    """Where a run's processes talk, as its second line says it."""
+    if isolated:
+        return (f"ROS graph: domain {domain}, private to this run (--isolated): another shell "
+                f"does not see it")
+    whose = ("your ROS_DOMAIN_ID" if os.environ.get("ROS_DOMAIN_ID", "").strip()
+             else "ROS's default: ROS_DOMAIN_ID is not set")
+    return (f"ROS graph: domain {domain} ({whose}), discovery {discovery}: a second shell with "
+            f"the same ROS_DOMAIN_ID sees the run (`polymatch echo /<ensemble>/diameter`); "
+            f"--isolated runs in a private domain")

@@ -76,7 +76,7 @@ def _discover(node: Node, executor: Executor, namespace: str, deadline: float) -
     records: dict[str, wire.RunRecord] = {}
 
     def heard(msg: Any) -> None:
-        rec = wire.RunRecord.from_json(msg.data)
+        rec = wire.RunRecord.from_msg(msg)
         if rec is not None and rec.role == "agent" and rec.node.startswith(namespace + "/"):
             records[rec.node.rsplit("/", 1)[-1]] = rec
 

@@ -32,6 +32,9 @@ class Hosts:
     discovery: DiscoverySpec           # how the DDS participants find each other
     agents_per_process: int | None     # -k as asked (bridge mode: 1); None: choose
     agent_nodes: str = "auto"          # --agent-nodes: auto | full | lean | none (``hosted``)
+    isolated: bool = False             # --isolated: a fresh private domain, not the user's
+    run_id: int | None = None          # --run-id: the id every message of the run carries;
+                                       # None: chosen (``runner``)
 
 
 @dataclass(frozen=True)
@@ -73,6 +76,7 @@ class BridgeOptions:
     max_angular_accel: float
     robot_log: str | None      # a directory for the robots' pose logs
     drive: str = "holonomic"   # holonomic | unicycle (differential-drive robots)
+    cmd_vel_type: str = "twist_stamped"  # first order: the cmd_vel message (params.CMD_TYPES)
 
 
 @dataclass(frozen=True)

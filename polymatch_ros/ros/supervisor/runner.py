@@ -2,11 +2,11 @@
 
 Starts the monitor and one process per agent (or per K agents) in the ensemble's namespace
 (``-r __ns:=/<ensemble>``, nodes ``agent_<i>`` and ``monitor``), all with loopback discovery
-and a fresh ROS_DOMAIN_ID unless the user set them; shows progress (simulated time,
-diameter, rounds/s); stops at t_end or once the diameter has stayed under the scene's
-tolerance; prints a summary (final diameters per group, in lockstep the deviation from the
-centralised solution, wall time, rounds/s) from the agents' final poses and run records; and
-ends every process it started, by PID, also on Ctrl-C and when a child dies.
+unless the user set otherwise, in the user's ROS domain (``--isolated``: a fresh one); shows
+progress (simulated time, diameter, rounds/s); stops at t_end or once the diameter has stayed
+under the scene's tolerance; prints a summary (final diameters per group, in lockstep the
+deviation from the centralised solution, wall time, rounds/s) from the agents' final poses and
+run records; and ends every process it started, by PID, also on Ctrl-C and when a child dies.
 """
 
 from __future__ import annotations
@@ -44,10 +44,11 @@ from .discovery import (
     discovery_environments,
     start_discovery_server,
 )
-from .environment import reserved_domain_id, ros_environment
+from .environment import describe_domain, ros_environment, run_domain_id
 from .packing import PackingChoice, choose_packing
 from .plan import RunPlan
 from .recording import report_recording, start_recorder
+from .shm import SegmentLedger
 from .summary import RunOutcome, report, verdict
 from .watcher import Watcher
 
@@ -62,9 +63,10 @@ class RunContext:
     domain: int                           # ROS_DOMAIN_ID
     envs: DiscoveryEnvironments | None    # client/super-client/server overlays, --discovery
     packing: PackingChoice                # -k as given, or chosen (``choose_packing``)
-    shared_domain: bool                   # the user's ROS_DOMAIN_ID, or discovery beyond loopback
+    shared_domain: bool                   # the user's domain, or discovery beyond loopback
     directory: str                        # the run's private temporary directory
     run_id: int                           # the stage messages' and checkpoints' run id
+    ledger: SegmentLedger                 # its children's /dev/shm segments (``shm``)
 
     @property
     def agents_per_process(self) -> int:
@@ -103,10 +105,11 @@ def run(plan: RunPlan) -> int:
 
     The caller ends the process with it (``teardown.end_process``): rclpy ran in this process.
     """
-    # a domain reserved for this run holds no other ensemble; the user's, or one reached
-    # beyond loopback, may (``Watcher.refuse_names_in_use``)
-    shared = bool(os.environ.get("ROS_DOMAIN_ID")) or plan.hosts.discovery.kind != "localhost"
-    with reserved_domain_id() as domain, tempfile.TemporaryDirectory(
+    # a domain reserved for this run (--isolated) holds no other ensemble; the user's, or one
+    # reached beyond loopback, may (``Watcher.refuse_names_in_use``)
+    isolated = plan.hosts.isolated
+    shared = not isolated or plan.hosts.discovery.kind != "localhost"
+    with run_domain_id(isolated) as domain, tempfile.TemporaryDirectory(
         prefix="polymatch_run_"
     ) as directory:
         env = ros_environment(domain)
@@ -115,15 +118,18 @@ def run(plan: RunPlan) -> int:
         packing = choose_packing(
             plan.packing, len(plan.hosts.agents), envs is None and _localhost(env)
         )
+        ledger = SegmentLedger()
         context = RunContext(plan, env, domain, envs, packing, shared, directory,
-                             _run_id(plan))
+                             _run_id(plan), ledger)
         _adopt(env if envs is None else envs.for_role("super_client", env))
         server = _start_server(context, directory)
         try:
             code = _run(context, server)
         finally:
             if server is not None:
+                ledger.note([server.pid], force=True)
                 server.stop()  # the one running now (``recovery`` may have restarted it)
+            ledger.remove_ended()  # what its ended (or killed) children left in /dev/shm
     return code
 
 
@@ -183,9 +189,11 @@ def _start_server(context: RunContext, directory: str) -> DiscoveryServer | None
 
 
 def _run_id(plan: RunPlan) -> int:
-    """A fresh random id; on hosts that each run some agents (--only), the same id on every
-    host: a hash of what all of them must agree on (scene file, times, method, ensemble,
-    domain)."""
+    """The id given (--run-id), else a fresh random id; on hosts that each run some agents
+    (--only), the same id on every host: a hash of what all of them must agree on (scene file,
+    times, method, ensemble, domain)."""
+    if plan.hosts.run_id is not None:
+        return plan.hosts.run_id
     if plan.every_agent_here:
         return random.randrange(1, 2**31 - 1)
     with open(plan.scene_path, "rb") as fh:
@@ -340,6 +348,18 @@ def _announce(context: RunContext) -> None:
         f"ensemble {wire.namespace(plan.hosts.ensemble)}",
         file=sys.stderr, flush=True,
     )
+    print(describe_domain(context.domain, plan.hosts.isolated, str(discovery)), file=sys.stderr,
+          flush=True)
+
+
+def _stop(context: RunContext, children: list[Child], monitor: Child | None,
+          watcher: Watcher | None, others: list[Child]) -> None:
+    """End every process of the run by its PID (the robots and the recorder last), once the
+    ledger has looked at each one still running (``shm``)."""
+    running = [c for c in [*children, *others, monitor] if c is not None and c.poll() is None]
+    context.ledger.note([c.pid for c in running], force=True)
+    stop_all(children, monitor, watcher)
+    stop_all(others, None, None)
 
 
 def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
@@ -375,13 +395,13 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
             others = bridge_run.robots(plan, context.role_env("client"))  # as the agents
         others += start_recorder(plan, context.env, context.envs, context.directory)
         monitor, children = _start(context)
-        supervision = Supervision(plan, watcher, children, monitor, progress, server)
+        supervision = Supervision(plan, watcher, children, monitor, progress, server, others,
+                                  context.ledger)
         code, message = supervision.watch(interrupted, start)
     except PolymatchError as exc:
         code, message = exc.exit_code, str(exc)
     finally:
-        stop_all(children, monitor, watcher)
-        stop_all(others, None, None)
+        _stop(context, children, monitor, watcher, others)
         for s, h in old.items():
             signal.signal(s, h)
     try:

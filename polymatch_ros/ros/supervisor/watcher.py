@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 from ...core.errors import PolymatchError
 from ...core.model import GroupState, State
 from .. import wire
-from ..nodes.control import ControlClient, parse_command
+from ..nodes.control import ControlClient, command_message, parse_command
 from ..nodes.exchange import LeanReaders
 
 if TYPE_CHECKING:
@@ -36,8 +36,8 @@ class Watcher:
 
     It hears every process's run record (``status``: progress, agents up, and the monitor's
     headline diameter), calls the ensemble's start and stop services (``control``), and takes each
-    agent's *final* state from its latched ``final_exchange`` topic (packed lockstep processes:
-    its block's ``final_exchange_block``) for the summary - not
+    agent's *final* state from its latched ``final_state`` topic (packed lockstep processes:
+    its block's ``final_state_block``) for the summary - not
     the per-step poses, so supervising a run adds no load to the lockstep rounds.  Only this
     run's final states and run records are taken (``run_id``, ``wire.exchange``): a latched
     final pose or a record of another run, or anything else on the topics, is ignored and
@@ -90,23 +90,23 @@ class Watcher:
         self._finals_taken_at = -math.inf
         if blocks_of is not None:
             for b in range(-(-self.model.n_agents // blocks_of)):
-                self.finals.subscribe("final_exchange_block", self._final_block(b, blocks_of),
+                self.finals.subscribe("final_state_block", self._final_block(b, blocks_of),
                                       dim, b, "lockstep")
         else:
             for a in range(self.model.n_agents):
-                self.finals.subscribe("final_exchange", self._final(a), dim, a, "lockstep")
+                self.finals.subscribe("final_state", self._final(a), dim, a, "lockstep")
 
     def _control(self, msg: Any) -> None:
         """A 'stop' on the control topic that the runner did not send: the ensemble's stop
         service, called from outside (``ros2 service call /polymatch/stop ...``)."""
-        command = parse_command(msg.data)
+        command = parse_command(msg)
         if command is None or command[0] != "stop" or self.stop_sent:
             return
         if self.stop_requested_at is None:
             self.stop_requested_at = self.time_every_agent_reached()
 
     def _status(self, msg: Any) -> None:
-        rec = wire.RunRecord.from_json(msg.data)
+        rec = wire.RunRecord.from_msg(msg)
         if rec is None or rec.run_id != self.run_id:
             self.ignored += 1
             return
@@ -276,9 +276,8 @@ class Watcher:
     def received(self) -> None:
         """'received' on the control topic: every final pose is here (runs across hosts)."""
         from rclpy.duration import Duration
-        from std_msgs.msg import String
 
-        self.control.publish(String(data="received"))
+        self.control.publish(command_message("received"))
         self.control.wait_for_all_acked(Duration(seconds=2.0))
 
     def start(self) -> bool:

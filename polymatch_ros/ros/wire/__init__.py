@@ -1,17 +1,15 @@
 """The message layer: every topic (name, type, QoS), every message built and decoded, the
 assembly of heard agents into group arrays, and the run record.  Nothing else touches messages.
+The run's own messages are the ``polymatch_interfaces`` package's (``.msg`` files).
 """
 
 # ruff: noqa: F401
 from .codec import (
-    BLOCK_FORMAT,
     FIELDS,
     FLAG_STOP,
-    HEADER,
     MAX_ABS,
-    PROJECTION_STAGE_TOL,  # noqa: F401
+    PROJECTION_STAGE_TOL,
     ROTATION_TOL,
-    STAGE_FORMAT,
     STAMP_SLACK,
     Stage,
     StageRows,
@@ -26,10 +24,8 @@ from .codec import (
     stamp_of,
     time_key,
 )
-from .ensemble import Row, assemble, assemble_rows  # noqa: F401
+from .ensemble import Row, assemble, assemble_rows
 from .exchange import (
-    EXCHANGE_BLOCK_FORMAT,
-    EXCHANGE_FORMAT,
     Motion,
     decode_exchange,
     decode_exchange_block,
@@ -39,7 +35,6 @@ from .exchange import (
 from .motion import (
     MOTIONS,
     Received,
-    array_to_state,
     decode_motion,
     decode_pose_msg,
     decode_twist_msg,
@@ -51,13 +46,13 @@ from .motion import (
     twist_message,
     twist_to_state,
 )
-from .record import RECORD_KEY, RunRecord, drop_summary, run_records  # noqa: F401
+from .record import RECORD_KEY, RunRecord, drop_summary, run_records
 from .topics import (
     DEFAULT_ENSEMBLE,
     TOPICS,
     Topic,
     full_name,
-    message_type,  # noqa: F401
+    message_type,
     namespace,
     publisher,
     qos_profiles,

@@ -1,27 +1,18 @@
-"""Messages on the wire: poses, velocities and lockstep stages, built and validated here only.
+"""Lockstep stage rows on the wire (``polymatch_interfaces/msg/StageRows``), and the checks
+every decoder of the run's messages shares.
 
-``agent_<i>/pose``   d <= 3: ``geometry_msgs/PoseStamped``: position = centroid (z = 0 in 2-D),
-                     orientation = quaternion of O_i (about z in 2-D), header.stamp = simulated
-                     time, header.frame_id = frame (default ``world``).  d >= 4:
-                     ``std_msgs/Float64MultiArray`` with layout dims
-                     [("t", 1), ("centroid", d), ("rotation_row_major", d*d)].
-``agent_<i>/twist``  second order only.  d <= 3: ``geometry_msgs/TwistStamped`` (linear =
-                     centroid velocity, angular = spatial angular velocity vee(W_i) of (A-1)).
-                     d >= 4: Float64MultiArray dims [("t", 1), ("velocity", d),
-                     ("angular_row_major", d*d)].
-``agent_<i>/stage``  lockstep only: ``std_msgs/Float64MultiArray``, no layout dims (they cost a
-                     Python object each on every publish and take), data = [format 2, run id,
-                     agent, step, stage, flags, t, mask] then x (d) if mask & 1, v (d) if
-                     mask & 2, rot (r) (mask & 4, always); rot is the core's representation
-                     (angle in 2-D, row-major matrix otherwise), so the distributed run computes
-                     with exactly the numbers the centralised one does.
-``stages/block_<b>`` lockstep with K agents per process: the rows of agents bK .. bK + K - 1
-                     that one process hosts, in one message per round: data = [format 3, run id,
-                     b, step, stage, flags, t, mask] then per row the agent index and its
-                     fields as above (one mask for all rows).
+``agent_<i>/stage``   one agent's row of a stage: what the integrator's stage (step, stage)
+                      needs of it (centroid, velocity, rotation), in the core's own
+                      representation (an angle in 2-D where the scene integrates angles, else
+                      the d x d matrix), so the distributed run computes with exactly the
+                      numbers the centralised one does.
+``stages/block_<b>``  lockstep with K agents per process: the rows of the agents bK .. bK + K - 1
+                      that one process hosts, in one message a round.
 
-Every decoder returns ``(value, None)`` or ``(None, reason)``, never raises: a value is finite,
-within MAX_ABS, stamped inside the run, its rotation in SO(d) (Lemma 2.1: the flow keeps O_i
+The fields, their units and shapes are documented in the ``.msg`` file.  Every decoder
+returns ``(value, None)`` or ``(None, reason)``, never raises: a value is of this run
+(``run_id``) and of the topic's sender, finite, within MAX_ABS, stamped inside the run, its
+arrays of the declared shapes, its rotations in SO(d) (Lemma 2.1: the flow keeps O_i
 orthogonal); agents and the monitor drop and count a message with a reason, never use it.
 """
 
@@ -38,14 +29,8 @@ import numpy as np
 if TYPE_CHECKING:
     from ...core.so import RotationGroup
 
-#: a stage message's header as read: (step, stage, flags, t, field mask)
-Header = tuple[int, int, int, float, int]
-
-STAGE_FORMAT = 2
-BLOCK_FORMAT = 3
-HEADER = 8
 FLAG_STOP = 1
-FIELDS = (("x", 1), ("v", 2), ("rot", 4))  # field, bit in the header's field mask, in wire order
+FIELDS = ("x", "v", "rot")  # a stage's fields, in the message's order
 
 # One tolerance for every rotation on the wire: the quaternion's norm, a matrix's orthogonality
 # defect, a planar pose's out-of-plane parts, an angular velocity's skewness.  Agents send
@@ -72,8 +57,24 @@ def time_key(sec: int, nanosec: int) -> int:
     return int(sec) * 1_000_000_000 + int(nanosec)
 
 
+def floats(values: Any) -> array.array:
+    """Numbers -> the ``array.array('d')`` a float64[] field takes as it is (a list or a numpy
+    array would be type- and range-checked item by item on every publish)."""
+    return array.array("d", np.ascontiguousarray(values, dtype=float).tobytes())
+
+
+def indices(values: Any) -> array.array:
+    """Agent indices -> the ``array.array('I')`` a uint32[] field takes as it is."""
+    return array.array("I", np.ascontiguousarray(values, dtype=np.uint32).tobytes())
+
+
+def numbers(field: Any) -> np.ndarray:
+    """A float64[] field as a numpy view (no copy)."""
+    return np.frombuffer(field, dtype=float) if len(field) else np.zeros(0)
+
+
 def rot_values(grp: RotationGroup, g: np.ndarray) -> list[float]:
-    """One rotation (a one-row group array) -> the list of floats the stage message carries."""
+    """One rotation (a one-row group array) -> the floats the stage message carries."""
     if grp.name == "angle":
         return [float(g[0])]
     return grp.to_matrices(g)[0].ravel().tolist()
@@ -82,7 +83,7 @@ def rot_values(grp: RotationGroup, g: np.ndarray) -> list[float]:
 def rot_matrix_values(grp: RotationGroup, g: np.ndarray) -> list[float]:
     """One rotation (a one-row group array) -> its d x d matrix, row-major, as floats; in 2-D
     straight from the angle (a tenth of the cost of building the matrix array: one agent's
-    exchange message each step)."""
+    state message each step)."""
     if grp.name == "angle":
         c, s = math.cos(g[0]), math.sin(g[0])
         return [c, -s, s, c]
@@ -122,7 +123,7 @@ def bad_skew(mat: np.ndarray) -> str | None:
     return None
 
 
-def _bad_numbers(values: np.ndarray) -> str | None:
+def bad_numbers(values: np.ndarray) -> str | None:
     """The reason a vector of numbers is unusable, or None (one reduction: a NaN or an
     infinity makes the largest magnitude non-finite)."""
     if not values.size:
@@ -134,7 +135,7 @@ def _bad_numbers(values: np.ndarray) -> str | None:
 
 
 def bad_scalars(values: Sequence[float]) -> str | None:
-    """``_bad_numbers`` of a few Python floats (a geometry message's fields), without numpy."""
+    """``bad_numbers`` of a few Python floats (a geometry message's fields), without numpy."""
     if not all(map(math.isfinite, values)):
         return "non-finite value"
     if values and max(map(abs, values)) > MAX_ABS:
@@ -142,10 +143,51 @@ def bad_scalars(values: Sequence[float]) -> str | None:
     return None
 
 
-def _bad_stamp(t: float, t_max: float | None) -> str | None:
+def bad_stamp(t: float, t_max: float | None) -> str | None:
     if not math.isfinite(t) or t < 0.0 or (t_max is not None and t > t_max + STAMP_SLACK):
         return "stamp outside the run"
     return None
+
+
+def header_time(msg: Any, t_max: float | None) -> tuple[tuple[float, int] | None, str | None]:
+    """(simulated time s, its integer ns key) of a message's ``std_msgs/Header`` stamp, or the
+    reason it is refused."""
+    sec, nsec = msg.header.stamp.sec, msg.header.stamp.nanosec
+    if nsec >= 1_000_000_000:
+        return None, "malformed header"
+    t = sec + 1e-9 * nsec
+    reason = bad_stamp(t, t_max)
+    return (None, reason) if reason else ((t, time_key(sec, nsec)), None)
+
+
+def block_members(agents: np.ndarray, block: int, k: int) -> bool:
+    """A block message's agents are agents of block ``block`` (bK .. bK + K - 1), each once."""
+    first = block * k
+    return bool(
+        len(agents) <= k
+        and np.all(agents >= first)
+        and np.all(agents < first + k)
+        and len(np.unique(agents)) == len(agents)
+    )
+
+
+def shaped(fields: Mapping[str, Any], widths: Mapping[str, int], n: int,
+           optional: Sequence[str] = ()) -> tuple[dict[str, np.ndarray] | None, str | None]:
+    """The float64[] ``fields`` as (n, width) arrays (views), checked: each of n rows of its
+    width (an ``optional`` field may be empty), every number finite and within MAX_ABS; or
+    (None, reason)."""
+    out: dict[str, np.ndarray] = {}
+    for label, field in fields.items():
+        values = numbers(field)
+        if not values.size and label in optional:
+            continue
+        if n == 0 or values.size != n * widths[label]:
+            return None, "malformed layout"
+        reason = bad_numbers(values)
+        if reason:
+            return None, reason
+        out[label] = values.reshape(n, widths[label])
+    return out, None
 
 
 # -- stage messages ------------------------------------------------------------------
@@ -167,7 +209,8 @@ class Stage:
 class StageRows:
     """A decoded stage message of one agent or a block: the rows of ``agents`` for one round
     (step, stage), ``rot`` a group array of their rotations, ``x`` and ``v`` (n, d) where
-    the message carries them."""
+    the message carries them.  ``flags``: FLAG_STOP, with the agreed stop step (graphs) in the
+    bits above it."""
 
     agents: np.ndarray
     step: int
@@ -193,181 +236,103 @@ class StageRows:
                          None if self.v is None else self.v[idx])
 
 
-def encode_stage(msg: Any, run_id: int, agent: int, step: int, stage: int, flags: int, t: float,
-                 fields: Mapping[str, Sequence[float]], fmt: int = STAGE_FORMAT,
-                 order: Sequence[tuple[str, int]] = FIELDS) -> Any:
-    """Fill a Float64MultiArray with a stage: fields is a dict label -> values (x, v, rot);
-    ``fmt`` and ``order`` (labels and mask bits): another message of the stage layout."""
-    mask = 0
-    body: list[float] = []
-    for label, bit in order:
-        if label in fields:
-            mask |= bit
-            body.extend(fields[label])
-    # an array.array is taken as it is; a list would be type- and range-checked item by item
-    msg.data = array.array("d", [
-        float(fmt),
-        float(run_id),
-        float(agent),
-        float(step),
-        float(stage),
-        float(flags),
-        float(t),
-        float(mask),
-    ] + body)
+_EMPTY = array.array("d")
+
+
+def _fill_stage(msg: Any, run_id: int, sender: int, step: int, stage: int, flags: int,
+                t: float, agents: Any, fields: Mapping[str, Any]) -> Any:
+    msg.run_id, msg.sender, msg.step, msg.stage = int(run_id), int(sender), int(step), int(stage)
+    msg.stop = bool(flags & FLAG_STOP)
+    msg.stop_step = flags >> 1 if flags > FLAG_STOP else -1
+    msg.t = float(t)
+    msg.agents = indices(agents)
+    msg.centroids = floats(fields["x"]) if "x" in fields else _EMPTY
+    msg.velocities = floats(fields["v"]) if "v" in fields else _EMPTY
+    msg.rotations = floats(fields["rot"])
     return msg
 
 
-def _stage_header(
-    data: np.ndarray, run_id: int, agent: int, t_max: float | None, fmt: int = STAGE_FORMAT
-) -> tuple[Header | None, str | None]:
-    """(step, stage, flags, t, mask) of a stage message's header, or the reason it is refused.
-
-    ``agent`` is the sender's agent index (a block message: its block index)."""
-    head = data[:HEADER].tolist()  # eight Python floats: cheaper to check than numpy's
-    counts = head[:6] + head[7:]  # every field but the time is a non-negative integer
-    if (
-        any(v % 1.0 for v in counts)  # a fraction (or NaN, for a non-finite value)
-        or min(counts[1:]) < 0
-        or max(map(abs, head)) > 2.0**53
-    ):
-        return None, "malformed header"
-    if int(head[0]) != fmt:
-        return None, "unknown format"
-    if int(head[1]) != int(run_id):
-        return None, "unknown sender (run id)"
-    if int(head[2]) != agent:
-        return None, "unknown sender (agent index)"
-    reason = _bad_stamp(float(head[6]), t_max)
-    if reason:
-        return None, reason
-    return (int(head[3]), int(head[4]), int(head[5]), float(head[6]), int(head[7])), None
-
-
-def stage_data(
-    msg: Any, run_id: int, sender: int, t_max: float | None, fmt: int
-) -> tuple[np.ndarray | None, Header | None, str | None]:
-    """(data, header, None) of a stage or block message, or (None, None, reason)."""
-    data = np.frombuffer(msg.data, dtype=float) if len(msg.data) else np.zeros(0)
-    if len(data) < HEADER or msg.layout.dim or msg.layout.data_offset != 0:
-        return None, None, "malformed layout"
-    reason = _bad_numbers(data)
-    if reason:
-        return None, None, reason
-    head, reason = _stage_header(data, run_id, sender, t_max, fmt)
-    return data, head, reason
-
-
-def decode_stage(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: int,
-                 rot_tol: float = ROTATION_TOL,
-                 t_max: float | None = None) -> tuple[Stage | None, str | None]:
-    """Float64MultiArray -> (Stage, None) or (None, reason)."""
-    data, head, reason = stage_data(msg, run_id, agent, t_max, STAGE_FORMAT)
-    if data is None or head is None:
-        return None, reason
-    step, stage, flags, t, mask = head
-    sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
-    if (
-        mask & ~7
-        or not mask & 4
-        or len(data) != HEADER + sum(sizes[f] for f, bit in FIELDS if mask & bit)
-    ):
-        return None, "malformed layout"
-    out = Stage(agent, step, stage, flags, t)
-    pos = HEADER
-    for label, bit in FIELDS:
-        if not mask & bit:
-            continue
-        values = data[pos : pos + sizes[label]]
-        pos += sizes[label]
-        if label == "rot":
-            if grp.name != "angle" and orthogonality(values.reshape(grp.dim, grp.dim)) > rot_tol:
-                return None, "rotation not orthogonal"
-            out.rot = rot_from_values(grp, values)
-        else:
-            setattr(out, label, values.copy())
-    return out, None
+def encode_stage(msg: Any, run_id: int, agent: int, step: int, stage: int, flags: int, t: float,
+                 fields: Mapping[str, Sequence[float]]) -> Any:
+    """Fill a StageRows message with one agent's stage: ``fields`` label -> values (x, v, rot;
+    rot always); ``flags`` FLAG_STOP, with the agreed stop step in the bits above it."""
+    return _fill_stage(msg, run_id, agent, step, stage, flags, t, [agent], fields)
 
 
 def encode_block(msg: Any, run_id: int, block: int, step: int, stage: int, flags: int, t: float,
                  agents: Sequence[int], fields: Mapping[str, np.ndarray]) -> Any:
-    """Fill a Float64MultiArray with the stage rows of several agents of one block.
+    """Fill a StageRows message with the stage rows of several agents of one block.
 
-    ``fields``: label -> array of shape (len(agents), width), in ``FIELDS`` order."""
-    mask = 0
-    columns = [np.asarray(agents, dtype=float)[:, None]]
-    for label, bit in FIELDS:
-        if label in fields:
-            mask |= bit
-            columns.append(np.asarray(fields[label], dtype=float).reshape(len(agents), -1))
-    head = np.array([BLOCK_FORMAT, run_id, block, step, stage, flags, t, mask], dtype=float)
-    msg.data = array.array("d", np.concatenate([head, np.hstack(columns).ravel()]).tobytes())
-    return msg
+    ``fields``: label -> array of shape (len(agents), width)."""
+    return _fill_stage(msg, run_id, block, step, stage, flags, t, agents, fields)
 
 
-def block_members(agents: np.ndarray, block: int, k: int) -> bool:
-    """A block message's agent column names agents of block ``block`` (bK .. bK + K - 1),
-    each once."""
-    first = block * k
-    return bool(
-        len(agents) <= k
-        and np.all(agents == np.round(agents))
-        and np.all(agents >= first)
-        and np.all(agents < first + k)
-        and len(np.unique(agents)) == len(agents)
-    )
+def _flags(msg: Any) -> int:
+    if not msg.stop:
+        return 0
+    return FLAG_STOP | (msg.stop_step << 1 if msg.stop_step >= 0 else 0)
 
 
-def block_rows(
-    data: np.ndarray, block: int, k: int, mask: int, sizes: Mapping[str, int],
-    order: Sequence[tuple[str, int]], mask_ok: bool,
-) -> tuple[np.ndarray, dict[str, np.ndarray]] | tuple[None, str]:
-    """The rows of a block message (stages or states) as (agent indices, {label: values}) for
-    the fields of ``order`` that ``mask`` names, each ``sizes[label]`` wide, or (None, reason);
-    ``mask_ok``: the mask is one the message kind allows."""
-    width = 1 + sum(sizes[f] for f, bit in order if mask & bit)
-    body = data[HEADER:]
-    if not mask_ok or not body.size or body.size % width:
-        return None, "malformed layout"
-    rows = body.reshape(-1, width)
-    if not block_members(rows[:, 0], block, k):
+def _stage_rows(msg: Any, grp: RotationGroup, dim: int, run_id: int, sender: int,
+                rot_tol: float, t_max: float | None,
+                members: Any) -> tuple[StageRows | None, str | None]:
+    """A StageRows message -> (StageRows, None) or (None, reason); ``members(agents)``: the
+    agents are the ones the sender may send."""
+    if msg.run_id != run_id:
+        return None, "unknown sender (run id)"
+    if msg.sender != sender:
         return None, "unknown sender (agent index)"
-    out: dict[str, np.ndarray] = {}
-    pos = 1
-    for label, bit in order:
-        if mask & bit:
-            out[label] = rows[:, pos : pos + sizes[label]]
-            pos += sizes[label]
-    return rows[:, 0].astype(int), out
-
-
-def decode_block(msg: Any, grp: RotationGroup, dim: int, run_id: int, block: int, k: int,
-                 rot_tol: float = ROTATION_TOL,
-                 t_max: float | None = None) -> tuple[StageRows | None, str | None]:
-    """Float64MultiArray of a block -> (StageRows, None) or (None, reason).
-
-    Checked as ``decode_stage`` checks one agent's message, each row's rotation included;
-    every agent index must lie in the block (bK .. bK + K - 1) and appear once.  The rows
-    stay arrays (one rotation conversion for all): a packed lockstep process takes one such
-    message per peer block and round, and per-row objects cost more than the rest of its
-    receive path (py-spy, 1024 agents in 4 processes)."""
-    data, head, reason = stage_data(msg, run_id, block, t_max, BLOCK_FORMAT)
-    if data is None or head is None:
+    reason = bad_stamp(msg.t, t_max)
+    if reason:
         return None, reason
-    step, stage, flags, t, mask = head
-    sizes = {"x": dim, "v": dim, "rot": rot_size(grp)}
-    rows = block_rows(data, block, k, mask, sizes, FIELDS, not (mask & ~7 or not mask & 4))
-    if rows[0] is None:
-        return None, rows[1]
-    agents, fields = rows
-    values = fields["rot"]
+    agents = np.frombuffer(msg.agents, dtype=np.uint32).astype(int) if len(msg.agents) \
+        else np.zeros(0, dtype=int)
+    if not len(agents):
+        return None, "malformed layout"
+    if not members(agents):
+        return None, "unknown sender (agent index)"
+    widths = {"x": dim, "v": dim, "rot": rot_size(grp)}
+    rows, reason = shaped({"x": msg.centroids, "v": msg.velocities, "rot": msg.rotations},
+                          widths, len(agents), optional=("x", "v"))
+    if rows is None:
+        return None, reason
+    values = rows["rot"]
     if grp.name == "angle":
         rot = values[:, 0].copy()
     else:
         mats = values.reshape(-1, grp.dim, grp.dim)
         if orthogonality(mats) > rot_tol:
             return None, "rotation not orthogonal"
+        if np.any(np.linalg.det(mats) < 0):     # orthogonal, but a reflection: not in SO(d)
+            return None, "rotation not in SO(d)"
         rot = grp.from_matrices(mats)
-    x, v = fields.get("x"), fields.get("v")
-    return StageRows(agents, step, stage, flags, t, rot,
+    x, v = rows.get("x"), rows.get("v")
+    return StageRows(agents, int(msg.step), int(msg.stage), _flags(msg), float(msg.t), rot,
                      None if x is None else x.copy(), None if v is None else v.copy()), None
+
+
+def decode_stage(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: int,
+                 rot_tol: float = ROTATION_TOL,
+                 t_max: float | None = None) -> tuple[Stage | None, str | None]:
+    """One agent's StageRows message -> (Stage, None) or (None, reason)."""
+    rows, reason = _stage_rows(msg, grp, dim, run_id, agent, rot_tol, t_max,
+                               lambda agents: len(agents) == 1 and agents[0] == agent)
+    if rows is None:
+        return None, reason
+    return Stage(agent, rows.step, rows.stage, rows.flags, rows.t,
+                 None if rows.x is None else rows.x[0], None if rows.v is None else rows.v[0],
+                 grp.take(rows.rot, [0])), None
+
+
+def decode_block(msg: Any, grp: RotationGroup, dim: int, run_id: int, block: int, k: int,
+                 rot_tol: float = ROTATION_TOL,
+                 t_max: float | None = None) -> tuple[StageRows | None, str | None]:
+    """A block's StageRows message -> (StageRows, None) or (None, reason).
+
+    Checked as ``decode_stage`` checks one agent's message, each row's rotation included;
+    every agent must lie in the block (bK .. bK + K - 1) and appear once.  The rows stay arrays
+    (one rotation conversion for all): a packed lockstep process takes one such message per
+    peer block and round, and per-row objects would cost more than the rest of its receive
+    path."""
+    return _stage_rows(msg, grp, dim, run_id, block, rot_tol, t_max,
+                       lambda agents: block_members(agents, block, k))

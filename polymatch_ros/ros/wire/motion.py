@@ -1,7 +1,16 @@
-"""Pose and velocity messages (formats: see ``codec``), built and decoded from one table.
+"""Pose and velocity messages, built and decoded from one table.
 
-d <= 3 they are geometry_msgs PoseStamped / TwistStamped, d >= 4 Float64MultiArray; a decoder
-checks the contents before the stamp (a corrupt message is named as such) and returns
+``agent_<i>/pose``   d <= 3: ``geometry_msgs/PoseStamped``: position = centroid (z = 0 in 2-D),
+                     orientation = quaternion of O_i (about z in 2-D), header.stamp = simulated
+                     time, header.frame_id = frame (default ``world``).  d >= 4:
+                     ``polymatch_interfaces/msg/PoseNd`` (position, orientation as a row-major
+                     d x d matrix).
+``agent_<i>/twist``  second order only.  d <= 3: ``geometry_msgs/TwistStamped`` (linear =
+                     centroid velocity, angular = spatial angular velocity vee(W_i) of (A-1)).
+                     d >= 4: ``polymatch_interfaces/msg/TwistNd`` (linear, angular as the skew
+                     d x d matrix W_i).
+
+A decoder checks the contents before the stamp (a corrupt message is named as such) and returns
 ``(Received, None)`` or ``(None, reason)``, never raises.
 """
 
@@ -16,13 +25,13 @@ import numpy as np
 
 from .codec import (
     ROTATION_TOL,
-    _bad_numbers,
-    _bad_stamp,
     bad_rotation,
     bad_scalars,
     bad_skew,
+    floats,
+    header_time,
+    shaped,
     stamp_of,
-    time_key,
 )
 
 if TYPE_CHECKING:
@@ -65,22 +74,6 @@ def twist_fields(
         else np.array([0.0, 0.0, skew[1, 0]])
     )
     return lin, ang
-
-
-def _array_message(
-    t: float, vec: np.ndarray, mat: np.ndarray, labels: Sequence[str]
-) -> Any:
-    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
-
-    msg = Float64MultiArray()
-    d = len(vec)
-    msg.layout.dim = [
-        MultiArrayDimension(label=labels[0], size=1, stride=1),
-        MultiArrayDimension(label=labels[1], size=d, stride=d),
-        MultiArrayDimension(label=labels[2], size=d * d, stride=d * d),
-    ]
-    msg.data = [float(t)] + [float(v) for v in vec] + [float(v) for v in np.asarray(mat).ravel()]
-    return msg
 
 
 def _stamped(cls: type, t: float, frame_id: str) -> Any:
@@ -145,21 +138,23 @@ def twist_to_state(
     return (lin[:3].copy(), grp.algebra_from_skew(skew)), None
 
 
-def array_to_state(
-    msg: Any, dim: int, rot_check: bool = True
-) -> tuple[tuple[float, np.ndarray, np.ndarray] | None, str | None]:
-    """Float64MultiArray pose/twist -> ((t, vector, matrix), None) or (None, reason)."""
-    data = np.asarray(msg.data, dtype=float)
-    if len(data) != 1 + dim + dim * dim or len(msg.layout.dim) != 3 or msg.layout.data_offset != 0:
-        return None, "malformed layout"
-    reason = _bad_numbers(data)
+def nd_to_state(
+    msg: Any, spec: _Motion, dim: int, t_max: float | None
+) -> tuple[tuple[float, int, np.ndarray, np.ndarray] | None, str | None]:
+    """PoseNd / TwistNd -> ((t, key, vector, matrix), None) or (None, reason): the contents
+    first (shapes, numbers, SO(d) or skew), then the stamp."""
+    rows, reason = shaped({"vec": getattr(msg, spec.parts[0]), "mat": getattr(msg, spec.parts[1])},
+                          {"vec": dim, "mat": dim * dim}, 1)
+    if rows is None:
+        return None, reason
+    mat = rows["mat"].reshape(dim, dim)
+    reason = bad_rotation(mat) if spec.rotation else bad_skew(mat)
     if reason:
         return None, reason
-    mat = data[1 + dim :].reshape(dim, dim)
-    reason = bad_rotation(mat) if rot_check else bad_skew(mat)
-    if reason:
+    stamp, reason = header_time(msg, t_max)
+    if stamp is None:
         return None, reason
-    return (float(data[0]), data[1 : 1 + dim].copy(), mat), None
+    return (stamp[0], stamp[1], rows["vec"][0].copy(), mat.copy()), None
 
 
 @dataclass
@@ -177,16 +172,7 @@ def _header_time(
 ) -> tuple[tuple[float, int] | None, str | None]:
     if frame_id is not None and msg.header.frame_id != frame_id:
         return None, f"unknown frame {msg.header.frame_id!r}"
-    sec, nsec = msg.header.stamp.sec, msg.header.stamp.nanosec
-    if nsec >= 1_000_000_000:
-        return None, "malformed header"
-    reason = _bad_stamp(sec + 1e-9 * nsec, t_max)
-    return (None, reason) if reason else ((sec + 1e-9 * nsec, time_key(sec, nsec)), None)
-
-
-def _array_time(t: float, t_max: float | None) -> tuple[tuple[float, int] | None, str | None]:
-    reason = _bad_stamp(t, t_max)
-    return (None, reason) if reason else ((t, int(round(t * 1e9))), None)
+    return header_time(msg, t_max)
 
 
 @dataclass(frozen=True)
@@ -195,9 +181,10 @@ class _Motion:
 
     d <= 3: the geometry message ``cls``, whose field ``body`` holds the parts ``parts`` with
     the components ``axes``; ``fields`` turns (vector, group row) into the parts' values and
-    ``to_state`` turns them back.  d >= 4: a Float64MultiArray with dims ``labels``, its matrix
-    from ``to_matrix`` and back through ``from_matrix``; ``rotation`` says whether the matrix is
-    a rotation (checked in SO(d)) or an angular velocity (checked skew).
+    ``to_state`` turns them back.  d >= 4: the message ``nd_cls``, whose fields ``parts`` hold
+    the vector and the d x d matrix, made by ``to_matrix`` and read back by ``from_matrix``;
+    ``rotation`` says whether the matrix is a rotation (checked in SO(d)) or an angular
+    velocity (checked skew).
     """
 
     cls: str
@@ -209,7 +196,7 @@ class _Motion:
         [RotationGroup, int, Sequence[float], Sequence[float]],
         tuple[StatePair | None, str | None],
     ]
-    labels: tuple[str, str, str]
+    nd_cls: str
     to_matrix: Callable[[RotationGroup, np.ndarray], np.ndarray]
     from_matrix: Callable[[RotationGroup, np.ndarray], np.ndarray]
     rotation: bool
@@ -218,13 +205,13 @@ class _Motion:
 MOTIONS = {
     "pose": _Motion(
         "PoseStamped", "pose", ("position", "orientation"), ("xyz", "xyzw"),
-        pose_fields, pose_to_state, ("t", "centroid", "rotation_row_major"),
+        pose_fields, pose_to_state, "PoseNd",
         lambda grp, one: grp.to_matrices(one)[0], lambda grp, mat: grp.from_matrices(mat),
         rotation=True,
     ),
     "twist": _Motion(
         "TwistStamped", "twist", ("linear", "angular"), ("xyz", "xyz"),
-        twist_fields, twist_to_state, ("t", "velocity", "angular_row_major"),
+        twist_fields, twist_to_state, "TwistNd",
         lambda grp, w: grp.algebra_to_skew(w)[0], lambda grp, skew: grp.algebra_from_skew(skew),
         rotation=False,
     ),
@@ -238,7 +225,12 @@ def motion_message(
     module doc)."""
     spec = MOTIONS[kind]
     if grp.dim >= 4:
-        return _array_message(t, vec, spec.to_matrix(grp, one), spec.labels)
+        from polymatch_interfaces import msg as own
+
+        msg = _stamped(getattr(own, spec.nd_cls), t, frame_id)
+        setattr(msg, spec.parts[0], floats(vec))
+        setattr(msg, spec.parts[1], floats(spec.to_matrix(grp, one)))
+        return msg
     from geometry_msgs import msg as geometry
 
     msg = _stamped(getattr(geometry, spec.cls), t, frame_id)
@@ -282,23 +274,22 @@ def decode_motion(kind: str, msg: Any, grp: RotationGroup, dim: int, frame_id: s
             return None, reason
         stamp, reason = _header_time(msg, frame_id, t_max)
         return (None, reason) if stamp is None else (Received(*stamp, val[0], val[1]), None)
-    res, reason = array_to_state(msg, dim, rot_check=spec.rotation)
+    if frame_id is not None and msg.header.frame_id != frame_id:
+        return None, f"unknown frame {msg.header.frame_id!r}"
+    res, reason = nd_to_state(msg, spec, dim, t_max)
     if res is None:
         return None, reason
-    t, vec, mat = res
-    stamp, reason = _array_time(t, t_max)
-    if stamp is None:
-        return None, reason
-    return Received(*stamp, vec, spec.from_matrix(grp, mat[None])), None
+    t, key, vec, mat = res
+    return Received(t, key, vec, spec.from_matrix(grp, mat[None])), None
 
 
 def decode_pose_msg(msg: Any, grp: RotationGroup, dim: int, frame_id: str | None = None,
                     t_max: float | None = None) -> tuple[Received | None, str | None]:
-    """PoseStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) or (None, reason)."""
+    """PoseStamped (d <= 3) or PoseNd (d >= 4) -> (Received, None) or (None, reason)."""
     return decode_motion("pose", msg, grp, dim, frame_id, t_max)
 
 
 def decode_twist_msg(msg: Any, grp: RotationGroup, dim: int, frame_id: str | None = None,
                      t_max: float | None = None) -> tuple[Received | None, str | None]:
-    """TwistStamped (d <= 3) or Float64MultiArray (d >= 4) -> (Received, None) | (None, reason)."""
+    """TwistStamped (d <= 3) or TwistNd (d >= 4) -> (Received, None) | (None, reason)."""
     return decode_motion("twist", msg, grp, dim, frame_id, t_max)

@@ -1,17 +1,20 @@
 """Results as data: the run record every agent process and the monitor emit.
 
-A ``RunRecord`` travels as one JSON line: the last line a process prints on stdout,
-and, latched, on the ensemble's ``status`` topic while it runs.  Whoever reads
-results (the runner, the benchmarks, the tests) reads them with ``run_records``;
-``describe()`` is the human-readable line printed above it.
+A ``RunRecord`` travels, latched, on the ensemble's ``status`` topic while a process runs, as
+a ``polymatch_interfaces/msg/RunRecord`` (``to_msg``, ``from_msg``), and as one JSON line, the
+last line the process prints on stdout.  Whoever reads results (the runner, the benchmarks, the
+tests) reads them with ``run_records``; ``describe()`` is the human-readable line printed
+above it.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import time
 from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field, fields
+from typing import Any
 
 RECORD_KEY = "polymatch_run_record"
 RECORD_VERSION = 1
@@ -103,6 +106,60 @@ class RunRecord:
             rec.clock_offsets = {int(k): float(v) for k, v in dict(rec.clock_offsets).items()}
             rec.t = float(rec.t)
             return rec if math.isfinite(rec.t) else None
+        except (TypeError, ValueError, AttributeError):
+            return None
+
+    def to_msg(self) -> Any:
+        """The record as a ``polymatch_interfaces/msg/RunRecord`` (NaN and -1 stand for None)."""
+        from polymatch_interfaces.msg import NamedValue, ReasonCount
+        from polymatch_interfaces.msg import RunRecord as Msg
+
+        nan = math.nan
+        msg = Msg(run_id=int(self.run_id), role=self.role, mode=self.mode, t=float(self.t),
+                  agents=list(self.agents), finished=self.finished, steps=int(self.steps),
+                  rounds=int(self.rounds), rounds_per_second=float(self.rounds_per_second),
+                  late_ticks=int(self.late_ticks),
+                  matched_after=nan if self.matched_after is None else float(self.matched_after),
+                  diameter=nan if self.diameter is None else float(self.diameter),
+                  agents_heard=int(self.agents_heard), reports=int(self.reports),
+                  peers=list(self.peers), stage_subscriptions=int(self.stage_subscriptions),
+                  n_agents=int(self.n_agents), node=self.node,
+                  resumed_at=-1 if self.resumed_at is None else int(self.resumed_at),
+                  first_round_at=nan if self.first_round_at is None
+                  else float(self.first_round_at),
+                  max_rss_mb=float(self.max_rss_mb))
+        msg.ms_per_round = [NamedValue(name=k, value=float(v))
+                            for k, v in self.ms_per_round.items()]
+        msg.dropped = [ReasonCount(reason=k, count=int(v)) for k, v in self.dropped.items()]
+        msg.clock_offsets = [NamedValue(name=str(k), value=float(v))
+                             for k, v in self.clock_offsets.items()]
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+        return msg
+
+    @classmethod
+    def from_msg(cls, msg: Any) -> RunRecord | None:
+        """The record of a ``RunRecord`` message, or None if it is not a valid one (never
+        raises)."""
+        try:
+            if msg.role not in ("agent", "monitor") or not math.isfinite(msg.t):
+                return None
+            def maybe(value: float) -> float | None:
+                return None if math.isnan(value) else float(value)
+
+            return cls(role=msg.role, mode=msg.mode, t=float(msg.t), agents=tuple(msg.agents),
+                       finished=bool(msg.finished), steps=msg.steps, rounds=msg.rounds,
+                       rounds_per_second=msg.rounds_per_second,
+                       ms_per_round={v.name: v.value for v in msg.ms_per_round},
+                       late_ticks=msg.late_ticks, matched_after=maybe(msg.matched_after),
+                       dropped={c.reason: int(c.count) for c in msg.dropped},
+                       diameter=maybe(msg.diameter), agents_heard=msg.agents_heard,
+                       reports=msg.reports, peers=tuple(msg.peers),
+                       stage_subscriptions=msg.stage_subscriptions,
+                       clock_offsets={int(v.name): v.value for v in msg.clock_offsets},
+                       n_agents=msg.n_agents, node=msg.node,
+                       resumed_at=None if msg.resumed_at < 0 else int(msg.resumed_at),
+                       run_id=int(msg.run_id), first_round_at=maybe(msg.first_round_at),
+                       max_rss_mb=msg.max_rss_mb)
         except (TypeError, ValueError, AttributeError):
             return None
 

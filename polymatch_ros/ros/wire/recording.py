@@ -3,8 +3,10 @@
 One MCAP file (``polymatch run --record``, ``polymatch record``): profile ``ros2``, one schema
 per message type (encoding ``ros2msg``: the type's ``.msg`` text followed by every type it uses,
 each after a line of 80 ``=`` and ``MSG: <package>/<Type>``, rosbag2's complete message
-definition), one channel per topic (encoding ``cdr``), and every message as the serialized
-CDR bytes the subscription took (nothing is decoded or re-encoded on the way).  ``ros2 bag
+definition), one channel per topic (encoding ``cdr``, metadata ``offered_qos_profiles``: the
+profiles its writers offer, in rosbag2's YAML, so that ``ros2 bag play`` replays a latched
+topic as transient-local), and every message as the serialized CDR bytes the subscription
+took (nothing is decoded or re-encoded on the way).  ``ros2 bag
 info|play FILE`` (Jazzy's default storage) and Foxglove open it.  The run's scene file rides
 along as the attachment ``scene.yaml`` and the metadata record ``polymatch`` (what
 ``polymatch plot`` needs to draw the polytopes and compute the diameters of Theorems 4.1/4.2
@@ -19,7 +21,7 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, BinaryIO
 
@@ -35,6 +37,10 @@ SCENE_ATTACHMENT = "scene.yaml"
 METADATA_NAME = "polymatch"
 #: the reader's history per topic: a recorder that falls this far behind a writer loses messages
 RECORDER_DEPTH = 1000
+#: the channel metadata key of the writers' QoS profiles (rosbag2's MCAP storage)
+OFFERED_QOS = "offered_qos_profiles"
+#: RMW_DURATION_INFINITE in ns: what the ROS graph reports for a duration policy left unset
+INFINITE_NS = 2**63 - 1
 
 
 def type_name(cls: type) -> str:
@@ -149,6 +155,32 @@ def recorder_qos(key: str) -> QoSProfile:
     )
 
 
+def _duration(ns: int) -> dict[str, int]:
+    sec, nsec = divmod(ns or INFINITE_NS, 10**9)
+    return {"sec": sec, "nsec": nsec}
+
+
+def offered_qos_profiles(profiles: Sequence[QoSProfile]) -> str:
+    """The YAML list rosbag2 (metadata version 9, Jazzy) stores as a channel's
+    ``offered_qos_profiles``: per writer its history, depth, reliability, durability (the
+    policies by their ROS short keys), deadline, lifespan, liveliness and lease duration
+    (``{sec, nsec}``; unset = infinite, as the graph reports it) and namespace conventions."""
+    import yaml
+
+    rows = [{
+        "history": p.history.short_key,
+        "depth": int(p.depth),
+        "reliability": p.reliability.short_key,
+        "durability": p.durability.short_key,
+        "deadline": _duration(p.deadline.nanoseconds),
+        "lifespan": _duration(p.lifespan.nanoseconds),
+        "liveliness": p.liveliness.short_key,
+        "liveliness_lease_duration": _duration(p.liveliness_lease_duration.nanoseconds),
+        "avoid_ros_namespace_conventions": bool(p.avoid_ros_namespace_conventions),
+    } for p in profiles]
+    return yaml.safe_dump(rows, sort_keys=False, default_flow_style=False) if rows else ""
+
+
 class RecordingWriter:
     """An MCAP file being written: a channel per topic, a schema per type, raw CDR messages.
 
@@ -174,13 +206,15 @@ class RecordingWriter:
         self.topics: dict[int, str] = {}
         self.finished = False
 
-    def channel(self, topic: str, type_: str) -> int:
-        """Register ``topic`` of type ``type_`` (its schema once per type); the channel id."""
+    def channel(self, topic: str, type_: str, offered: Sequence[QoSProfile] = ()) -> int:
+        """Register ``topic`` of type ``type_`` (its schema once per type) whose writers offer
+        the profiles ``offered``; the channel id."""
         if type_ not in self.schemas:
             self.schemas[type_] = self.writer.register_schema(
                 name=type_, encoding="ros2msg", data=message_definition(type_).encode())
-        channel = self.writer.register_channel(topic=topic, message_encoding="cdr",
-                                               schema_id=self.schemas[type_])
+        channel = self.writer.register_channel(
+            topic=topic, message_encoding="cdr", schema_id=self.schemas[type_],
+            metadata={OFFERED_QOS: offered_qos_profiles(offered)})
         self.counts[channel], self.topics[channel] = 0, topic
         return channel
 

@@ -34,29 +34,30 @@ class Topic:
 
 
 TOPICS = {
-    # d <= 3: geometry_msgs/PoseStamped and TwistStamped; d >= 4: std_msgs/Float64MultiArray
+    # d <= 3: geometry_msgs/PoseStamped and TwistStamped; d >= 4: polymatch_interfaces PoseNd,
+    # TwistNd
     "pose": Topic("agent_{agent}/pose", "pose", "pose", realtime_reader_qos="latest"),
     "twist": Topic("agent_{agent}/twist", "twist", "pose", realtime_reader_qos="latest"),
     # the run's own exchange (wire.exchange): each state with the run's id, for the peers and
     # the monitor; the pose and twist topics above are for people and tools
-    "exchange": Topic("agent_{agent}/exchange", "array", "pose", realtime_reader_qos="latest"),
+    "state": Topic("agent_{agent}/state", "state", "pose", realtime_reader_qos="latest"),
     # lockstep with K agents per process: the states of block b's agents, one message a step
-    "exchange_block": Topic("exchanges/block_{agent}", "array", "pose"),
+    "state_block": Topic("states/block_{agent}", "state_block", "pose"),
     # the final state, latched, for people and tools
     "final_pose": Topic("agent_{agent}/final_pose", "pose", "latched"),
     "final_twist": Topic("agent_{agent}/final_twist", "twist", "latched"),
-    # the final state on the run's exchange (with the run's id): what the runner summarises
-    "final_exchange": Topic("agent_{agent}/final_exchange", "array", "latched",
-                            reader_qos="final_in"),
+    # the final state with the run's id: what the runner summarises
+    "final_state": Topic("agent_{agent}/final_state", "state", "latched",
+                         reader_qos="final_in"),
     # lockstep with K agents per process: the final states of block b's agents, latched
-    "final_exchange_block": Topic("exchanges/final_block_{agent}", "array", "latched",
-                                  reader_qos="final_in"),
-    "stage": Topic("agent_{agent}/stage", "array", "stage", reader_qos="stage_in"),
+    "final_state_block": Topic("states/final_block_{agent}", "state_block", "latched",
+                               reader_qos="final_in"),
+    "stage": Topic("agent_{agent}/stage", "stage", "stage", reader_qos="stage_in"),
     # lockstep with K agents per process: the rows of block b (agents bK .. bK + K - 1)
-    "stage_block": Topic("stages/block_{agent}", "array", "stage", reader_qos="stage_in"),
-    "control": Topic("control", "string", "control"),
-    # RunRecord JSON of every agent process and the monitor (wire.record), latched per writer
-    "status": Topic("status", "string", "status", reader_qos="status_in"),
+    "stage_block": Topic("stages/block_{agent}", "stage", "stage", reader_qos="stage_in"),
+    "control": Topic("control", "control", "control"),
+    # the run record of every agent process and the monitor (wire.record), latched per writer
+    "status": Topic("status", "record", "status", reader_qos="status_in"),
     "diameter": Topic("diameter", "float64", "latched"),
     "diameter_centroid": Topic("diameter/centroid", "float64", "latched"),
     "diameter_rotation": Topic("diameter/rotation", "float64", "latched"),
@@ -66,38 +67,39 @@ TOPICS = {
     "diagnostics": Topic("/diagnostics", "diagnostics", "diagnostics"),
 }
 
+#: the run's own messages (polymatch_interfaces/msg) by topic kind
+OWN_MESSAGES = {
+    "state": "AgentState",
+    "state_block": "AgentStateBlock",
+    "stage": "StageRows",
+    "control": "ControlCommand",
+    "record": "RunRecord",
+}
+#: standard messages by topic kind: (package, message)
+STANDARD_MESSAGES = {
+    "float64": ("std_msgs", "Float64"),
+    "markers": ("visualization_msgs", "MarkerArray"),
+    "diagnostic_status": ("diagnostic_msgs", "DiagnosticStatus"),
+    "diagnostics": ("diagnostic_msgs", "DiagnosticArray"),
+}
+
 
 def message_type(kind: str, dim: int | None = None) -> type:
     """The message class of a topic kind; the one d <= 3 / d >= 4 switch of poses and twists."""
-    if kind in ("pose", "twist") and dim is not None and dim <= 3:
-        from geometry_msgs.msg import PoseStamped, TwistStamped
+    import importlib
 
-        return PoseStamped if kind == "pose" else TwistStamped
-    if kind in ("pose", "twist", "array"):
-        from std_msgs.msg import Float64MultiArray
+    if kind in ("pose", "twist"):
+        if dim is not None and dim <= 3:
+            from geometry_msgs.msg import PoseStamped, TwistStamped
 
-        return Float64MultiArray
-    if kind == "string":
-        from std_msgs.msg import String
+            return PoseStamped if kind == "pose" else TwistStamped
+        from polymatch_interfaces.msg import PoseNd, TwistNd
 
-        return String
-    if kind == "float64":
-        from std_msgs.msg import Float64
-
-        return Float64
-    if kind == "markers":
-        from visualization_msgs.msg import MarkerArray
-
-        return MarkerArray
-    if kind == "diagnostic_status":
-        from diagnostic_msgs.msg import DiagnosticStatus
-
-        return DiagnosticStatus
-    if kind == "diagnostics":
-        from diagnostic_msgs.msg import DiagnosticArray
-
-        return DiagnosticArray
-    raise KeyError(kind)
+        return PoseNd if kind == "pose" else TwistNd
+    if kind in OWN_MESSAGES:
+        return getattr(importlib.import_module("polymatch_interfaces.msg"), OWN_MESSAGES[kind])
+    package, name = STANDARD_MESSAGES[kind]
+    return getattr(importlib.import_module(f"{package}.msg"), name)
 
 
 def topic_name(key: str, agent: int | None = None) -> str:

@@ -1,26 +1,35 @@
-"""Smoke test of `python -m benchmarks`: every family runs with --quick and prints its tables.
+"""`python -m benchmarks`: the family table, the command line, the combined report, and every
+family that starts no ROS process run with --quick, its tables' values held to what they
+measure against (closed forms, scipy, the naive double sum, brute-force vertex distances); the
+families that start ROS processes: test/benchmarks/test_bench_ros_families.py.
 
 Benchmarks report figures; nothing here asserts on timings.
 """
 
-import contextlib
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from ros_harness import ros_slot
+from bench_tables import family_tables, number
 
 import benchmarks
 from benchmarks import families, main
+
+pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[2]
 
 #: the families, in report order (stated here, not read from the package)
 FAMILY_NAMES = ["step", "meanfield", "dop853", "precision", "extremes", "longhorizon",
                 "distributed", "packing", "scaling", "sweep", "basins", "graphs", "lossy", "trade",
-                "bridge", "realtime", "reductions", "faults"]
+                "bridge", "realtime", "reductions", "faults", "leftovers"]
+#: the families that start ROS processes (test/benchmarks/test_bench_ros_families.py runs them)
+ROS_FAMILIES = {"distributed", "packing", "scaling", "graphs", "lossy", "trade", "bridge",
+                "realtime", "faults", "leftovers"}
+NUMERIC_FAMILIES = [name for name in FAMILY_NAMES if name not in ROS_FAMILIES]
 
 # headers every family must print
 EXPECTED = {
@@ -40,64 +49,133 @@ EXPECTED = {
                     "refused (unstable)", "RK45", "DOP853", "adaptive (ours)"],
     "extremes": ["| extreme", "| expectation", "what happened", "pass/fail", "wall s", "m = 1e-8",
                  "gamma = 0", "kappa = 1e4", "centroids ~1e9", "one agent", "expectations over"],
-    "faults": ["| distinct agents killed", "back after (s) mean / max", "final matching diameter",
-               "runner RSS (MiB) start -> end", "| run", "wall s lost per death",
-               "max vertex deviation"],
     "reductions": ["| reduction", "full / reduced", "angles (Kuramoto) vs 2x2 matrices",
                    "exact flow (Prop. 2.1)", "O(m/gamma) modelling error"],
-    "distributed": ["| processes", "bare rounds/s best / median", "agents / bare (medians)",
-                    "deployed / agents (medians)", "slowest match"],
-    "packing": ["| agents", "processes x agents each: rounds/s", "| fastest", "default (no -k)",
-                "default / fastest", "1 x 8:", "2 x 4:", "rounds/s by --agent-nodes",
-                "start-up s by --agent-nodes", "auto / none rounds/s"],
-    "scaling": ["| agents", "processes x agents each", "rounds/s", "first round after (s)",
-                "peak memory per process (MB)", "ms per round: publish / wait / other",
-                "transport share", "| 8 "],
-    "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
-              "injected delay"],
-    "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
-               "true: median / max", "true / floor", "true below floor from (s)",
-               "(A-2) alone (no noise, no lag"],
     "sweep": ["| solver", "batch (rkmk8)", "scipy DOP853 loop", "max vertex error",
               "Speed-up (scipy loop / batch"],
     "basins": ["| N", "stable q (d = 2)", "d = 3 twisted ends", "| p", "var q", "| eps",
                "Findings (computed from the runs above)"],
 }
 
-# lossy runs ROS ensembles on namespace hosts: even --quick takes about a minute; its tables
-# are tested from records below.  faults --quick takes two minutes of killing and restarting
-# processes; what it measures is asserted in test/ros/test_faults.py.
-QUICK_FAMILIES = [name for name in FAMILY_NAMES if name not in ("lossy", "faults")]
-
 
 def test_family_table_is_the_stated_list_in_report_order():
     assert list(benchmarks.FAMILIES) == FAMILY_NAMES
     assert [module.NAME for module in families()] == FAMILY_NAMES
-    assert set(EXPECTED) <= set(FAMILY_NAMES)
+    assert set(EXPECTED) == set(NUMERIC_FAMILIES)
 
 
-#: the families that start ROS processes: they take one of the suite's ROS slots; the others
-#: are numerics, run beside the ROS tests as test/core is (their timings are printed, never
-#: asserted)
-ROS_FAMILIES = {"distributed", "packing", "scaling", "graphs", "lossy", "trade", "bridge",
-                "realtime", "faults"}
+def _column(tables, header, name):
+    """The cells of column ``name`` in every table whose header has it."""
+    return [row[name] for table in tables if name in table[0] and header in table[0]
+            for row in table[1]]
 
 
-def test_ros_families_are_families():
-    assert ROS_FAMILIES <= set(FAMILY_NAMES)
+def _meanfield(tables, out):
+    """The mean field's rates against the naive double sum sum_k (O_k O_i^T - O_i O_k^T)."""
+    diffs = [number(c) for c in _column(tables, "mean field best ms", "max abs diff")]
+    assert diffs and max(diffs) < 1e-12, diffs
 
 
-@pytest.mark.parametrize("name", QUICK_FAMILIES)
+def _dop853(tables, out):
+    """Every solver's error within a hundred times its tolerance of the reference; ours stays on
+    SO(d) to round-off (scipy's does not: it integrates the matrix entries)."""
+    rows = [row for table in tables if "A: max err (11 times)" in table[0] for row in table[1]]
+    assert {row["solver"] for row in rows} >= {"ours (angle)", "scipy DOP853"}, rows
+    for row in rows:
+        assert number(row["A: max err (11 times)"]) < 100 * number(row["rtol=atol"]), row
+        if row["solver"].startswith("ours"):
+            assert number(row["orth. defect"]) < 1e-12, row
+
+
+def _precision(tables, out):
+    """Observed orders are the methods' nominal orders (Lie-group methods: 1, 2, 4); the
+    Lie-group and projection methods stay on SO(d)."""
+    orders = [(row["nominal order"], row["observed order (consecutive h, errors > 100 x floor)"])
+              for table in tables if "nominal order" in table[0] for row in table[1]]
+    assert len(orders) >= 5, orders
+    for nominal, observed in orders:
+        assert abs(number(observed) - number(nominal)) < 0.3, (nominal, observed)
+    rows = [row for table in tables if {"orth. defect", "max error"} <= set(table[0])
+            for row in table[1] if row["method"] not in ("RK45", "DOP853")]
+    assert len(rows) >= 10, rows
+    for row in rows:
+        assert number(row["orth. defect"]) < 1e-12, row
+
+
+def _extremes(tables, out):
+    verdicts = [row["pass/fail"] for table in tables if "pass/fail" in table[0]
+                for row in table[1]]
+    assert verdicts and set(verdicts) == {"pass"}, verdicts
+
+
+def _longhorizon(tables, out):
+    """Undamped (gamma = 0): the symplectic lie_verlet's energy stays bounded (Prop. 2.2 i);
+    every Lie-group method that ran keeps O_i^T O_i = I to round-off."""
+    verdicts = {row["method"]: row["verdict"] for table in tables if "verdict" in table[0]
+                for row in table[1]}
+    assert verdicts["lie_verlet"] == "bounded", verdicts
+    defects = [number(row[name]) for header, rows in tables for name in header
+               if name.startswith("orth. defect") for row in rows
+               if row[name] != "-" and row["method"] not in ("RK45", "DOP853")]
+    assert len(defects) >= 5 and max(defects) < 1e-14, defects
+
+
+def _sweep(tables, out):
+    """The batch and scipy's DOP853 both within 1e-6 of the batch at dt/16, and every ensemble
+    matched."""
+    errors = [number(c) for c in _column(tables, "ensembles timed", "max vertex error")]
+    assert len(errors) == 2 and max(errors) < 1e-6, errors
+    matched = re.search(r"(\d+)/(\d+) ensembles matched", out)
+    assert matched and matched.group(1) == matched.group(2), out
+
+
+def _basins(tables, out):
+    """A ring with k = N/2 neighbours a side is the complete graph: every ensemble matches."""
+    rows = [row for table in tables if {"k/N", "d = 2 matched"} <= set(table[0])
+            for row in table[1] if number(row["k/N"]) >= 0.5]
+    assert rows, tables
+    for row in rows:
+        for name in ("d = 2 matched", "d = 3 matched"):
+            got, of = row[name].split("/")
+            assert got == of, row
+
+
+def _reductions(tables, out):
+    """A reduction that is exact differs from the full model by round-off; the others by what
+    their column says they leave (rkmk4's centroid error, O(m/gamma) = 1e-3)."""
+    rows = [row for table in tables if "expected difference" in table[0] for row in table[1]]
+    assert len(rows) >= 6, rows
+    for row in rows:
+        diff, expected = number(row["max vertex difference at t_end"]), row["expected difference"]
+        limit = 1e-13 if expected == "round-off" else 1e-2 if "m/gamma" in expected else 1e-6
+        assert diff < limit, row
+
+
+def _step(tables, out):
+    """Each method's right-hand-side evaluations per step are its stages."""
+    stages = {"rkmk4": 4, "lie_euler": 1, "rk4_proj": 4, "lie_heun": 2, "lie_verlet": 1}
+    rows = [row for table in tables if "evals/step" in table[0] for row in table[1]]
+    assert rows
+    for row in rows:
+        if row["method"] in stages:
+            assert number(row["evals/step"]) == stages[row["method"]], row
+
+
+VALUES = {"meanfield": _meanfield, "dop853": _dop853, "precision": _precision,
+          "extremes": _extremes, "longhorizon": _longhorizon, "sweep": _sweep, "basins": _basins,
+          "reductions": _reductions, "step": _step}
+
+
+@pytest.mark.parametrize("name", NUMERIC_FAMILIES)
 def test_family_quick(name, capsys):
-    with ros_slot() if name in ROS_FAMILIES else contextlib.nullcontext():
-        assert main([name, "--quick", "--quiet"]) == 0
+    assert main([name, "--quick", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("# ")
-    assert "|---" in out                     # at least one markdown table
     for failure in ("run failed", "Failed runs:"):   # a family reports, never hides, a failure
         assert failure not in out, f"{name}: a run inside the family failed"
-    for text in EXPECTED.get(name, []):
+    for text in EXPECTED[name]:
         assert text in out, f"{name}: {text!r} missing from the output"
+    VALUES[name](family_tables(out), out)
 
 
 def _benchmarks(*args):

@@ -1,13 +1,13 @@
 """The shipped parameter files (config/params/, one per node, the ``/**:`` wildcard) hold only
 parameters their node declares, each of its declared type and in its range, none of what the
 scene sets (a file's value would replace every scene's), and a node resolves and starts from
-its file (``--params-file``)."""
+its file (``--params-file``, test/ros/test_param_file_runs.py)."""
 
 import pathlib
 
 import pytest
 import yaml
-from ros_harness import CONFIG, PY, needs_ros
+from ros_harness import CONFIG
 
 from polymatch_ros.ros.nodes.params import (
     AGENT,
@@ -61,19 +61,3 @@ def test_a_param_file_resolves_on_a_shipped_scene_and_its_values_are_in_use(name
     assert {k: used[k] for k in _values(name)} == _values(name)
     if name != "robot.yaml":
         assert used["t_end"] == 30.0  # config/congruent_triangles.yaml: time.t_end
-
-
-@needs_ros
-def test_an_agent_runs_from_its_param_file(ros, tmp_path):
-    """One lockstep agent alone (a one-agent scene) from config/params/agent.yaml."""
-    scene = tmp_path / "solo.yaml"
-    scene.write_text(
-        "name: solo\ndimension: 3\nseed: 1\nmodel: {order: 1}\n"
-        "integrator: {method: rkmk4, dt: 0.1}\ntime: {t_end: 1.0}\n"
-        "groups:\n  - {name: one, shape: tetrahedron, count: 1}\n"
-    )
-    agent = ros.start([PY, "-m", "polymatch_ros.cli", "agent", "--ros-args", "--params-file",
-                       str(PARAMS / "agent.yaml"), "-p", f"scene:={scene}", "-p", "agent:=0"],
-                      timeout=60)
-    assert ros.wait(agent, 70) == 0, ros.output(agent)
-    assert "agent 0: finished at t = 1 after 10 steps" in ros.output(agent), ros.output(agent)

@@ -2,17 +2,16 @@
 monitor, with a wrong type and out of its range, checked in-process: ``params.check`` runs
 before the nodes create any topic; the real processes are covered in test_robustness.py), and
 the declared ones hold what the node uses: the scene's gains, integrator, step and end time
-unless given, read back through the rcl_interfaces services as `ros2 param get` does, and a
-value set while running reads back and is used."""
+unless given (a running node's, read back through the rcl_interfaces services as `ros2 param
+get` does: test/ros/test_params_over_ros.py)."""
 
-import json
 import os
 import re
-import time
 from types import SimpleNamespace
 
 import pytest
-from ros_harness import CONFIG, PY, needs_ros, node_argv, scene_path
+from param_tables import LOCKSTEP_TABLE, REALTIME_TABLE
+from ros_harness import CONFIG, needs_ros, scene_path
 
 from polymatch_ros.core.errors import ParameterError, PolymatchError
 from polymatch_ros.core.scene import load_scene
@@ -115,7 +114,7 @@ CHOICE_CASES = [
     ("agent", "agent_nodes", ("full", "lean", "none")),
     ("agent", "start", ("now", "control", "at")),
     ("agent", "pose_type", ("pose", "odometry")),
-    ("agent", "cmd_type", ("twist", "twist_stamped")),
+    ("agent", "cmd_type", ("twist_stamped", "twist")),
     ("agent", "command_frame", ("world", "body")),
     ("monitor", "mode", ("lockstep", "realtime")),
 ]
@@ -220,30 +219,6 @@ SCENE_FILES = {
     "extremes/stiff_mass": dict(kappa=1.5, gamma=2.0, mass=1e-8, integrator="etd2", dt=0.02,
                                 t_end=30.0),
 }
-# every parameter a lockstep agent on congruent_triangles declares, with its value (no
-# placeholder: no 0 for "the scene's", no '' for "none"); rclpy adds use_sim_time and
-# start_type_description_service
-LOCKSTEP_TABLE = {
-    "scene": os.path.join(CONFIG, "congruent_triangles.yaml"), "agent": 0, "agents": [0],
-    "agents_per_process": 1, "agent_nodes": "full", "mode": "lockstep", "autostart": True,
-    "integrator": "rkmk4",
-    "dt": 0.05, "t_end": 30.0, "rate": 50.0, "kappa": 1.0, "gamma": 1.0, "time_scale": 1.0,
-    "peer_timeout": 1.0, "delay": 0.0, "clock_offset_warn": 0.1, "hold_final": 0.0,
-    "round_timeout": 10.0, "stall_timeout": 300.0, "peers_restart": False,
-    "discovery_timeout": 120.0, "pose_subscribers": 0, "exchange_subscribers": 0,
-    "frame_id": "world",
-    "max_linear_speed": 1e6, "max_angular_speed": 1e6, "max_linear_accel": 1e6,
-    "max_angular_accel": 1e6, "pose_timeout": 0.5, "pose_type": "pose", "cmd_type": "twist",
-    "command_frame": "world", "run_id": 0,
-}
-# a realtime agent on congruent_triangles_second_order given gamma:=2.0 and rate:=5.0: no dt (it
-# steps time_scale/rate), the scene's mass, how it starts (start_time: once it started)
-REALTIME_TABLE = dict(
-    {k: v for k, v in LOCKSTEP_TABLE.items() if k != "dt"},
-    scene=os.path.join(CONFIG, "congruent_triangles_second_order.yaml"), mode="realtime",
-    t_end=50.0, gamma=2.0, mass=0.5, rate=5.0, discovery_timeout=30.0, start="now",
-)
-RCLPY_OWN = {"use_sim_time": False, "start_type_description_service": True}
 
 
 def _agent_values(**given):
@@ -387,57 +362,3 @@ def test_a_runtime_gain_is_checked_against_the_model_then_applied_at_the_next_ti
     assert agent._on_set([SimpleNamespace(name="gamma", value=0.5)]).successful
     assert agent.model.gamma == 1.0 and agent.apply_runtime()
     assert (agent.model.gamma, agent.params["gamma"], agent.model.kappa) == (0.5, 0.5, 1.0)
-
-
-PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "support",
-                     "param_probe.py")
-
-
-@needs_ros
-def test_parameters_read_back_what_the_nodes_use_and_a_runtime_set_is_used(ros):
-    """`ros2 param get` through GetParameters: a lockstep agent's every parameter is the value it
-    uses (the scene's kappa, gamma, integrator, dt, t_end); a realtime agent's shows the
-    overrides (gamma, rate) beside the scene's (kappa, mass); the monitor's t_end; a kappa set
-    while running reads back and is the gain in use (the agent's diagnostics); read-only ones
-    and values out of range are refused."""
-    before = time.time()
-    ros.start(node_argv("nodes.agent", "congruent_triangles", agent=0, discovery_timeout=120.0)
-              + ["-r", "__node:=agent_0"], timeout=90, name="lockstep agent")
-    ros.start(node_argv("nodes.agent", SECOND, agent=0, mode="realtime", gamma=2.0, rate=5.0)
-              + ["-r", "__ns:=/second", "-r", "__node:=agent_0"], timeout=90,
-              name="realtime agent")
-    ros.start(node_argv("nodes.monitor", "congruent_triangles", t_end=12.5)
-              + ["-r", "__node:=monitor"], timeout=90, name="monitor")
-    lock, real = "/polymatch/agent_0", "/second/agent_0"
-    probe = ros.start([PY, PROBE, f"get {lock}", f"get {real}", "get /polymatch/monitor",
-                       f"diagnostic {real} gamma 2", f"diagnostic {real} kappa 1",
-                       f"set {real} kappa 3.0", f"get {real} kappa", f"diagnostic {real} kappa 3",
-                       f"set {real} mass 0.0", f"set {real} t_end 5.0", f"set {lock} kappa 3.0",
-                       f"get {real} mass t_end", f"get {lock} kappa",
-                       f"describe {lock} kappa dt agents", f"describe {real} kappa mass t_end"],
-                      timeout=80, name="probe")
-    assert ros.wait(probe, 85) == 0, ros.output(probe)
-    text = ros.output(probe)
-    got = [json.loads(m) for m in re.findall(r"^PARAMS \S+ (.*)$", text, re.M)]
-    assert got[0] == dict(LOCKSTEP_TABLE, **RCLPY_OWN), text
-    start_time = got[1].pop("start_time")
-    assert got[1] == dict(REALTIME_TABLE, **RCLPY_OWN), text
-    assert before < start_time < time.time(), text  # declared once t = 0 was fixed
-    assert got[2] == dict(scene=scene_path("congruent_triangles"), mode="lockstep", rate=10.0,
-                          report_rate=20.0, peer_timeout=1.0, frame_id="world", markers=True,
-                          t_end=12.5, run_id=0, agents_per_process=1, report_readers=0,
-                          **RCLPY_OWN), text
-    assert got[3:] == [{"kappa": 3.0}, {"mass": 0.5, "t_end": 50.0}, {"kappa": 1.0}], text
-    sets = re.findall(r"^SET (\S+) (\S+) (True|False) ?(.*)$", text, re.M)
-    assert [s[:3] for s in sets] == [(real, "kappa", "True"), (real, "mass", "False"),
-                                     (real, "t_end", "False"), (lock, "kappa", "False")], text
-    assert "read-only" in sets[2][3] and "read-only" in sets[3][3], text
-    described = [json.loads(m) for m in re.findall(r"^DESCRIBE \S+ (.*)$", text, re.M)]
-    assert described == [
-        {"kappa": {"read_only": True, "range": [0.0, 1e6]},  # lockstep: the scene's model
-         "dt": {"read_only": True, "range": [1e-12, 1e6]},
-         "agents": {"read_only": True, "range": None}},
-        {"kappa": {"read_only": False, "range": [0.0, 1e6]},  # realtime: set while running
-         "mass": {"read_only": False, "range": [1e-12, 1e6]},
-         "t_end": {"read_only": True, "range": [1e-12, 1e12]}},
-    ], text

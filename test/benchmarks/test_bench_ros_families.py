@@ -1,0 +1,100 @@
+"""The benchmark families that start ROS processes run with --quick in the test's ROS world
+(its slot of the machine's ROS worlds) and print their tables, the values held to what they
+count (processes x agents = agents, rounds per step = the integrator's stages, every run
+finished, the robots' true diameter below the noise floor).
+
+lossy runs ROS ensembles on namespace hosts: even --quick takes about a minute, and its tables
+are tested from records (test/code/test_bench_smoke.py); faults --quick takes two minutes of
+killing and restarting processes, and what it measures is asserted in test/ros/test_faults.py.
+"""
+
+import math
+import re
+
+import pytest
+from bench_tables import family_tables, number
+
+from benchmarks import main
+
+ROS_QUICK_FAMILIES = ["distributed", "packing", "scaling", "graphs", "trade", "bridge",
+                      "realtime"]
+
+# headers every family must print
+EXPECTED = {
+    "distributed": ["| processes", "bare rounds/s best / median", "agents / bare (medians)",
+                    "deployed / agents (medians)", "slowest match"],
+    "packing": ["| agents", "processes x agents each: rounds/s", "| fastest", "default (no -k)",
+                "default / fastest", "1 x 8:", "2 x 4:", "rounds/s by --agent-nodes",
+                "start-up s by --agent-nodes", "auto / none rounds/s"],
+    "scaling": ["| agents", "processes x agents each", "rounds/s", "first round after (s)",
+                "peak memory per process (MB)", "ms per round: publish / wait / other",
+                "transport share", "| 8 "],
+    "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
+              "injected delay"],
+    "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
+               "true: median / max", "true / floor", "true below floor from (s)",
+               "(A-2) alone (no noise, no lag"],
+}
+
+
+def _rows(tables, name):
+    return [row for header, rows in tables if name in header for row in rows]
+
+
+def _finished(tables, out):
+    """Every run the family started finished ('3+3+3 of 3', '2 of 2')."""
+    cells = [row["runs that finished"] for row in _rows(tables, "runs that finished")]
+    assert cells, tables
+    for cell in cells:
+        done, total = cell.split(" of ")
+        assert all(int(part) == int(total) for part in done.split("+")), cell
+
+
+def _shapes_multiply(tables, out):
+    """Each 'P x K' shape runs P processes of K agents: P K is the row's agent count."""
+    rows = _rows(tables, "agents")
+    assert rows, tables
+    for row in rows:
+        agents = int(row["agents"])
+        shapes = re.findall(r"(\d+) x (\d+)", " ".join(v for k, v in row.items() if k != "agents"))
+        assert shapes, row
+        assert all(int(p) * int(k) == agents for p, k in shapes), row
+
+
+def _trade(tables, out):
+    """A lockstep round per stage: rounds per step are the integrator's stages."""
+    stages = {"lie_euler": 1, "lie_heun": 2, "rkmk4": 4, "euler_proj": 1, "rk4_proj": 4}
+    rows = _rows(tables, "rounds/step")
+    assert rows, tables
+    for row in rows:
+        assert number(row["rounds/step"]) == stages[row["integrator"]], row
+
+
+def _bridge(tables, out):
+    """The noise floor of each row is 6 sqrt(2) (sigma sqrt(d) + sigma r) for the quick scene's
+    triangles (d = 2, vertex radius 1), and every run drove its robots (a true diameter)."""
+    rows = _rows(tables, "true / floor")
+    assert rows, tables
+    for row in rows:
+        sigma = number(row["sigma (m, rad)"])
+        floor = 6 * math.sqrt(2) * (sigma * math.sqrt(2) + sigma * 1.0)
+        assert number(row["noise floor"]) == pytest.approx(floor, rel=5e-3), row
+        assert row["true: median / max"] != "-", row
+
+
+VALUES = {"distributed": _finished, "packing": _shapes_multiply, "scaling": _shapes_multiply,
+          "graphs": None, "trade": _trade, "bridge": _bridge, "realtime": _finished}
+
+
+@pytest.mark.usefixtures("ros")  # the slot and domain of a ROS world; the family takes its own
+@pytest.mark.parametrize("name", ROS_QUICK_FAMILIES)
+def test_ros_family_quick(name, capsys):
+    assert main([name, "--quick", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("# ")
+    for failure in ("run failed", "Failed runs:"):   # a family reports, never hides, a failure
+        assert failure not in out, f"{name}: a run inside the family failed"
+    for text in EXPECTED.get(name, []):
+        assert text in out, f"{name}: {text!r} missing from the output"
+    if VALUES[name] is not None:
+        VALUES[name](family_tables(out), out)
