@@ -15,6 +15,14 @@ constraint holds when both do:
                                            + 2 alpha h' + alpha^2 h) / 2
         (h'' + 2 alpha h' + alpha^2 h >= 0: the barrier of h' + alpha h, relative degree two)
 
+A robot does not apply its command in continuous time: it is held for one command period T,
+reaches the robot through the actuator's lag, and is computed against peers' positions as old as
+their stamps.  So the barrier is evaluated where the robots will be when the command acts
+(``horizon`` = T + latency ahead): every peer is predicted with its velocity over its age plus
+the horizon (second order: the robot's own position too), and each pair's distance 2 r is
+widened by ``reach_j`` = |v_j - v_i| horizon, what the pair can close within a horizon that the
+linear prediction misses (``predicted_barrier``).
+
 The quadratic programme min |u - u_model|^2 subject to these is solved by DAQP (a dual
 active-set solver: exact on these few-variable problems).  ``SafetyFilter.filter`` says when
 the command changed, and a ``DeadlockWatch`` when the filter has held a robot still while the
@@ -70,12 +78,14 @@ class Filtered:
 
 
 def barrier_rows(p: np.ndarray, peers: np.ndarray, spec: SafetySpec,
-                 v: np.ndarray | None = None,
-                 peer_v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 v: np.ndarray | None = None, peer_v: np.ndarray | None = None,
+                 reach: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(A, b) of the constraints A u >= b of agent at ``p`` against ``peers`` (k, d); with
-    velocities ``v`` and ``peer_v`` the second-order ones (module doc)."""
+    velocities ``v`` and ``peer_v`` the second-order ones (module doc); ``reach`` (k,) widens
+    each pair's distance 2 r."""
     dp = p[None, :] - peers
-    h = np.einsum("ij,ij->i", dp, dp) - (2.0 * spec.radius) ** 2
+    gap = 2.0 * spec.radius + (0.0 if reach is None else np.asarray(reach, dtype=float))
+    h = np.einsum("ij,ij->i", dp, dp) - gap ** 2
     a = spec.alpha
     if v is None:
         return 2.0 * dp, -0.5 * a * h
@@ -119,15 +129,29 @@ def least_violation(nominal: np.ndarray, rows: np.ndarray, lower: np.ndarray,
     return None if exitflag < 1 else np.asarray(x[:d], dtype=float)
 
 
+def predicted_barrier(p: np.ndarray, peers: np.ndarray, ages: np.ndarray, horizon: float,
+                      v: np.ndarray, peer_v: np.ndarray,
+                      own_ahead: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(own position, peers' positions, reach) where the command will act (module doc): the
+    peers ``ages`` (k,) + ``horizon`` s ahead with ``peer_v`` (k, d), this robot ``horizon``
+    ahead with ``v`` when ``own_ahead``, and reach_j = |v_j - v| horizon."""
+    lead = np.maximum(np.asarray(ages, dtype=float), 0.0) + horizon
+    ahead = peers + peer_v * lead[:, None]
+    own = p + v * horizon if own_ahead else p
+    return own, ahead, np.linalg.norm(peer_v - v[None, :], axis=1) * horizon
+
+
 def filter_command(nominal: np.ndarray, p: np.ndarray, peers: np.ndarray, spec: SafetySpec,
                    fallback: np.ndarray, v: np.ndarray | None = None,
-                   peer_v: np.ndarray | None = None) -> Filtered:
+                   peer_v: np.ndarray | None = None,
+                   reach: np.ndarray | None = None) -> Filtered:
     """The command closest to ``nominal`` that keeps every barrier (module doc); ``v`` given:
-    an acceleration (second order)."""
+    an acceleration (second order); ``reach`` (k,) widens the pairs' distances."""
     nominal = np.asarray(nominal, dtype=float)
     if len(peers) == 0 or not np.all(np.isfinite(nominal)):
         return Filtered(nominal, False, 0)
-    rows, lower = barrier_rows(np.asarray(p, float), np.asarray(peers, float), spec, v, peer_v)
+    rows, lower = barrier_rows(np.asarray(p, float), np.asarray(peers, float), spec, v, peer_v,
+                               reach)
     u, active = closest_admissible(nominal, rows, lower)
     if u is None:
         relaxed = least_violation(nominal, rows, lower)

@@ -257,7 +257,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
         request = SimpleNamespace(stage=self.state, fields=fields)
         heard = self.peers.in_range(self.peers.active(), self.state)  # a radio: peers in range
         ensemble = self.peers.ensemble(request, heard)  # type: ignore[arg-type]
-        twist = self._command(gi, row, ensemble, own)
+        twist = self._command(gi, row, ensemble, own, heard)
         if not twist.finite:
             self._hold("non-finite command", brake=True)
             return
@@ -267,12 +267,13 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.saturated = twist.saturated
 
     def _command(
-        self, gi: int, row: int, ensemble: Ensemble, own: SimpleNamespace
+        self, gi: int, row: int, ensemble: Ensemble, own: SimpleNamespace, heard: list[int]
     ) -> Twist:
         """The twist (A-2) or the acceleration (A-1) of this agent against ``ensemble``."""
         rot = self.grp.to_matrices(own.rot)[0]  # formation, safety filter, drive: core.shaping
+        stamps = {a: self.peers.latest[a].t for a in heard}  # the peers' ages, for the filter
         return self.shaper.command(self.system, gi, row, ensemble, own, rot, self.state.t,
-                                   self.params)
+                                   self.params, stamps)
 
     def _state_at(self, t: float, own: SimpleNamespace) -> State:
         gi = self.layout.owner[self.layout.local[0]][0]

@@ -229,6 +229,8 @@ AGENT = (
           "scene's safety.radius, none without one)", (0.0, 1e6)),
     Param("safety_alpha", 0.0, "bridge: the safety filter's rate alpha (1/s; 0: the scene's, "
           "or 1)", (0.0, 1e6)),
+    Param("safety_latency", 0.05, "bridge: the safety filter looks one command period plus this "
+          "far ahead (s: the actuator's lag and the command's transport)", (0.0, 10.0)),
     Param(
         "run_id",
         0,
