@@ -19,6 +19,7 @@ import tempfile
 import numpy as np
 
 RADIUS, ALPHA, CIRCLE, TOLERANCE, AXLE = 0.3, 2.0, 1.5, 0.05, 0.2
+ALPHA_SECOND = 1.0  # the second-order barrier's rate (both poles: slower, its loop lags more)
 CONFIGS = (  # (label, model order, drive)
     ("first order", 1, "holonomic"),
     ("second order", 2, "holonomic"),
@@ -26,8 +27,9 @@ CONFIGS = (  # (label, model order, drive)
 )
 
 
-def starts(count, n=8, box=4.0, gap=2 * RADIUS + 0.1, seed=0):
-    """``count`` arrays (n, 2) of start positions in [-box, box]^2, no two closer than ``gap``."""
+def starts(count, n=8, box=4.0, gap=2 * (RADIUS + AXLE) + 0.1, seed=0):
+    """``count`` arrays (n, 2) of start positions in [-box, box]^2, no two closer than ``gap``
+    (the unicycles' discs of r + ell around the points ahead apart too)."""
     rng = np.random.default_rng(seed)
     out = []
     while len(out) < count:
@@ -42,7 +44,8 @@ def scene_text(order, points, filtered, seed):
     """A scene of 8 triangles (0.3 m) at ``points`` with a circle formation (and safety)."""
     model = "{order: 1, kappa: 1.0, gamma: 1.0}" if order == 1 else \
         "{order: 2, kappa: 1.0, gamma: 2.0, mass: 1.0}"
-    safety = f"safety: {{radius: {RADIUS}, alpha: {ALPHA}}}\n" if filtered else ""
+    alpha = ALPHA if order == 1 else ALPHA_SECOND
+    safety = f"safety: {{radius: {RADIUS}, alpha: {alpha}}}\n" if filtered else ""
     rows = ", ".join(f"[{x:.6f}, {y:.6f}]" for x, y in points)
     return (f"name: separation\ndimension: 2\nseed: {seed}\nmodel: {model}\n"
             f"integrator: {{method: rkmk4, dt: 0.05}}\ntime: {{t_end: 60.0}}\n"
