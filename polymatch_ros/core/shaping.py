@@ -132,9 +132,9 @@ class CommandShaper:
         if peer_v is None:
             peer_v = self._estimated_speeds(peers, ids, stamps)
         ages = np.array([t - stamps.get(int(a), t) for a in ids])
+        own_v = self.last_linear if v is None else v
         own, ahead, reach = predicted_barrier(own_x + self.offset(self.agent), peers, ages,
-                                              self.horizon, v if second else self.last_linear,
-                                              peer_v, own_ahead=second)
+                                              self.horizon, own_v, peer_v, own_ahead=second)
         got: Filtered = filter_command(nominal, own, ahead, self.safety, fallback, v,
                                        peer_v if second else None, reach)
         self.changed += got.changed
