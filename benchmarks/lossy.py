@@ -94,7 +94,7 @@ def _echo_status(net, seconds):
     def observe(procs, started, env):
         echo_env = discovery.discovery_environments("subnet").for_role("client", env)
         echo = procs.start([sys.executable, "-m", "polymatch_ros.cli", "echo",
-                            "/polymatch/status", "--timeout", str(seconds)], echo_env,
+                            "/polymatch/status", "--json", "--timeout", str(seconds)], echo_env,
                            seconds + 10, "echo", prefix=net.prefix(HOSTS - 1))
         for proc in started:
             proc.wait(timeout=seconds + 10)
@@ -106,13 +106,12 @@ def _echo_status(net, seconds):
 def _status_records(echo):
     """The monitor's run records among those `polymatch echo` printed (the agents publish
     theirs on the status topic too)."""
-    from polymatch_ros.ros.wire import run_records
+    from polymatch_ros.ros.wire import echoed_run_records
 
     from .hosts.runs import Processes
 
     lines = Processes.output(echo).splitlines()
-    records = run_records(line.partition("data: ")[2] for line in lines
-                          if line.startswith("data: "))
+    records = echoed_run_records(lines)
     return [r for r in records if r.role == "monitor"]
 
 

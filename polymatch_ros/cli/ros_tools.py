@@ -26,7 +26,7 @@ def cmd_echo(args: argparse.Namespace) -> int:
     from ..ros.supervisor.environment import ros_environment
 
     os.environ.update(ros_environment())  # the discovery of `polymatch run` unless set otherwise
-    return echo(args.topic, args.count, args.until_below, args.timeout)
+    return echo(args.topic, args.count, args.until_below, args.timeout, as_json=args.json)
 
 
 def cmd_set(args: argparse.Namespace) -> int:
@@ -50,6 +50,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--timeout", type=float, metavar="S",
                    help="give up after S seconds (exit 1); default: give up when no message came "
                    "within 10 s, saying which ROS domain and discovery range it listened in")
+    p.add_argument("--json", action="store_true",
+                   help="one JSON object a message and line (fields by name), for programs")
     p.set_defaults(func=cmd_echo)
 
     p = sub.add_parser("set", help="set a runtime parameter (kappa, gamma, mass, rate, limits) on "

@@ -70,7 +70,7 @@ def kill_and_restart_host(net, argv):
         shm = ShmWatch(lambda: [p.pid for p in procs.procs if p.poll() is None])
         echo_env = discovery.discovery_environments("subnet").for_role("client", env)
         echo = procs.start([sys.executable, "-m", "polymatch_ros.cli", "echo",
-                            "/polymatch/status", "--timeout", str(TIMEOUT)], echo_env,
+                            "/polymatch/status", "--json", "--timeout", str(TIMEOUT)], echo_env,
                            TIMEOUT + 10, "echo",
                            prefix=net.prefix(2))
         assert wait_for_record(procs, echo, lambda r: r.agents_heard == AGENTS

@@ -8,8 +8,8 @@
   hosts 1 and 2 while it is down, then every agent is heard again and the ensemble matches.
 
 The monitor's reports are read as data: `polymatch echo` of its ``status`` topic inside host 2
-prints each run record (JSON), read with ``wire.run_records``.  In every test tcpdump on the
-root namespace must match no DDS packet (the kernel's count).
+prints each run record (``--json``), read with ``wire.echoed_run_records``.  In every test
+tcpdump on the root namespace must match no DDS packet (the kernel's count).
 """
 
 import sys
@@ -109,7 +109,8 @@ def link_down_while_running(net):
     def outage(procs, started, env):
         echo_env = discovery.discovery_environments("subnet").for_role("client", env)
         echo = procs.start([sys.executable, "-m", "polymatch_ros.cli", "echo",
-                            "/polymatch/status", "--timeout", "150"], echo_env, 160, "echo",
+                            "/polymatch/status", "--json", "--timeout", "150"], echo_env, 160,
+                           "echo",
                            prefix=net.prefix(2))
         running = hr.wait_for_record(procs, echo, lambda r: r.agents_heard == hr.AGENTS
                                       and r.t >= 2.0 * hr.TIME_SCALE, 90)

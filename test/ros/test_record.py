@@ -114,7 +114,8 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
     # the monitor's reports (at most report_rate a second): the last is the final step's
     diameters = [m.data for _, m in got["/polymatch/diameter"][1]]
     assert 1 <= len(diameters) <= mon.reports and diameters[-1] == mon.diameter
-    assert any('"role": "monitor"' in m.data for _, m in got["/polymatch/status"][1])
+    assert any(m.role == "monitor" and m.run_id == mon.run_id
+               for _, m in got["/polymatch/status"][1])
 
     from polymatch_ros.ros.wire.recording_read import diameter_series, read_recording
 
@@ -137,9 +138,11 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
     assert offered(other)["/clock"] == [("BEST_EFFORT", "VOLATILE")]  # lockstep's /clock
     assert beside["/clock"][0] == "rosgraph_msgs/msg/Clock"
     ticks = [m.clock.sec * 10**9 + m.clock.nanosec for _, m in beside["/clock"][1]]
-    assert ticks and all(a < b for a, b in zip(ticks, ticks[1:])), ticks
+    # the recorder, found late by a run of ten steps, may hear none of its few /clock samples
+    # (best effort); those it heard go forward
+    assert all(a < b for a, b in zip(ticks, ticks[1:])), ticks
     assert beside["/polymatch/diameter"][1][-1][1].data == mon.diameter  # latched: the last
-    statuses = run_records([m.data for _, m in beside["/polymatch/status"][1]])
+    statuses = [m for _, m in beside["/polymatch/status"][1]]  # decoded by rosbags
     # the monitor's last report, as the run's --records has it
-    assert any(r.role == "monitor" and (r.t, r.diameter) == (mon.t, mon.diameter)
-               for r in statuses), statuses
+    assert any(m.role == "monitor" and (m.t, m.diameter) == (mon.t, mon.diameter)
+               for m in statuses), statuses

@@ -32,6 +32,7 @@ pytestmark = needs_ros
 # (measured: 0 to about 1.3 s after the first agent); a run of t_end 1 lasts about 1.3 s, and
 # in 2 of 28 runs one agent had not matched it before the end, so it had nothing to drop.
 ROGUE_T_END = 4.0
+RUN_ID = "31337"
 ROGUE = os.path.join(REPO, "test", "support", "rogue_publisher.py")
 # the foreign states' stamp: late in the realtime run (its t_end is one more), so that a reader
 # that took them would take them as agent 3's newest
@@ -41,7 +42,7 @@ FOREIGN_STAMP = 299
 def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     # the rogue outlives the longest run this test allows (30 s to start flooding + the run's
     # 150 s): it is still sending when the run ends, and the harness ends it by its PID
-    rogue = ros.start([PY, ROGUE, "polymatch", "3", "200"], timeout=210)
+    rogue = ros.start([PY, ROGUE, "polymatch", "3", "200", "--run-id", RUN_ID], timeout=210)
     deadline = time.monotonic() + 30                  # the flood is on before the run starts
     while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -49,6 +50,7 @@ def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     out = tmp_path / "final.npz"
     proc = ros.start(
         cli_argv("run", scene_path("congruent_triangles"), "--t-end", ROGUE_T_END,
+                 "--run-id", RUN_ID,  # the rogue's NaN messages carry it: checked, not trusted
                  "--integrator", "rkmk4", "--no-compare", "--save", out, "--timeout", 150, "-q",
                  "--round-timeout", 60,  # the flood is under test, not the timeout
                  "-k", 1),  # a process per agent: each one reads agent 3's stage topic
@@ -165,37 +167,45 @@ def _scene_file(path, group, shape, count, dimension, dt, t_end, **extra):
 
 
 def test_colcon_build_and_installed_executables_start(ros, tmp_path):
+    """colcon builds both packages of the repository, the interface package (ament_cmake,
+    rosidl) against the PyPI wheels as scripts/build-interfaces.sh does, and the node
+    executables it installs start."""
     colcon = os.path.join(os.path.dirname(PY), "colcon")
     if not os.path.exists(colcon):
         pytest.skip("colcon is not installed in this environment")
     ws = tmp_path / "ws"
     ws.mkdir()
+    venv = os.path.dirname(os.path.dirname(PY))
+    includes = subprocess.run(
+        [PY, "-c", "import sysconfig, numpy; "
+         "print(sysconfig.get_paths()['include'] + ';' + numpy.get_include())"],
+        capture_output=True, text=True, check=True).stdout.strip()
+    env = dict(os.environ, AMENT_PREFIX_PATH=venv,
+               PATH=f"{os.path.dirname(PY)}:{os.environ['PATH']}")
     build = subprocess.run(
-        [
-            "timeout",
-            "-k",
-            "5",
-            "300",
-            colcon,
-            "build",
-            "--base-paths",
-            REPO,
-            "--build-base",
-            str(ws / "build"),
-            "--install-base",
-            str(ws / "install"),
-        ],
-        cwd=ws,
-        capture_output=True,
-        text=True,
+        ["timeout", "-k", "5", "900", colcon, "build",
+         "--base-paths", REPO, os.path.join(REPO, "polymatch_interfaces"),
+         "--build-base", str(ws / "build"), "--install-base", str(ws / "install"),
+         "--cmake-args", f"-DCMAKE_PREFIX_PATH={venv}", f"-DPython3_EXECUTABLE={PY}",
+         "-DBUILD_TESTING=OFF",
+         f"-DCMAKE_PROJECT_INCLUDE={os.path.join(REPO, 'scripts', 'ros_wheels_python.cmake')}",
+         f"-DPYTHON_INCLUDE_DIRS={includes}"],
+        cwd=ws, env=env, capture_output=True, text=True,
     )
-    assert build.returncode == 0, build.stdout + build.stderr
+    assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
+    interfaces = ws / "install" / "polymatch_interfaces"
+    assert (interfaces / "share" / "polymatch_interfaces" / "msg" / "AgentState.msg").exists()
+    assert (interfaces / "lib" / "python3.11" / "site-packages" / "polymatch_interfaces" / "msg"
+            / "_agent_state.py").exists()
     prefix = ws / "install" / "polymatch_ros"
     exe = prefix / "lib" / "polymatch_ros"
     assert all((exe / name).exists() for name in ("agent", "monitor", "robot", "polymatch"))
     assert (prefix / "share" / "polymatch_ros" / "config" / "congruent_triangles.yaml").exists()
     site = prefix / "lib" / "python3.11" / "site-packages"
-    ros.env["PYTHONPATH"] = str(site)
+    # the agents import the colcon-built interfaces first (their libraries beside them)
+    iface_site = interfaces / "lib" / "python3.11" / "site-packages"
+    ros.env["PYTHONPATH"] = f"{site}:{iface_site}"
+    ros.env["LD_LIBRARY_PATH"] = f"{interfaces / 'lib'}:{ros.env.get('LD_LIBRARY_PATH', '')}"
     ros.env["AMENT_PREFIX_PATH"] = f"{prefix}:{ros.env.get('AMENT_PREFIX_PATH', '')}"
     scene = _scene_file(tmp_path / "one_agent.yaml", "solo", "tetrahedron", 1, 3, 0.1, 2.0)
     agent = ros.start(

@@ -1,7 +1,9 @@
 """`polymatch run` joins the user's ROS graph: a second shell with the same environment hears it.
 
 The domain the test reserves stands in for the user's: it is set in a user's shell's
-environment (ROS_DOMAIN_ID alone: none of polymatch's discovery range, transports or profile),
+environment (ROS_DOMAIN_ID, and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST as README asks of a
+second shell; none of polymatch's transports or profile; every process a test starts stays on
+loopback),
 `polymatch run` starts there without --isolated, and a plain rclpy process with that same
 environment (test/support/graph_reader.py, as `ros2 topic echo` in a second terminal) receives
 the diameter and the monitor's run records.  With --isolated the run is in a domain of its own:
@@ -21,10 +23,12 @@ SCENE = "congruent_triangles"
 
 
 def users_shell(domain):
-    """A user's shell: the test's environment without any ROS or DDS setting, ROS_DOMAIN_ID set."""
+    """A user's shell: the test's environment without any ROS or DDS setting but ROS_DOMAIN_ID
+    and loopback discovery (a test never sends DDS traffic beyond loopback)."""
     env = {k: v for k, v in os.environ.items()
            if not k.startswith(("ROS_", "FASTRTPS", "FASTDDS", "RMW_"))}
     env["ROS_DOMAIN_ID"] = str(domain)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     return env
 
 
@@ -38,7 +42,7 @@ def test_run_in_the_users_domain_is_heard_from_a_second_shell_theorem_4_2(ros):
     assert ros.wait(reader, 120) == 0, ros.output(reader)[-3000:] + ros.output(run)[-3000:]
     assert ros.wait(run, 120) == 0, ros.output(run)
     lines = [json.loads(x) for x in ros.output(reader).splitlines() if x.startswith("{")]
-    assert lines[0] == {"domain": str(ros.domain), "range": None}  # a plain shell's discovery
+    assert lines[0] == {"domain": str(ros.domain), "range": "LOCALHOST"}  # the shell's own
     diameters = [x["diameter"] for x in lines if "diameter" in x]
     roles = [x["status"] for x in lines if "status" in x]
     assert len(diameters) >= 3 and diameters[-1] < diameters[0], diameters

@@ -3,8 +3,8 @@
     python test/support/clock_probe.py POSE_TOPIC END_NS BOUND_S
 
 Prints ``CLOCK <ns>`` for every /clock message and ``POSE <ns>`` for every stamp on
-POSE_TOPIC (geometry_msgs/PoseStamped), until /clock reaches END_NS (then, after a short
-spin, ``NOW <ns> <ros time active>``: its own clock, which follows /clock) or BOUND_S
+POSE_TOPIC (geometry_msgs/PoseStamped), until /clock reaches END_NS (then, once the pose of
+END_NS came too, ``NOW <ns> <ros time active>``: its own clock, which follows /clock) or BOUND_S
 seconds pass (exit 3).
 """
 
@@ -31,8 +31,11 @@ def main():
         seen.append(ns)
         print(f"CLOCK {ns}", flush=True)
 
+    poses = []
+
     def on_pose(msg):
-        print(f"POSE {msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec}", flush=True)
+        poses.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+        print(f"POSE {poses[-1]}", flush=True)
 
     # as rclpy's time source reads /clock: newest only, best effort
     node.create_subscription(Clock, "/clock", on_clock,
@@ -44,7 +47,9 @@ def main():
             print("TIMEOUT", flush=True)
             return 3
         rclpy.spin_once(node, timeout_sec=0.1)
-    for _ in range(5):
+    # the last step's pose comes on another writer than its /clock: wait for it (5 s at most)
+    last = time.monotonic() + 5.0
+    while end_ns not in poses and time.monotonic() < last:
         rclpy.spin_once(node, timeout_sec=0.05)
     clock = node.get_clock()
     print(f"NOW {clock.now().nanoseconds} {clock.ros_time_is_active}", flush=True)

@@ -12,7 +12,7 @@ from benchmarks.hosts import runs as netns_run
 from benchmarks.hosts.runs import host_argv, lockstep_split
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import plan
-from polymatch_ros.ros.wire import run_records
+from polymatch_ros.ros.wire import echoed_run_records
 
 DEVIATION = re.compile(r"max vertex deviation (\S+)")
 
@@ -84,8 +84,7 @@ def status_records(procs, echo):
     """The monitor's run records among those ``polymatch echo`` of the status topic printed so
     far (the agents publish theirs there too)."""
     lines = procs.output(echo).splitlines()
-    records = run_records(line.partition("data: ")[2] for line in lines
-                          if line.startswith("data: "))
+    records = echoed_run_records(lines)
     return [r for r in records if r.role == "monitor"]
 
 

@@ -39,7 +39,7 @@ def swallow_first(publisher, block, step, stage):
     send, lost = publisher.publish, []
 
     def publish(msg):
-        head = tuple(int(v) for v in msg.data[2:5])
+        head = (msg.sender, msg.step, msg.stage)
         if head == (block, step, stage) and not lost:
             lost.append(head)
             return

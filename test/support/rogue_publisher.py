@@ -1,10 +1,11 @@
 """A rogue publisher for the robustness tests: floods one agent's topics.
 
-    python test/support/rogue_publisher.py ENSEMBLE AGENT SECONDS [STAMP]
+    python test/support/rogue_publisher.py ENSEMBLE AGENT SECONDS [STAMP] [--run-id ID]
 
 Sends, at ~100 Hz each: PoseStamped with NaN positions, PoseStamped with a quaternion of
-norm 2, lockstep stage rows with NaN data, a foreign run id, or no rows, agent states
-(``wire.exchange``) with NaN data or a foreign run id, and another run's final state on the
+norm 2, lockstep stage rows with NaN data (stamped with the run's id, ID: a rogue that knows
+it), a foreign run id, or no rows, agent states (``wire.exchange``) with NaN data (the run's id)
+or a foreign run id, and another run's final state on the
 latched ``final_state``.  With STAMP it sends instead, at 20 Hz, well-formed states
 of a 2-D agent far away (centroid (50, 0), rotation 0.3 rad) stamped STAMP (late in the run:
 newer than any real pose), on the agent's pose topic and on its exchange with a foreign run
@@ -45,7 +46,7 @@ def well_formed(pose, exchange, status, agent, stamp):
                                           np.array(FAR), np.array([ANGLE])))
 
 
-def malformed(pose, stage, exchange, final, agent, k):
+def malformed(pose, stage, exchange, final, agent, k, run_id):
     """NaN and non-unit poses, stages with NaN data, a foreign run id or no header, exchange
     messages with NaN data or a foreign run id, and another run's well-formed final state (far
     away, stamped t = 1) on the latched final exchange the runner summarises."""
@@ -59,22 +60,26 @@ def malformed(pose, stage, exchange, final, agent, k):
         p.pose.orientation.w = 2.0                      # quaternion far from unit norm
     pose.publish(p)
     fields = {"x": [0.0, 0.0], "rot": [math.nan if k % 2 else 0.3]}
-    msg = wire.encode_stage(StageRows(), FOREIGN_RUN if k % 2 == 0 else 0, agent, k, 0,
+    msg = wire.encode_stage(StageRows(), FOREIGN_RUN if k % 2 == 0 else run_id, agent, k, 0,
                             0, 0.0, fields)
     stage.publish(msg)
     stage.publish(StageRows(sender=agent, t=0.0))       # no rows at all
 
     grp = SO2()
     x = np.array([math.nan if k % 2 else 0.0, 0.0])
-    exchange.publish(wire.encode_exchange(AgentState(), grp, FOREIGN_RUN, agent, 0.0, x,
-                                          np.array([0.3])))
+    exchange.publish(wire.encode_exchange(AgentState(), grp, run_id if k % 2 else FOREIGN_RUN,
+                                          agent, 0.0, x, np.array([0.3])))
     final.publish(wire.encode_exchange(AgentState(), grp, FOREIGN_RUN, agent, 1.0,
                                        np.array(FAR), np.array([ANGLE])))
 
 
 def main():
-    ensemble, agent, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
-    stamp = float(sys.argv[4]) if len(sys.argv) > 4 else None
+    argv, run_id = sys.argv[1:], 0
+    if "--run-id" in argv:
+        i = argv.index("--run-id")
+        run_id, argv = int(argv[i + 1]), argv[:i] + argv[i + 2:]
+    ensemble, agent, seconds = argv[0], int(argv[1]), float(argv[2])
+    stamp = float(argv[3]) if len(argv) > 3 else None
     rclpy.init()
     node = Node("rogue")
     qos = wire.qos_profiles()
@@ -91,7 +96,7 @@ def main():
     k = 0
     while time.monotonic() < end:
         if stamp is None:
-            malformed(pose, stage, exchange, final, agent, k)
+            malformed(pose, stage, exchange, final, agent, k, run_id)
         else:
             well_formed(pose, exchange, status, agent, stamp)
         k += 1

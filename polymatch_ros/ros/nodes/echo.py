@@ -17,6 +17,7 @@ in).  Once the topic is heard and no --timeout was given, it prints until Ctrl-C
 from __future__ import annotations
 
 import importlib
+import json
 import os
 import sys
 import time
@@ -73,6 +74,22 @@ def message_to_lines(msg: Any, indent: str = "") -> list[str]:
     return lines
 
 
+def message_to_dict(msg: Any) -> dict[str, Any]:
+    """A ROS message as plain data (nested messages as dicts, arrays as lists): one JSON line
+    of ``polymatch echo --json``."""
+    out: dict[str, Any] = {}
+    for name in msg.get_fields_and_field_types():
+        value = getattr(msg, name)
+        if hasattr(value, "get_fields_and_field_types"):
+            out[name] = message_to_dict(value)
+        elif hasattr(value, "__len__") and not isinstance(value, (str, bytes)):
+            out[name] = [message_to_dict(v) if hasattr(v, "get_fields_and_field_types")
+                         else (v.item() if hasattr(v, "item") else v) for v in value]
+        else:
+            out[name] = value.item() if hasattr(value, "item") else value
+    return out
+
+
 def message_class(type_name: str) -> type:
     """'std_msgs/msg/Float64' -> the Python class."""
     pkg, _, cls = type_name.partition("/msg/")
@@ -83,7 +100,8 @@ class Echo:
     """Print every message of ``topic`` until --count, --until-below or --timeout (exit 1)."""
 
     def __init__(self, topic: str, count: int | None = None, until_below: float | None = None,
-                 timeout: float | None = None, stream: TextIO = sys.stdout) -> None:
+                 timeout: float | None = None, stream: TextIO = sys.stdout,
+                 as_json: bool = False) -> None:
         from rclpy.node import Node
 
         self.node = Node(f"echo_{os.getpid()}")
@@ -91,7 +109,7 @@ class Echo:
         # without --timeout: only the first message is waited for at most FIRST_MESSAGE_SECONDS
         self.bounded = timeout is not None
         self.timeout = timeout if timeout is not None else FIRST_MESSAGE_SECONDS
-        self.stream = stream
+        self.stream, self.as_json = stream, as_json
         self.deadline: float | None = time.monotonic() + self.timeout
         self.seen = 0
         self.done = False
@@ -125,7 +143,10 @@ class Echo:
         self.seen += 1
         if not self.bounded:
             self.deadline = None  # heard: print until --count, --until-below or Ctrl-C
-        self.stream.write("\n".join(message_to_lines(msg)) + "\n---\n")
+        if self.as_json:
+            self.stream.write(json.dumps(message_to_dict(msg)) + "\n")
+        else:
+            self.stream.write("\n".join(message_to_lines(msg)) + "\n---\n")
         self.stream.flush()
         if self.count is not None and self.seen >= self.count:
             self.done = True
@@ -159,10 +180,11 @@ class Echo:
 
 
 def echo(topic: str, count: int | None = None, until_below: float | None = None,
-         timeout: float | None = None, stream: TextIO = sys.stdout) -> int:
+         timeout: float | None = None, stream: TextIO = sys.stdout, as_json: bool = False) -> int:
     """Print the messages of ``topic`` (absolute) until ``count`` messages, a value below
     ``until_below``, or ``timeout`` seconds (an error; None: ``FIRST_MESSAGE_SECONDS`` without
     a message); the exit code."""
     return ros_main(
-        lambda argv: Echo(topic, count, until_below, timeout, stream), "polymatch", ["polymatch"]
+        lambda argv: Echo(topic, count, until_below, timeout, stream, as_json), "polymatch",
+        ["polymatch"]
     )

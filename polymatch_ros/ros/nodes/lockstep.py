@@ -97,8 +97,9 @@ class LockstepExchange:
             self.links = BlockLinks(self.node, resolver, layout, decode_rows, self._take, drops,
                                     patience.keep_rounds)
         else:
-            def decode(msg: Any, agent: int) -> tuple[wire.Stage | None, str | None]:
-                return wire.decode_stage(msg, grp, dim, self.run_id, agent, rot_tol, t_max)
+            def decode(msg: Any, agent: int) -> tuple[wire.StageRows | None, str | None]:
+                return wire.decode_agent_rows(msg, grp, dim, self.run_id, agent, rot_tol,
+                                              t_max)
 
             self.links = AgentLinks(self.node, resolver, layout, decode, self._take, drops,
                                     patience.keep_rounds)

@@ -150,7 +150,7 @@ class AgentLinks(_Links):
     """One stage topic per agent (a process of one agent)."""
 
     def __init__(self, node: Node, resolver: Node, layout: Layout,
-                 decode: Callable[[Any, int], tuple[wire.Stage | None, str | None]],
+                 decode: Callable[[Any, int], tuple[wire.StageRows | None, str | None]],
                  on_stage: OnStage, on_drop: OnDrop, keep: int = 2) -> None:
         super().__init__(node, resolver, layout, keep)
         rows_msg = wire.message_type("stage")
@@ -162,11 +162,11 @@ class AgentLinks(_Links):
 
         def receiver(agent: int) -> Callable[[Any], None]:
             def receive(msg: Any) -> None:
-                stage, reason = decode(msg, agent)
-                if stage is None:
+                rows, reason = decode(msg, agent)
+                if rows is None:
                     on_drop(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
                 else:
-                    on_stage(wire.StageRows.of(stage))
+                    on_stage(rows)
 
             return receive
 

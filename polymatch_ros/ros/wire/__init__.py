@@ -13,6 +13,7 @@ from .codec import (
     STAMP_SLACK,
     Stage,
     StageRows,
+    decode_agent_rows,
     decode_block,
     decode_stage,
     encode_block,
@@ -46,7 +47,7 @@ from .motion import (
     twist_message,
     twist_to_state,
 )
-from .record import RECORD_KEY, RunRecord, drop_summary, run_records
+from .record import RECORD_KEY, RunRecord, drop_summary, echoed_run_records, run_records
 from .topics import (
     DEFAULT_ENSEMBLE,
     TOPICS,

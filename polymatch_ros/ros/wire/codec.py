@@ -311,12 +311,20 @@ def _stage_rows(msg: Any, grp: RotationGroup, dim: int, run_id: int, sender: int
                      None if x is None else x.copy(), None if v is None else v.copy()), None
 
 
+def decode_agent_rows(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: int,
+                      rot_tol: float = ROTATION_TOL,
+                      t_max: float | None = None) -> tuple[StageRows | None, str | None]:
+    """One agent's StageRows message -> (its single row, None) or (None, reason): what a
+    lockstep process of one agent takes from each peer."""
+    return _stage_rows(msg, grp, dim, run_id, agent, rot_tol, t_max,
+                       lambda agents: len(agents) == 1 and agents[0] == agent)
+
+
 def decode_stage(msg: Any, grp: RotationGroup, dim: int, run_id: int, agent: int,
                  rot_tol: float = ROTATION_TOL,
                  t_max: float | None = None) -> tuple[Stage | None, str | None]:
     """One agent's StageRows message -> (Stage, None) or (None, reason)."""
-    rows, reason = _stage_rows(msg, grp, dim, run_id, agent, rot_tol, t_max,
-                               lambda agents: len(agents) == 1 and agents[0] == agent)
+    rows, reason = decode_agent_rows(msg, grp, dim, run_id, agent, rot_tol, t_max)
     if rows is None:
         return None, reason
     return Stage(agent, rows.step, rows.stage, rows.flags, rows.t,

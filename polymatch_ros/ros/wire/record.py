@@ -202,3 +202,27 @@ def run_records(lines: Iterable[str]) -> list[RunRecord]:
         if rec is not None:
             out.append(rec)
     return out
+
+
+def echoed_run_records(lines: Iterable[str]) -> list[RunRecord]:
+    """Every run record among ``lines`` that ``polymatch echo --json`` printed of a ``status``
+    topic (a ``RunRecord`` message a line), in order; other lines are passed over."""
+    from types import SimpleNamespace
+
+    def attributes(value: Any) -> Any:
+        if isinstance(value, dict):
+            return SimpleNamespace(**{k: attributes(v) for k, v in value.items()})
+        if isinstance(value, list):
+            return [attributes(v) for v in value]
+        return value
+
+    out = []
+    for line in lines:
+        try:
+            data = json.loads(line)
+        except ValueError:
+            continue
+        rec = RunRecord.from_msg(attributes(data)) if isinstance(data, dict) else None
+        if rec is not None:
+            out.append(rec)
+    return out
