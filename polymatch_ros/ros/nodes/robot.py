@@ -7,8 +7,9 @@ It receives ``cmd_vel`` (geometry_msgs/TwistStamped, or Twist with ``cmd_type:=t
 or body frame), tracks it with a first-order actuator lag (time constant ``lag``) under the
 speed limits, integrates its pose at ``rate`` Hz and publishes it with Gaussian noise on
 ``measured_pose`` (PoseStamped or nav_msgs/Odometry): the topics a real robot offers and
-receives.  It starts at agent ``agent``'s initial pose of the scene.  A robot without a command
-for ``cmd_timeout`` s stops by itself, as robot drivers do.
+receives.  It starts at agent ``agent``'s initial pose of the scene.  A robot applies a command
+for at most ``cmd_timeout`` s after it came (within a step too: the step's rest is braking) and
+then stops by itself, as robot drivers do.
 
 For a second-order scene (A-1) the robot is a double integrator: it receives ``cmd_accel``
 (geometry_msgs/AccelStamped, world or body frame), its acceleration tracks the command with the
@@ -273,19 +274,27 @@ class RobotNode:
             now = time.monotonic()
             if now - last < period:
                 continue
-            linear, angular, heard = self.command
-            dt, frame = min(now - last, 5 * period), self.params["command_frame"]
-            if now - heard > self.params["cmd_timeout"]:  # the watchdog: velocity to zero
-                self.robot.step(dt, np.zeros(3), np.zeros(3))
-            elif self.second_order:
-                self.robot.accelerate(dt, linear, angular, frame)
-            elif self.params["drive"] == "unicycle":
-                self.robot.roll(dt, linear[0], angular[2])
-            else:
-                self.robot.step(dt, linear, angular, frame)
+            self._advance(min(now - last, 5 * period), now)
             last = now
             self._publish()
         return 0
+
+    def _advance(self, dt: float, now: float) -> None:
+        """Move the robot over the ``dt`` s before ``now`` (monotonic): the last command while
+        it is younger than ``cmd_timeout``, then the watchdog's stop (velocity to zero with the
+        lag) for the rest of the step."""
+        linear, angular, heard = self.command
+        valid = min(dt, max(0.0, heard + self.params["cmd_timeout"] - (now - dt)))
+        if valid > 0.0:
+            frame = self.params["command_frame"]
+            if self.second_order:
+                self.robot.accelerate(valid, linear, angular, frame)
+            elif self.params["drive"] == "unicycle":
+                self.robot.roll(valid, linear[0], angular[2])
+            else:
+                self.robot.step(valid, linear, angular, frame)
+        if dt - valid > 0.0:
+            self.robot.step(dt - valid, np.zeros(3), np.zeros(3))
 
     def destroy(self) -> None:
         if self.pose_log is not None:
