@@ -15,17 +15,25 @@ constraint holds when both do:
                                            + 2 alpha h' + alpha^2 h) / 2
         (h'' + 2 alpha h' + alpha^2 h >= 0: the barrier of h' + alpha h, relative degree two)
 
-A robot does not apply its command in continuous time: it is held for one command period T,
-reaches the robot through the actuator's lag, and is computed against peers' positions as old as
-their stamps.  So the barrier is evaluated where the robots will be when the command acts
-(``horizon`` = T + latency ahead): every peer is predicted with its velocity over its age plus
-the horizon (second order: the robot's own position too), and each pair's distance 2 r is
-widened by ``reach_j`` = |v_j - v_i| horizon, what the pair can close within a horizon that the
-linear prediction misses (``predicted_barrier``).
+A robot does not apply its command in continuous time: it is held for at most one command period
+T (the robot brakes if no newer one comes), reaches the robot through the actuator's lag, and is
+computed against peers' positions as old as their stamps.  So each peer is taken where it may
+be when the command acts, ``horizon`` = T + latency ahead (``bounded_peers``): its position at
+its stamp and the disc of what it can travel in its age plus the horizon, tau_j.  First order
+(no peer velocity is sent) the disc is the robots' speed bound times tau_j; second order the
+peer is predicted with the velocity it sent (this robot ``horizon`` ahead with its own), and
+the disc is what the pair can close within a horizon that the linear prediction misses,
+|v_j - v_i| horizon, plus the drift from the prediction within tau_j under the acceleration
+and speed bounds.  A peer older than ``stale`` whose disc reaches this robot's is not filtered
+against but waited for: the agent holds its robot (the caller's fallback command).
 
 The quadratic programme min |u - u_model|^2 subject to these is solved by DAQP (a dual
 active-set solver: exact on these few-variable problems).  ``SafetyFilter.filter`` says when
-the command changed, and a ``DeadlockWatch`` when the filter has held a robot still while the
+the command changed.  Robots held short of their places by one another (the closest admissible
+command almost still while the model's is not) sidestep in the plane: the admissible command
+closest to the model's turned ``SIDESTEP`` clockwise is taken when it moves the robot more (a
+right-hand rule, every robot turning the same way, so that a knot of robots circulates);
+a ``DeadlockWatch`` says when the filter has held a robot still while the
 model still asks it to move (robots held apart, the formation not reached).
 """
 
@@ -45,6 +53,10 @@ SAFETY_KEYS = ("radius", "alpha")
 #: a command moved by less than this (relative to max(1, |u_model|)) is unchanged
 UNCHANGED = 1e-9
 _INF = 1e30     # DAQP's "no bound"
+#: a robot the filter holds (planar) tries its model command turned this far clockwise (rad)
+SIDESTEP = math.pi / 3
+#: held: the model's command at least MOVING (m/s or m/s^2), the filtered one below SHARE of it
+MOVING, SHARE = 1e-2, 0.1
 
 
 @dataclass(frozen=True)
@@ -129,16 +141,52 @@ def least_violation(nominal: np.ndarray, rows: np.ndarray, lower: np.ndarray,
     return None if exitflag < 1 else np.asarray(x[:d], dtype=float)
 
 
-def predicted_barrier(p: np.ndarray, peers: np.ndarray, ages: np.ndarray, horizon: float,
-                      v: np.ndarray, peer_v: np.ndarray,
-                      own_ahead: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(own position, peers' positions, reach) where the command will act (module doc): the
-    peers ``ages`` (k,) + ``horizon`` s ahead with ``peer_v`` (k, d), this robot ``horizon``
-    ahead with ``v`` when ``own_ahead``, and reach_j = |v_j - v| horizon."""
-    lead = np.maximum(np.asarray(ages, dtype=float), 0.0) + horizon
-    ahead = peers + peer_v * lead[:, None]
-    own = p + v * horizon if own_ahead else p
-    return own, ahead, np.linalg.norm(peer_v - v[None, :], axis=1) * horizon
+@dataclass(frozen=True)
+class PeerSight:
+    """What an agent knows of its peers when it commands: ``positions`` (k, d) at their stamps,
+    ``ages`` (k,) (s from each stamp to the command, on one clock), and the ``velocities``
+    (k, d) sent with the positions (second order) or None (first order)."""
+
+    positions: np.ndarray
+    ages: np.ndarray
+    velocities: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class MotionBounds:
+    """What the filter assumes of the robots: a command acts ``horizon`` s (one command period
+    plus the latency to the robot); their ``speed`` (m/s) and ``accel`` (m/s^2) bounds; a peer
+    older than ``stale`` s is waited for, not filtered against."""
+
+    horizon: float
+    speed: float
+    accel: float = math.inf
+    stale: float = 0.5
+
+
+def bounded_peers(p: np.ndarray, v: np.ndarray | None, sight: PeerSight,
+                  bounds: MotionBounds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(own position, peers' positions, reach (k,)) where the command will act (module doc):
+    ``v`` this robot's velocity (second order), None for first order."""
+    tau = np.maximum(np.asarray(sight.ages, dtype=float), 0.0) + bounds.horizon
+    if v is None or sight.velocities is None:
+        return np.asarray(p, float), np.asarray(sight.positions, float), bounds.speed * tau
+    peer_v = np.asarray(sight.velocities, dtype=float)
+    ahead = sight.positions + peer_v * tau[:, None]
+    closing = np.linalg.norm(peer_v - v[None, :], axis=1) * bounds.horizon
+    drift = np.minimum(0.5 * bounds.accel * tau ** 2,
+                       (bounds.speed + np.linalg.norm(peer_v, axis=1)) * tau)
+    return p + v * bounds.horizon, ahead, closing + drift
+
+
+def stale_nearby(own: np.ndarray, ahead: np.ndarray, reach: np.ndarray, ages: np.ndarray,
+                 spec: SafetySpec, bounds: MotionBounds) -> bool:
+    """Whether a peer older than ``bounds.stale`` may be within its reach of this robot."""
+    old = np.asarray(ages, dtype=float) > bounds.stale
+    if not np.any(old):
+        return False
+    gap = np.linalg.norm(ahead[old] - own[None, :], axis=1)
+    return bool(np.any(gap < 2.0 * spec.radius + reach[old] + bounds.speed * bounds.horizon))
 
 
 def filter_command(nominal: np.ndarray, p: np.ndarray, peers: np.ndarray, spec: SafetySpec,
@@ -162,22 +210,45 @@ def filter_command(nominal: np.ndarray, p: np.ndarray, peers: np.ndarray, spec: 
     return Filtered(u if moved else nominal, moved, active)
 
 
+def is_held(nominal: np.ndarray, filtered: Filtered, moving: float = MOVING,
+            share: float = SHARE) -> bool:
+    """Whether the filter holds the robot: the model's command at least ``moving``, the
+    filtered one changed and below ``share`` of it."""
+    want = float(np.linalg.norm(nominal))
+    return bool(filtered.changed and want >= moving
+                and float(np.linalg.norm(filtered.value)) < share * want)
+
+
+def sidestep_command(nominal: np.ndarray, p: np.ndarray, peers: np.ndarray, spec: SafetySpec,
+                     fallback: np.ndarray, v: np.ndarray | None = None,
+                     peer_v: np.ndarray | None = None,
+                     reach: np.ndarray | None = None) -> Filtered:
+    """``filter_command``, and in the plane, when it holds the robot, the admissible command
+    closest to the model's turned ``SIDESTEP`` clockwise if that one moves it more."""
+    got = filter_command(nominal, p, peers, spec, fallback, v, peer_v, reach)
+    if len(nominal) != 2 or not is_held(nominal, got):
+        return got
+    c, s = math.cos(SIDESTEP), math.sin(SIDESTEP)
+    turned = np.array([[c, s], [-s, c]]) @ np.asarray(nominal, dtype=float)
+    other = filter_command(turned, p, peers, spec, fallback, v, peer_v, reach)
+    if other.infeasible or np.linalg.norm(other.value) <= np.linalg.norm(got.value):
+        return got
+    return Filtered(other.value, True, other.active)
+
+
 class DeadlockWatch:
     """Says when the filter has held a robot for ``hold`` s: every command changed, the model's
     linear command at least ``moving`` (m/s or m/s^2) and the filtered one below ``share`` of it
     (robots held apart while the formation is not reached)."""
 
-    def __init__(self, hold: float = 2.0, moving: float = 1e-2, share: float = 0.1) -> None:
+    def __init__(self, hold: float = 2.0, moving: float = MOVING, share: float = SHARE) -> None:
         self.hold, self.moving, self.share = hold, moving, share
         self.since: float | None = None
         self.deadlocked = False
 
     def update(self, t: float, nominal: np.ndarray, filtered: Filtered) -> bool:
         """Take one tick; True when the deadlock state changed."""
-        want = float(np.linalg.norm(nominal))
-        held = (filtered.changed and want >= self.moving
-                and float(np.linalg.norm(filtered.value)) < self.share * want)
-        if not held:
+        if not is_held(nominal, filtered, self.moving, self.share):
             self.since = None
         elif self.since is None:
             self.since = t

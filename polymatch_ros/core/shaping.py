@@ -6,10 +6,11 @@ x_i = q_i - origin - c_i, q_i the robot's position, or on a differential-drive b
 with a scene's ``safety`` (or the agent's ``safety_radius``) the linear part is filtered
 against every heard peer's position (``safety``; on a unicycle base the discs around the points
 ahead have radius r + ell, which cover the robots' own discs of radius r); on a unicycle base
-the filtered velocity of the point ahead becomes (v, omega).  The filter looks ``horizon`` s
-ahead (one command period plus the latency to the robot) with every peer predicted over the age
-of its stamp (``safety.predicted_barrier``): second order with the velocities the peers send,
-first order with velocities estimated from their successive stamped positions.  No ROS here.
+the filtered velocity of the point ahead becomes (v, omega).  The filter takes every peer ever
+heard (a peer dropped from the model's sums after its silence is still somewhere in the room),
+each where it may be when the command acts (``safety.bounded_peers``: its stamp's age, one
+command period and the latency to the robot, the robots' speed and acceleration bounds); a
+peer too old to bound that is near holds the robot (``safety.stale_nearby``).  No ROS here.
 """
 
 from __future__ import annotations
@@ -30,10 +31,21 @@ from .command import (
 )
 from .errors import ParameterError
 from .model import System
-from .safety import DeadlockWatch, Filtered, SafetySpec, filter_command, predicted_barrier
+from .safety import (
+    DeadlockWatch,
+    Filtered,
+    MotionBounds,
+    PeerSight,
+    SafetySpec,
+    bounded_peers,
+    sidestep_command,
+    stale_nearby,
+)
 from .unicycle import point_ahead, unicycle_command
 
 DRIVES = ("holonomic", "unicycle")
+#: a speed limit this large is none (the parameters' default)
+UNBOUNDED = 1e6
 
 
 def heading_of(rot: np.ndarray) -> float:
@@ -46,7 +58,7 @@ class CommandShaper:
 
     def __init__(self, scene: Any, agent: int, drive: str = "holonomic",
                  axle_offset: float = 0.2, safety: SafetySpec | None = None,
-                 horizon: float = 0.1) -> None:
+                 bounds: MotionBounds | None = None) -> None:
         model = scene.model
         if drive not in DRIVES:
             raise ParameterError(f"drive {drive!r}: expected holonomic or unicycle")
@@ -60,12 +72,11 @@ class CommandShaper:
         spec = safety if safety is not None else scene.safety
         if spec is not None and drive == "unicycle":
             spec = replace(spec, radius=spec.radius + axle_offset)
-        self.safety, self.horizon = spec, horizon
-        self.heard: dict[int, tuple[float, np.ndarray]] = {}  # peer -> (stamp, world position)
-        self.speeds: dict[int, np.ndarray] = {}  # first order: peer -> estimated velocity
+        self.safety = spec
+        self.bounds = bounds if bounds is not None else MotionBounds(0.1, 1e6)
         self.last_linear = np.zeros(model.dim)   # first order: the command being held
         self.watch = DeadlockWatch()
-        self.changed = self.infeasible = 0
+        self.changed = self.infeasible = self.held = 0
 
     def offset(self, agent: int) -> np.ndarray | float:
         return 0.0 if self.offsets is None else self.offsets[agent]
@@ -77,66 +88,35 @@ class CommandShaper:
             q = point_ahead(q, heading_of(rot), self.ell)
         return q - self.origin - self.offset(self.agent)
 
-    def peers(self, ensemble: Sequence[Any],
-              with_v: bool) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        """World positions (k, d) (relative to origin), ``with_v`` velocities, and the agent
-        numbers (k,) of every heard agent but this one."""
-        pos, vel, ids = [], [], []
-        for g, e in zip(self.model.groups, ensemble):
-            if e is None or e.x is None:
-                continue
-            rows = np.arange(len(e.x)) if getattr(e, "index", None) is None \
-                else np.asarray(e.index)
-            agents = g.start + rows
-            keep = agents != self.agent
-            shift = 0.0 if self.offsets is None else self.offsets[agents[keep]]
-            pos.append(e.x[keep] + shift)
-            ids.append(agents[keep])
-            if with_v:
-                vel.append(np.zeros_like(e.x[keep]) if getattr(e, "v", None) is None
-                           else e.v[keep])
-        empty = np.zeros((0, self.model.dim))
-        return (np.concatenate(pos) if pos else empty,
-                (np.concatenate(vel) if vel else empty) if with_v else None,
-                np.concatenate(ids) if ids else np.zeros(0, dtype=int))
+    def sight(self, agents: Sequence[int], x: np.ndarray, ages: np.ndarray,
+              v: np.ndarray | None = None) -> PeerSight:
+        """The peers ``agents`` (this one left out) at their states ``x`` (k, d; formation
+        coordinates), ``ages`` (k,) s old, with velocities ``v`` (second order) as the filter
+        takes them (world positions relative to the origin)."""
+        ids = np.asarray(agents, dtype=int)
+        keep = ids != self.agent
+        shift = 0.0 if self.offsets is None else self.offsets[ids[keep]]
+        dim = self.model.dim
+        return PeerSight(np.asarray(x, float).reshape(-1, dim)[keep] + shift,
+                         np.asarray(ages, float)[keep],
+                         None if v is None else np.asarray(v, float).reshape(-1, dim)[keep])
 
-    def _estimated_speeds(self, peers: np.ndarray, ids: np.ndarray,
-                          stamps: Mapping[int, float]) -> np.ndarray:
-        """First order: each peer's velocity from its last two stamped positions (zero until
-        two were heard, or after a gap over 1 s)."""
-        out = np.zeros_like(peers)
-        for k, agent in enumerate(int(a) for a in ids):
-            t = stamps.get(agent)
-            if t is None:
-                continue
-            before = self.heard.get(agent)
-            if before is not None and t > before[0]:
-                lapse = t - before[0]
-                self.speeds[agent] = ((peers[k] - before[1]) / lapse if lapse <= 1.0
-                                      else np.zeros_like(peers[k]))
-            if before is None or t > before[0]:
-                self.heard[agent] = (t, peers[k].copy())
-            out[k] = self.speeds.get(agent, 0.0)
-        return out
-
-    def _filter(self, t: float, nominal: np.ndarray, own_x: np.ndarray, ensemble: Sequence[Any],
-                fallback: np.ndarray, v: np.ndarray | None = None,
-                stamps: Mapping[int, float] | None = None) -> np.ndarray:
-        """The filtered linear command (counts changes, infeasible programmes, deadlocks);
-        ``stamps`` the peers' stamp times (agent -> s, the clock of ``t``), for their ages."""
-        if self.safety is None:
+    def _filter(self, t: float, nominal: np.ndarray, own_x: np.ndarray,
+                sight: PeerSight | None, fallback: np.ndarray, v: np.ndarray | None = None,
+                own_age: float = 0.0) -> np.ndarray:
+        """The filtered linear command (counts changes, infeasible programmes, holds and
+        deadlocks); ``own_age`` s since the own pose was measured."""
+        if self.safety is None or sight is None or len(sight.ages) == 0:
             return nominal
-        second = v is not None
-        peers, peer_v, ids = self.peers(ensemble, second)
-        stamps = stamps or {}
-        if peer_v is None:
-            peer_v = self._estimated_speeds(peers, ids, stamps)
-        ages = np.array([t - stamps.get(int(a), t) for a in ids])
-        own_v = self.last_linear if v is None else v
-        own, ahead, reach = predicted_barrier(own_x + self.offset(self.agent), peers, ages,
-                                              self.horizon, own_v, peer_v, own_ahead=second)
-        got: Filtered = filter_command(nominal, own, ahead, self.safety, fallback, v,
-                                       peer_v if second else None, reach)
+        moving = self.last_linear if v is None else v
+        p = own_x + self.offset(self.agent) + moving * max(own_age, 0.0)
+        own, ahead, reach = bounded_peers(p, v, sight, self.bounds)
+        if stale_nearby(own, ahead, reach, sight.ages, self.safety, self.bounds):
+            got = Filtered(np.asarray(fallback, dtype=float), True, 0)
+            self.held += 1
+        else:
+            got = sidestep_command(nominal, own, ahead, self.safety, fallback, v,
+                                   None if v is None else sight.velocities, reach)
         self.changed += got.changed
         self.infeasible += got.infeasible
         self.watch.update(t, nominal, got)
@@ -144,22 +124,22 @@ class CommandShaper:
 
     def command(self, system: System, gi: int, row: int, ensemble: Sequence[Any],
                 own: Any, rot: np.ndarray, t: float, p: dict[str, Any],
-                stamps: Mapping[int, float] | None = None) -> Twist:
+                sight: PeerSight | None = None, own_age: float = 0.0) -> Twist:
         """The command of local row ``row`` of group gi (first order: a twist; second order: an
-        acceleration), ``own`` the measured state (x, rot, v, w), ``rot`` its matrix,
-        ``stamps`` the heard peers' stamp times (``_filter``)."""
+        acceleration), ``own`` the measured state (x, rot, v, w) measured ``own_age`` s ago,
+        ``rot`` its matrix, ``sight`` the peers for the safety filter (``sight``)."""
         coupling = system.couple(ensemble, first_stage=True)
         x, own_rot = own.x[None], own.rot
         if self.model.order == 2:
             accel, w_dot = model_accelerations(system, gi, x, own_rot, own.v[None], own.w,
                                                coupling)
             brake = -(self.model.gamma / self.model.mass) * own.v
-            linear = self._filter(t, accel[0], own.x, ensemble, brake, own.v, stamps)
+            linear = self._filter(t, accel[0], own.x, sight, brake, own.v, own_age)
             return twist_command(linear, w_dot[0], rot, p["command_frame"],
                                  p["max_linear_accel"], p["max_angular_accel"])
         velocity, skew = model_rates(system, gi, x, own_rot, coupling)
-        linear = self._filter(t, velocity[0], own.x, ensemble, np.zeros_like(velocity[0]),
-                              stamps=stamps)
+        linear = self._filter(t, velocity[0], own.x, sight, np.zeros_like(velocity[0]),
+                              own_age=own_age)
         self.last_linear = linear
         if self.drive == "unicycle":
             return self._unicycle(linear, rot, p["max_linear_speed"], p["max_angular_speed"])
@@ -183,19 +163,36 @@ class CommandShaper:
         if self.safety is None:
             return {}
         return {"safety_changed": self.changed, "safety_infeasible": self.infeasible,
+                "safety_held_for_stale_peers": self.held,
                 "safety_deadlock": "yes" if self.watch.deadlocked else "no"}
 
 
-def shaper_for(scene: Any, agent: int, params: dict[str, Any]) -> CommandShaper:
+def motion_bounds(params: Mapping[str, Any]) -> MotionBounds:
+    """What the filter assumes of the robots, from a bridged agent's parameters: a command acts
+    one period (``rate``) plus ``safety_latency``; the robots' speed bound ``max_linear_speed``
+    (on a unicycle base the point ahead's: hypot(v, axle_offset omega) at the limits), their
+    acceleration bound ``max_linear_accel``, and ``safety_stale``."""
+    speed = float(params.get("max_linear_speed", 1e6))
+    if params.get("drive", "holonomic") == "unicycle":
+        speed = math.hypot(speed, params.get("axle_offset", 0.2)
+                           * params.get("max_angular_speed", 1e6))
+    return MotionBounds(1.0 / params.get("rate", 20.0) + params.get("safety_latency", 0.05),
+                        speed, float(params.get("max_linear_accel", 1e6)),
+                        float(params.get("safety_stale", 0.5)))
+
+
+def shaper_for(scene: Any, agent: int, params: Mapping[str, Any]) -> CommandShaper:
     """The shaper of a bridged agent's parameters: ``drive``, ``axle_offset``, and
     ``safety_radius`` / ``safety_alpha`` (0: the scene's ``safety``, alpha 1 without one), and
-    the filter's horizon: one command period (``rate``) plus ``safety_latency``."""
+    what the filter assumes of the robots (``motion_bounds``)."""
     spec = scene.safety
     radius, alpha = params.get("safety_radius", 0.0), params.get("safety_alpha", 0.0)
     if radius > 0:
         spec = SafetySpec(radius, alpha if alpha > 0 else (spec.alpha if spec else 1.0))
     elif spec is not None and alpha > 0:
         spec = replace(spec, alpha=alpha)
+    if spec is not None and not params.get("max_linear_speed", UNBOUNDED) < UNBOUNDED:
+        raise ParameterError("the safety filter needs the robots' speed bound: "
+                             "max_linear_speed (m/s; polymatch run --max-linear-speed)")
     return CommandShaper(scene, agent, params.get("drive", "holonomic"),
-                         params.get("axle_offset", 0.2), spec,
-                         1.0 / params.get("rate", 20.0) + params.get("safety_latency", 0.05))
+                         params.get("axle_offset", 0.2), spec, motion_bounds(params))

@@ -34,7 +34,7 @@ AGENT_NAMES = [
     "pose_subscribers", "exchange_subscribers", "frame_id", "max_linear_speed",
     "max_angular_speed", "max_linear_accel", "max_angular_accel", "pose_timeout", "pose_type",
     "cmd_type", "command_frame", "drive", "axle_offset", "safety_radius", "safety_alpha",
-    "safety_latency", "run_id",
+    "safety_latency", "safety_stale", "run_id",
 ]
 MONITOR_NAMES = ["scene", "mode", "rate", "report_rate", "peer_timeout", "frame_id", "markers",
                  "t_end", "run_id", "agents_per_process", "report_readers"]
@@ -109,6 +109,7 @@ RANGE_CASES = [
     ("agent", "safety_radius", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("agent", "safety_alpha", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("agent", "safety_latency", 0.0, 10.0, -1e-9, 10.000001, "[0, 10]"),
+    ("agent", "safety_stale", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("monitor", "rate", 0.01, 1e4, 0.0099, 10000.01, "[0.01, 10000]"),
     ("monitor", "report_rate", 0.01, 1e4, 0.0099, 10000.01, "[0.01, 10000]"),
     ("monitor", "peer_timeout", 0.001, 1e6, 0.00099, 1.000001e6, "[0.001, 1e+06]"),

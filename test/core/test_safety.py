@@ -12,11 +12,14 @@ from scipy.optimize import minimize
 from polymatch_ros.core.errors import SceneError
 from polymatch_ros.core.safety import (
     DeadlockWatch,
+    MotionBounds,
+    PeerSight,
     SafetySpec,
     barrier_rows,
+    bounded_peers,
     filter_command,
     parse_safety,
-    predicted_barrier,
+    stale_nearby,
 )
 
 SPEC = SafetySpec(radius=0.5, alpha=2.0)
@@ -119,40 +122,49 @@ def test_safety_key_is_validated_in_one_line():
         parse_safety({"radius": 0.3, "alpha": -1.0})
 
 
-def _sampled_loop(look_ahead, seed, n=8, period=0.05, lag=0.05, age=0.1, t_end=10.0, dt=0.005):
-    """The bridge's loop without ROS: each agent commands at 1/period Hz (its own phase) and
-    holds the command; each robot's velocity follows it with the lag; the agent sees its peers'
-    positions ``age`` s old (their last published tick).  Robots pulled to a circle formation
-    through one another; the smallest true distance over the run."""
+def _sampled_loop(bounded, seed, n=8, period=0.05, lag=0.05, age=0.1, t_end=8.0, dt=0.005,
+                  stall=0.4):
+    """The bridge's loop without ROS: each agent commands at 1/period Hz (its own phase); its
+    robot applies a command for one period, then brakes, its velocity following with the lag;
+    the agent sees its peers' positions ``age`` s old; every second one agent stalls for
+    ``stall`` s (commands nothing: its peers hear nothing newer of it).  Robots pulled to a
+    circle formation through one another; the smallest true distance over the run."""
     rng = np.random.default_rng(seed)
     p = rng.uniform(-4, 4, (n, 2))
     while min(np.linalg.norm(p[i] - p[j]) for i in range(n) for j in range(i)) < 0.7:
         p = rng.uniform(-4, 4, (n, 2))
     places = 1.5 * np.stack([np.cos(np.arange(n) * 2 * np.pi / n),
                              np.sin(np.arange(n) * 2 * np.pi / n)], axis=1)
-    spec = SafetySpec(radius=0.3, alpha=2.0)
-    v, cmd = np.zeros_like(p), np.zeros_like(p)
+    spec, speed = SafetySpec(radius=0.3, alpha=2.0), 1.0
+    bounds = MotionBounds(horizon=period + lag, speed=speed)
+    v, cmd, sent = np.zeros_like(p), np.zeros_like(p), np.zeros(n)
     due = rng.uniform(0, period, n)
+    stamps, known = np.zeros(n), p.copy()      # what the peers last published, and when
     history = [(0.0, p.copy())]
     closest, t = np.inf, 0.0
     while t < t_end:
-        seen_t = max((h for h in history if h[0] <= t - age), key=lambda h: h[0],
-                     default=history[0])
-        older = max((h for h in history if h[0] <= seen_t[0] - period), key=lambda h: h[0],
-                    default=seen_t)
+        stalled = int(t) % n if t % 1.0 < stall else -1
+        seen = max((h for h in history if h[0] <= t - age), key=lambda h: h[0],
+                   default=history[0])
         for i in np.flatnonzero(due <= t):
             due[i] += period
-            peers = np.delete(seen_t[1], i, axis=0)
-            nominal = np.mean(seen_t[1] - places, axis=0) - (p[i] - places[i])
-            if not look_ahead:
-                cmd[i] = filter_command(nominal, p[i], peers, spec, np.zeros(2)).value
+            if i == stalled:
                 continue
-            lapse = seen_t[0] - older[0]
-            peer_v = (peers - np.delete(older[1], i, axis=0)) / lapse if lapse > 0 else 0 * peers
-            own, ahead, reach = predicted_barrier(p[i], peers, np.full(n - 1, t - seen_t[0]),
-                                                  period + lag, cmd[i], peer_v, own_ahead=False)
-            cmd[i] = filter_command(nominal, own, ahead, spec, np.zeros(2), reach=reach).value
-        v += (dt / lag) * (cmd - v)
+            stamps[i], known[i] = seen[0], seen[1][i]      # i's pose as its peers get it
+            peers = np.delete(known, i, axis=0)
+            nominal = np.mean(known - places, axis=0) - (p[i] - places[i])
+            if bounded:
+                sight = PeerSight(peers, t - np.delete(stamps, i))
+                own, ahead, reach = bounded_peers(p[i], None, sight, bounds)
+                cmd[i] = filter_command(nominal, own, ahead, spec, np.zeros(2),
+                                        reach=reach).value
+            else:
+                cmd[i] = filter_command(nominal, p[i], peers, spec, np.zeros(2)).value
+            norm = np.linalg.norm(cmd[i])
+            cmd[i] *= min(1.0, speed / norm) if norm > 0 else 1.0
+            sent[i] = t
+        target = np.where((t - sent <= period)[:, None], cmd, 0.0)   # the robots' watchdog
+        v += (dt / lag) * (target - v)
         p = p + dt * v
         t += dt
         history.append((t, p.copy()))
@@ -162,12 +174,45 @@ def _sampled_loop(look_ahead, seed, n=8, period=0.05, lag=0.05, age=0.1, t_end=1
     return closest
 
 
-def test_held_lagged_commands_against_stale_peers_keep_two_radii_only_when_looking_ahead():
-    """The barrier's claim for a sampled loop (commands held 0.05 s, actuator lag 0.05 s, peers
-    seen 0.1 s late): the plain filter lets robots closer than 2 r; with the peers predicted
-    over their age and the horizon, and the pairs widened by their reach (predicted_barrier),
-    the brute-force smallest distance stays >= 2 r."""
+def test_held_lagged_commands_against_stale_peers_keep_two_radii_with_bounded_peers():
+    """The barrier's claim for a sampled loop (commands held one period 0.05 s then braked,
+    actuator lag 0.05 s, peers seen 0.1 s late, agents stalling 0.4 s): the plain filter lets
+    robots closer than 2 r; with every peer taken as the disc it can reach in its age and the
+    horizon (bounded_peers), the brute-force smallest distance stays >= 2 r."""
     plain = [_sampled_loop(False, seed) for seed in (1, 2)]
     assert min(plain) < 2 * 0.3 * 0.97, plain
-    ahead = [_sampled_loop(True, seed) for seed in (1, 2)]
-    assert min(ahead) >= 2 * 0.3, ahead
+    bounded = [_sampled_loop(True, seed) for seed in (1, 2)]
+    assert min(bounded) >= 2 * 0.3, bounded
+
+
+def test_bounded_peers_is_the_reachable_disc_in_closed_form():
+    """First order: the peer where it was, reach = speed (age + horizon); second order: the
+    peer ahead with its velocity over age + horizon, this robot ahead over the horizon, reach =
+    |v_j - v_i| horizon + min(accel tau^2 / 2, (speed + |v_j|) tau), written out here."""
+    bounds = MotionBounds(horizon=0.1, speed=2.0, accel=3.0)
+    sight = PeerSight(np.array([[1.0, 0.0], [0.0, 2.0]]), np.array([0.05, -0.01]),
+                      np.array([[0.5, 0.0], [0.0, -1.0]]))
+    own, ahead, reach = bounded_peers(np.zeros(2), None, PeerSight(sight.positions, sight.ages),
+                                      bounds)
+    np.testing.assert_allclose(ahead, sight.positions)
+    np.testing.assert_allclose(reach, [2.0 * 0.15, 2.0 * 0.1])
+    v = np.array([0.2, 0.0])
+    own, ahead, reach = bounded_peers(np.zeros(2), v, sight, bounds)
+    np.testing.assert_allclose(own, [0.02, 0.0])
+    np.testing.assert_allclose(ahead, [[1.0 + 0.5 * 0.15, 0.0], [0.0, 2.0 - 0.1]])
+    tau = np.array([0.15, 0.1])
+    drift = np.minimum(1.5 * tau ** 2, (2.0 + np.array([0.5, 1.0])) * tau)
+    np.testing.assert_allclose(reach, [0.3 * 0.1, np.hypot(0.2, 1.0) * 0.1] + drift)
+
+
+def test_a_stale_peer_near_holds_the_robot_and_a_far_one_does_not():
+    spec, bounds = SafetySpec(radius=0.3), MotionBounds(horizon=0.1, speed=1.0, stale=0.5)
+    near = PeerSight(np.array([[1.5, 0.0]]), np.array([0.8]))
+    own, ahead, reach = bounded_peers(np.zeros(2), None, near, bounds)
+    assert stale_nearby(own, ahead, reach, near.ages, spec, bounds)  # 1.5 < 0.6 + 0.9 + 0.1
+    far = PeerSight(np.array([[1.7, 0.0]]), np.array([0.8]))
+    own, ahead, reach = bounded_peers(np.zeros(2), None, far, bounds)
+    assert not stale_nearby(own, ahead, reach, far.ages, spec, bounds)
+    fresh = PeerSight(np.array([[0.7, 0.0]]), np.array([0.4]))
+    own, ahead, reach = bounded_peers(np.zeros(2), None, fresh, bounds)
+    assert not stale_nearby(own, ahead, reach, fresh.ages, spec, bounds)

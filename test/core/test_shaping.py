@@ -14,6 +14,7 @@ import pytest
 
 from polymatch_ros.core.command import bridge_system
 from polymatch_ros.core.errors import ParameterError
+from polymatch_ros.core.safety import MotionBounds
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.shaping import CommandShaper, shaper_for
 from polymatch_ros.core.unicycle import point_ahead, unicycle_step
@@ -37,11 +38,13 @@ def _ensemble(scene, world):
     return (SimpleNamespace(x=x, rot=rot, v=None, index=None),), x
 
 
-def _command(scene, shaper, world, agent=0):
+def _command(scene, shaper, world, agent=0, ages=(0.0, 0.0, 0.0)):
+    """The shaper's command with every agent heard at ``world``, ``ages`` s ago."""
     ensemble, x = _ensemble(scene, world)
     system = bridge_system(scene.model, [np.array([agent])])
     own = SimpleNamespace(x=x[agent], rot=scene.model.rotations.take(ensemble[0].rot, [agent]))
-    return shaper.command(system, 0, agent, ensemble, own, np.eye(2), 0.0, LIMITS)
+    sight = shaper.sight(range(3), x, np.array(ages))
+    return shaper.command(system, 0, agent, ensemble, own, np.eye(2), 0.0, LIMITS, sight)
 
 
 def test_formation_velocity_is_a2_on_the_offset_centroids():
@@ -56,7 +59,7 @@ def test_formation_velocity_is_a2_on_the_offset_centroids():
 def test_filtered_command_keeps_the_half_barrier_of_every_peer():
     scene = _scene(safety={"radius": 0.4, "alpha": 1.5})
     world = np.array([[0.0, 0.0], [0.9, 0.0], [0.0, 5.0]])   # agent 1 just outside 2 r = 0.8
-    shaper = CommandShaper(scene, 0)
+    shaper = CommandShaper(scene, 0, bounds=MotionBounds(horizon=0.0, speed=1.0))
     twist = _command(scene, shaper, world)
     u = twist.linear[:2]
     for j in (1, 2):
@@ -64,6 +67,25 @@ def test_filtered_command_keeps_the_half_barrier_of_every_peer():
         h = dp @ dp - 0.8 ** 2
         assert 2 * dp @ u >= -0.75 * h - 1e-9
     assert shaper.changed == 1 and shaper.note()["safety_changed"] == 1
+
+
+def test_peers_heard_late_are_kept_at_the_distance_they_can_close():
+    """Agent 1 heard 0.2 s ago, robots at most 0.5 m/s, horizon 0.1 s: the half barrier holds
+    for the pair's distance widened to 2 r + 0.5 (0.2 + 0.1) = 2 r + 0.15, written out here;
+    a peer heard longer ago than ``stale`` and near holds the robot (zero command, counted)."""
+    scene = _scene(safety={"radius": 0.4, "alpha": 1.5})
+    world = np.array([[0.0, 0.0], [1.2, 0.0], [0.0, 5.0]])
+    shaper = CommandShaper(scene, 0, bounds=MotionBounds(horizon=0.1, speed=0.5, stale=0.5))
+    u = _command(scene, shaper, world, ages=(0.0, 0.2, 0.0)).linear[:2]
+    for j, gap in ((1, 0.8 + 0.15), (2, 0.8 + 0.05)):
+        dp = world[0] - world[j]
+        assert 2 * dp @ u >= -0.75 * (dp @ dp - gap ** 2) - 1e-9
+    dp = world[0] - world[1]   # the widened barrier binds: the command is slowed to it
+    assert abs(2 * dp @ u + 0.75 * (dp @ dp - 0.95 ** 2)) < 1e-9
+    world[1, 0] = 1.1      # 0.6 s old: it may be within 2 r + 0.5 (0.6 + 0.1) + 0.5 0.1 = 1.2
+    held = _command(scene, shaper, world, ages=(0.0, 0.6, 0.0))
+    np.testing.assert_array_equal(held.linear, 0.0)
+    assert shaper.note()["safety_held_for_stale_peers"] == 1
 
 
 def test_unicycle_command_moves_the_point_ahead_with_the_filtered_velocity():
@@ -93,3 +115,12 @@ def test_unicycle_is_refused_for_second_order_scenes():
                         "groups": [{"shape": "triangle", "count": 2}]})
     with pytest.raises(ParameterError, match="^drive unicycle: "):
         CommandShaper(scene, 0, "unicycle")
+
+
+def test_safety_without_a_speed_bound_is_refused_in_one_line():
+    """The discs of where a peer may be need the robots' speed bound: none given, one line."""
+    scene = _scene(safety={"radius": 0.4})
+    with pytest.raises(ParameterError, match="^the safety filter needs the robots' speed bound"):
+        shaper_for(scene, 0, {})
+    shaper = shaper_for(scene, 0, {"max_linear_speed": 1.5, "rate": 20.0, "safety_latency": 0.1})
+    assert shaper.bounds.speed == 1.5 and abs(shaper.bounds.horizon - 0.15) < 1e-15

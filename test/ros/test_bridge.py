@@ -300,6 +300,7 @@ def test_robots_crossing_to_their_formation_places_never_come_closer_than_2r(ros
     scene = _scene(tmp_path, SCENE_CROSSING.format())
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene, "--mode", "bridge",
                       "--rate", "20", "--lag", "0.05", "--drive", drive, "--hold", "1e9",
+                      "--max-linear-speed", "1.0", "--max-angular-speed", "4.0",
                       "--robot-log", str(tmp_path), "--timeout", "90"], timeout=110)
     ros.wait(proc, 120)
     logs = [np.loadtxt(tmp_path / f"robot_{a}.txt") for a in range(3)]

@@ -41,6 +41,8 @@ import time
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from ...core.command import (
     ZERO,
     brake_command,
@@ -50,6 +52,7 @@ from ...core.command import (
 )
 from ...core.errors import ParameterError
 from ...core.model import GroupState, State
+from ...core.safety import PeerSight
 from ...core.shaping import shaper_for
 from .. import wire
 from .agent_base import AgentBase
@@ -57,7 +60,6 @@ from .realtime import PeerTable, RealtimeAgent
 from .runtime_params import RuntimeParams
 
 if TYPE_CHECKING:
-    import numpy as np
     from rclpy.executors import Executor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
@@ -130,6 +132,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.holding = "no measured pose yet"
         self.zero_sent = False
         self.commands = 0
+        self.epoch = time.time()  # t = 0 of the ensemble's clock (``loop``)
         pose_qos, cmd_qos = robot_qos()
         self.cmd_class = command_class(self.model.order, params["cmd_type"])
         topic = CMD_ACCEL if self.model.order == 2 else CMD_VEL
@@ -271,9 +274,22 @@ class BridgeAgent(RuntimeParams, AgentBase):
     ) -> Twist:
         """The twist (A-2) or the acceleration (A-1) of this agent against ``ensemble``."""
         rot = self.grp.to_matrices(own.rot)[0]  # formation, safety filter, drive: core.shaping
-        stamps = {a: self.peers.latest[a].t for a in heard}  # the peers' ages, for the filter
+        sight = self._peer_sight() if self.shaper.safety is not None else None
         return self.shaper.command(self.system, gi, row, ensemble, own, rot, self.state.t,
-                                   self.params, stamps)
+                                   self.params, sight, time.monotonic() - own.heard)
+
+    def _peer_sight(self) -> PeerSight:
+        """Every peer ever heard, silent ones too (a robot dropped from the sums is still in
+        the room), with its stamp's age now on the ensemble's clock (the filter's peers)."""
+        known = [(a, e) for a, e in self.peers.latest.items() if e.x is not None]
+        now = time.time() - self.epoch
+        x = np.array([e.x for _, e in known]).reshape(len(known), self.model.dim)
+        ages = np.array([now - e.t for _, e in known])
+        v = None
+        if self.model.order == 2:
+            v = np.array([e.v if e.v is not None else np.zeros(self.model.dim)
+                          for _, e in known]).reshape(len(known), self.model.dim)
+        return self.shaper.sight([a for a, _ in known], x, ages, v)
 
     def _state_at(self, t: float, own: SimpleNamespace) -> State:
         gi = self.layout.owner[self.layout.local[0]][0]
@@ -312,7 +328,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
 
     def loop(self) -> None:
         self.wait_for_discovery()
-        start = self._start_epoch()
+        start = self.epoch = self._start_epoch()
         next_tick = time.monotonic()
         while not self.stop_requested:
             self.apply_runtime()

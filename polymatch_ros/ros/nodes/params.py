@@ -231,6 +231,8 @@ AGENT = (
           "or 1)", (0.0, 1e6)),
     Param("safety_latency", 0.05, "bridge: the safety filter looks one command period plus this "
           "far ahead (s: the actuator's lag and the command's transport)", (0.0, 10.0)),
+    Param("safety_stale", 0.5, "bridge: a peer's pose older than this (s) is not filtered "
+          "against: the robot holds while that peer may be near", (0.0, 1e6)),
     Param(
         "run_id",
         0,
