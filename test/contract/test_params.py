@@ -70,6 +70,7 @@ TYPE_CASES = [
     ("agent", "run_id", 2.5, INTEGER), ("agent", "drive", 1.5, STRING),
     ("agent", "axle_offset", "abc", NUMBER), ("agent", "safety_radius", "abc", NUMBER),
     ("agent", "safety_alpha", "abc", NUMBER), ("agent", "safety_latency", "abc", NUMBER),
+    ("agent", "safety_stale", "abc", NUMBER),
     ("monitor", "scene", 1.5, STRING), ("monitor", "mode", 1.5, STRING),
     ("monitor", "rate", "abc", NUMBER), ("monitor", "report_rate", "abc", NUMBER),
     ("monitor", "peer_timeout", "abc", NUMBER), ("monitor", "frame_id", 1.5, STRING),
