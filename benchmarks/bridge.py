@@ -290,8 +290,10 @@ def run(args, log):
 
     from .report import Report
 
-    report = Report(NAME, "Robots in the loop: matching error against pose noise and actuator "
-                    "lag (`python -m benchmarks bridge`)")
+    report = Report(NAME, "Robots that share a room: separation, formation and differential-drive "
+                    "bases (`python -m benchmarks bridge --separation-only`)"
+                    if args.separation_only else "Robots in the loop: matching error against "
+                    "pose noise and actuator lag (`python -m benchmarks bridge`)")
     scene_arg, grid, rates, t_end, window = _plan(args)
     scene_path = None if scene_arg is None else os.path.abspath(resolve_scene_path(scene_arg))
     found, notes = {}, []

@@ -4,7 +4,7 @@ from the simulated robots' logged true poses (the rows `python -m benchmarks bri
 For each configuration (first order, second order, first order on unicycle bases; with and
 without the safety filter) and each of ``--starts`` random starts of 8 robots (discs of radius
 r, no two closer than 2 r + 0.1 at the start), ``polymatch run --mode bridge --robot-log DIR``
-drives the robots to a circle formation (radius 1.5 m, places 1.15 m apart, 2 r = 0.6 m) for
+drives the robots to a circle formation (radius 2 m, places 1.53 m apart, 2 r = 0.6 m) for
 ``--separation-t-end`` wall seconds without noise, and the benchmark reads the logs:
 
   min distance   the smallest distance between two robots' true positions (axles) over the run
@@ -18,8 +18,11 @@ import tempfile
 
 import numpy as np
 
-RADIUS, ALPHA, CIRCLE, TOLERANCE, AXLE = 0.3, 2.0, 1.5, 0.05, 0.2
-ALPHA_SECOND = 1.0  # the second-order barrier's rate (both poles: slower, its loop lags more)
+RADIUS, ALPHA, CIRCLE, TOLERANCE, AXLE = 0.3, 2.0, 2.0, 0.05, 0.2
+#: the robots' bounds, the same with and without the filter (the filter's discs of what a peer
+#: can travel come from them): speed (m/s), turn rate (rad/s), acceleration (m/s^2)
+SPEED, TURN, ACCEL = 1.0, 4.0, 3.0
+ALPHA_SECOND = 3.0  # the second-order barrier's rate (both poles of h'' + 2 a h' + a^2 h)
 CONFIGS = (  # (label, model order, drive)
     ("first order", 1, "holonomic"),
     ("second order", 2, "holonomic"),
@@ -99,6 +102,8 @@ def one_run(env, workdir, case, t_end):
     out = run_cli(env, ["run", path, "--mode", "bridge", "--rate", "20", "--lag", "0.05",
                         "--t-end", repr(t_end), "--hold", "1e9", "--ensemble", "bench_sep",
                         "--drive", drive, "-q", "--robot-log", logs,
+                        "--max-linear-speed", repr(SPEED), "--max-angular-speed", repr(TURN),
+                        "--max-linear-accel", repr(ACCEL),
                         "--timeout", repr(t_end + 120.0)], t_end + 160.0)
     got = read_robot_logs(logs, len(points))
     if len(got) < len(points):
