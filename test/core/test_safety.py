@@ -19,6 +19,7 @@ from polymatch_ros.core.safety import (
     bounded_peers,
     filter_command,
     parse_safety,
+    sidestep_command,
     stale_nearby,
 )
 
@@ -216,3 +217,21 @@ def test_a_stale_peer_near_holds_the_robot_and_a_far_one_does_not():
     fresh = PeerSight(np.array([[0.7, 0.0]]), np.array([0.4]))
     own, ahead, reach = bounded_peers(np.zeros(2), None, fresh, bounds)
     assert not stale_nearby(own, ahead, reach, fresh.ages, spec, bounds)
+
+
+def test_a_held_robot_sidesteps_to_the_projection_of_its_command_turned_clockwise():
+    """Two peers ahead, symmetric (gap 2 r = 1 just open, alpha 0.5): the closest admissible
+    command is 0.045 m/s forward, under a tenth of the model's 1 m/s (held).  The sidestep
+    takes the model's command turned 60 degrees clockwise, (1/2, -sqrt(3)/2), projected onto
+    the one half-plane it violates, in closed form, and keeps the other."""
+    spec = SafetySpec(radius=0.5, alpha=0.5)
+    peers = np.array([[1.0, 0.6], [1.0, -0.6]])
+    nominal = np.array([1.0, 0.0])
+    plain = filter_command(nominal, np.zeros(2), peers, spec, np.zeros(2))
+    np.testing.assert_allclose(plain.value, [0.045, 0.0], atol=1e-12)
+    got = sidestep_command(nominal, np.zeros(2), peers, spec, np.zeros(2))
+    turned = np.array([0.5, -np.sqrt(3.0) / 2.0])
+    a, b = np.array([-2.0, 1.2]), -0.25 * (1.0 + 0.36 - 1.0)       # -(alpha/2) h
+    expected = turned + (b - a @ turned) / (a @ a) * a
+    np.testing.assert_allclose(got.value, expected, atol=1e-12)
+    assert got.changed and np.array([-2.0, -1.2]) @ got.value >= b - 1e-12
