@@ -59,6 +59,11 @@ def add_arguments(p):
     add_number(p, "--t-end", 1.0, 16.0, "wall seconds per run", float)
     add_number(p, "--window", 0.1, 4.0, "steady-state window: the last W seconds", float)
     add_number(p, "--retries", 0, 1, "runs again a case whose run gave no figures", int)
+    add_number(p, "--starts", 0, 20, "random starts per row of the separation table "
+               "(formation, safety filter, unicycle bases; 0: no such table)", int)
+    add_number(p, "--separation-t-end", 1.0, 25.0, "wall seconds per separation run", float)
+    p.add_argument("--separation-only", action="store_true",
+                   help="only the separation table (not the noise x lag grid)")
 
 
 # -- reading the robots' logs --------------------------------------------------------------------
@@ -269,6 +274,8 @@ def _plan(args):
     """(scene path or None for the quick scene, grid cases, rate cases, t_end, window)."""
     if args.quick:
         return None, [(0.005, 0.1, 50.0)], [], 0.5, 0.2
+    if args.separation_only:
+        return args.scene, [], [], args.t_end, args.window
     grid = [(s, lag, args.rate) for s in args.noise for lag in args.lag]
     rates = [(args.rate_noise, args.rate_lag, r) for r in args.rates]
     return args.scene, grid, rates, args.t_end, args.window
@@ -283,8 +290,10 @@ def run(args, log):
 
     from .report import Report
 
-    report = Report(NAME, "Robots in the loop: matching error against pose noise and actuator "
-                    "lag (`python -m benchmarks bridge`)")
+    report = Report(NAME, "Robots that share a room: separation, formation and differential-drive "
+                    "bases (`python -m benchmarks bridge --separation-only`)"
+                    if args.separation_only else "Robots in the loop: matching error against "
+                    "pose noise and actuator lag (`python -m benchmarks bridge`)")
     scene_arg, grid, rates, t_end, window = _plan(args)
     scene_path = None if scene_arg is None else os.path.abspath(resolve_scene_path(scene_arg))
     found, notes = {}, []
@@ -298,6 +307,14 @@ def run(args, log):
                 found[case], more = measure_with_retries(
                     scene, scene_path, case, (t_end, window), env, workdir, args.retries, log)
                 notes += more
+        starts = 0 if args.quick else args.starts
+        if starts:
+            from .bridge_separation import run_separation, separation_table
+
+            separated = run_separation(env, workdir, starts, args.separation_t_end, log)
+            separation_table(report, separated, starts, args.separation_t_end)
+    if not grid:
+        return report
     if all("true" not in got for got in found.values()):
         raise PolymatchError(f"bridge: no run gave figures ({notes[0]})")
     _tables(report, scene, grid, rates, found, (t_end, window, _model_alone(scene, t_end,

@@ -120,6 +120,7 @@ def _bridge_options(args: argparse.Namespace) -> BridgeOptions:
         max_linear_accel=args.max_linear_accel,
         max_angular_accel=args.max_angular_accel,
         robot_log=args.robot_log,
+        drive=args.drive,
         cmd_vel_type=args.cmd_vel_type,
     )
 
@@ -235,6 +236,9 @@ def _add_bridge_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--robot-log", metavar="DIR",
                    help="each robot writes its true and measured pose at every step to "
                    "DIR/robot_<i>.txt")
+    g.add_argument("--drive", choices=("holonomic", "unicycle"), default="holonomic",
+                   help="the simulated robots' base: unicycle = differential drive, driven by "
+                   "the point ahead of its axle (first order, 2-D)")
 
 
 def _add_host_options(p: argparse.ArgumentParser) -> None:

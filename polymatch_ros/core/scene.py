@@ -21,6 +21,7 @@ import numpy as np
 from . import graph
 from .checks import Map, describe, did_you_mean, number, vector
 from .errors import SceneError
+from .formation import check_separation, parse_formation
 from .integrators import METHODS
 from .limits import (
     FLOAT,
@@ -36,6 +37,7 @@ from .limits import (
 )
 from .model import Model, State, validate_model
 from .proximity import BYTES_PER_WEIGHT
+from .safety import SafetySpec, parse_safety
 from .scene_groups import GroupContext, build_group
 from .so import group_for
 from .yamlfile import parse_yaml, read_scene_file
@@ -74,6 +76,10 @@ class Scene:
     seed: int
     path: str | None = None
     notes: list[str] = field(default_factory=list)
+    #: (N, d) formation offsets c_i (``core.formation``): the states carry x_i - c_i; None: none
+    formation: np.ndarray | None = None
+    #: the robots' minimum separation (``core.safety``); None: no safety filter
+    safety: SafetySpec | None = None
 
     @property
     def dim(self) -> int:
@@ -158,7 +164,7 @@ def _apply_overrides(data: Any, overrides: dict[str, Any]) -> Any:
 REPRESENTATIONS = ("auto", "angle", "so3", "so3-cayley", "so3-exp", "matrix")
 MODEL_KEYS = ("order", "kappa", "gamma", "mass", "kappa_2", "L", "representation", "centroids")
 TOP_KEYS = ("name", "description", "dimension", "seed", "model", "integrator", "time",
-            "convergence", "groups", "figure", "graph")
+            "convergence", "groups", "figure", "graph", "formation", "safety")
 
 
 def build_scene(data: object, limits: Limits | None = None) -> Scene:
@@ -182,6 +188,7 @@ def build_scene(data: object, limits: Limits | None = None) -> Scene:
                   kappa_2=params["kappa_2"], L=params["L"], centroids=params["centroids"])
     validate_model(model)
     check_rates("model", model_rates(model))
+    formation, safety = _formation_and_safety(top, model, states)
     origin = np.concatenate([gs.x for gs in states]).mean(axis=0)
     for gs in states:
         gs.x = gs.x - origin
@@ -194,7 +201,27 @@ def build_scene(data: object, limits: Limits | None = None) -> Scene:
     return Scene(name=name, description=description, model=model,
                  initial=State(0.0, tuple(states)), origin=origin, integrator=spec, t_end=t_end,
                  samples=samples, snapshots=snapshots, tolerance=conv_tol,
-                 expect_convergence=expected, seed=seed, notes=ctx.notes)
+                 expect_convergence=expected, seed=seed, notes=ctx.notes, formation=formation,
+                 safety=safety)
+
+
+def _formation_and_safety(top: Map, model: Model,
+                          states: list) -> tuple[np.ndarray | None, SafetySpec | None]:
+    """The scene's formation offsets (the initial centroids become x_i - c_i, in place) and
+    its safety spec; refuses a formation whose places are closer than 2 safety.radius."""
+    safety = parse_safety(top.raw("safety")) if top.has("safety") else None
+    if not top.has("formation"):
+        return None, safety
+    if model.inter_group or any(g.graph is not None and g.graph.dynamic for g in model.groups):
+        raise SceneError("formation: not with an inter-group potential (kappa_2) or a proximity "
+                         "graph: both act on the distances between centroids, not on x_i - c_i")
+    sizes = {g.name: (g.start, g.size) for g in model.groups}
+    offsets = parse_formation(top.raw("formation"), model.dim, sizes)
+    if safety is not None:
+        check_separation(offsets, safety.radius)
+    for g, gs in zip(model.groups, states):
+        gs.x = gs.x - offsets[g.start:g.start + g.size]
+    return offsets, safety
 
 
 def _model_params(mm, dim):

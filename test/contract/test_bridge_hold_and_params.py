@@ -96,8 +96,11 @@ def test_cmd_vel_twist_stamped_by_default_twist_on_request(cmd_type, message_typ
     args = build_parser().parse_args(["run", "x.yaml", "--mode", "bridge"]
                                      + ["--cmd-vel-type", cmd_type] * (cmd_type == "twist"))
     assert args.cmd_vel_type == cmd_type
-    options = SimpleNamespace(max_linear_speed=1.0, max_angular_speed=1.0, cmd_vel_type=cmd_type)
+    options = SimpleNamespace(max_linear_speed=1.0, max_angular_speed=1.0, cmd_vel_type=cmd_type,
+                              drive="holonomic", lag=0.05)
     assert f"cmd_type:={cmd_type}" in agent_args(options, order=1)
+    # the safety filter's latency: the robots' lag plus one robot step (30 Hz)
+    assert f"safety_latency:={0.05 + 1 / 30.0!r}" in agent_args(options, order=1)
 
     sent = Twist(np.array([0.25, -0.5, 0.0]), np.array([0.0, 0.0, 0.75]), False)
     clock = SimpleNamespace(now=lambda: SimpleNamespace(to_msg=lambda: Time(sec=7)))

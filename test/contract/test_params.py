@@ -33,7 +33,8 @@ AGENT_NAMES = [
     "checkpoint", "discovery_timeout",
     "pose_subscribers", "exchange_subscribers", "exchange_rate", "frame_id", "max_linear_speed",
     "max_angular_speed", "max_linear_accel", "max_angular_accel", "pose_timeout", "pose_type",
-    "cmd_type", "command_frame", "run_id",
+    "cmd_type", "command_frame", "drive", "axle_offset", "safety_radius", "safety_alpha",
+    "safety_latency", "safety_stale", "run_id",
 ]
 MONITOR_NAMES = ["scene", "mode", "rate", "report_rate", "peer_timeout", "frame_id", "markers",
                  "t_end", "run_id", "agents_per_process", "report_readers"]
@@ -67,7 +68,10 @@ TYPE_CASES = [
     ("agent", "max_linear_accel", "abc", NUMBER), ("agent", "max_angular_accel", "abc", NUMBER),
     ("agent", "pose_timeout", "abc", NUMBER), ("agent", "pose_type", 1.5, STRING),
     ("agent", "cmd_type", 1.5, STRING), ("agent", "command_frame", 1.5, STRING),
-    ("agent", "run_id", 2.5, INTEGER),
+    ("agent", "run_id", 2.5, INTEGER), ("agent", "drive", 1.5, STRING),
+    ("agent", "axle_offset", "abc", NUMBER), ("agent", "safety_radius", "abc", NUMBER),
+    ("agent", "safety_alpha", "abc", NUMBER), ("agent", "safety_latency", "abc", NUMBER),
+    ("agent", "safety_stale", "abc", NUMBER),
     ("monitor", "scene", 1.5, STRING), ("monitor", "mode", 1.5, STRING),
     ("monitor", "rate", "abc", NUMBER), ("monitor", "report_rate", "abc", NUMBER),
     ("monitor", "peer_timeout", "abc", NUMBER), ("monitor", "frame_id", 1.5, STRING),
@@ -104,6 +108,11 @@ RANGE_CASES = [
     ("agent", "max_angular_accel", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("agent", "pose_timeout", 0.001, 1e6, 0.00099, 1.000001e6, "[0.001, 1e+06]"),
     ("agent", "run_id", 0, 2**31 - 1, -1, 2**31, "[0, 2.14748e+09]"),
+    ("agent", "axle_offset", 1e-6, 1e3, 9.9e-7, 1000.001, "[1e-06, 1000]"),
+    ("agent", "safety_radius", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
+    ("agent", "safety_alpha", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
+    ("agent", "safety_latency", 0.0, 10.0, -1e-9, 10.000001, "[0, 10]"),
+    ("agent", "safety_stale", 0.0, 1e6, -1e-9, 1.000001e6, "[0, 1e+06]"),
     ("monitor", "rate", 0.01, 1e4, 0.0099, 10000.01, "[0.01, 10000]"),
     ("monitor", "report_rate", 0.01, 1e4, 0.0099, 10000.01, "[0.01, 10000]"),
     ("monitor", "peer_timeout", 0.001, 1e6, 0.00099, 1.000001e6, "[0.001, 1e+06]"),
@@ -118,6 +127,7 @@ CHOICE_CASES = [
     ("agent", "pose_type", ("pose", "odometry")),
     ("agent", "cmd_type", ("twist_stamped", "twist")),
     ("agent", "command_frame", ("world", "body")),
+    ("agent", "drive", ("holonomic", "unicycle")),
     ("monitor", "mode", ("lockstep", "realtime")),
 ]
 SPECS = {"agent": AGENT, "monitor": MONITOR}

@@ -169,3 +169,26 @@ def test_noise_floor_covers_what_measurement_noise_alone_makes(dim, sigma_p, sig
     assert np.quantile(diameters, 0.999) < floor, (np.quantile(diameters, 0.999), floor)
     assert floor < 20 * np.median(diameters), (np.median(diameters), floor)
     assert noise_floor(0.0, 0.0, radius, dim) == 0.0
+
+
+def test_robot_applies_a_command_one_timeout_then_brakes_within_the_step():
+    """The simulated robot's watchdog (what the safety filter's horizon assumes): over a step of
+    0.2 s whose command came 0.05 s (``cmd_timeout``) before it began to expire, the velocity
+    follows the command for 0.05 s and then decays to zero with the lag, in closed form
+    u (1 - e^{-0.05/lag}) e^{-0.15/lag}; the position moves by each part's velocity times its
+    duration (the robot's explicit update), written out here."""
+    from polymatch_ros.ros.nodes.robot import RobotNode
+
+    lag, u = 0.1, np.array([0.8, -0.4, 0.0])
+    node = RobotNode.__new__(RobotNode)
+    node.robot = SimulatedRobot([0.0, 0.0], np.eye(2), True, lag, math.inf, math.inf)
+    node.params = {"cmd_timeout": 0.05, "command_frame": "world", "drive": "holonomic"}
+    node.second_order = False
+    node.command = (u, np.zeros(3), 10.0)         # heard at 10.0 s (monotonic)
+    node._advance(0.2, 10.2)
+    held = u * (1.0 - math.exp(-0.05 / lag))
+    np.testing.assert_allclose(node.robot.v, held * math.exp(-0.15 / lag), atol=1e-15)
+    np.testing.assert_allclose(node.robot.p, held * 0.05 + held * math.exp(-0.15 / lag) * 0.15,
+                               atol=1e-15)
+    node._advance(0.05, 10.25)                    # a stale command moves nothing more in
+    np.testing.assert_allclose(node.robot.v, held * math.exp(-0.2 / lag), atol=1e-15)

@@ -22,7 +22,8 @@ LOCKSTEP_TABLE = {
     "max_linear_speed": 1e6, "max_angular_speed": 1e6, "max_linear_accel": 1e6,
     "max_angular_accel": 1e6, "pose_timeout": 0.5, "pose_type": "pose",
     "cmd_type": "twist_stamped",
-    "command_frame": "world", "run_id": 0,
+    "command_frame": "world", "drive": "holonomic", "axle_offset": 0.2, "safety_radius": 0.0,
+    "safety_alpha": 0.0, "safety_latency": 0.05, "safety_stale": 0.5, "run_id": 0,
 }
 # a realtime agent on congruent_triangles_second_order given gamma:=2.0 and rate:=5.0: no dt (it
 # steps time_scale/rate), the scene's mass, how it starts (start_time: once it started)

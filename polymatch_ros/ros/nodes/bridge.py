@@ -41,24 +41,25 @@ import time
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from ...core.command import (
     ZERO,
-    accel_command,
     brake_command,
     bridge_system,
-    command_from_ensemble,
     is_still,
     rotation3,
 )
 from ...core.errors import ParameterError
 from ...core.model import GroupState, State
+from ...core.safety import PeerSight
+from ...core.shaping import shaper_for
 from .. import wire
 from .agent_base import AgentBase
 from .realtime import PeerTable, RealtimeAgent
 from .runtime_params import RuntimeParams
 
 if TYPE_CHECKING:
-    import numpy as np
     from rclpy.executors import Executor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
@@ -131,6 +132,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.holding = "no measured pose yet"
         self.zero_sent = False
         self.commands = 0
+        self.epoch = time.time()  # t = 0 of the ensemble's clock (``loop``)
         pose_qos, cmd_qos = robot_qos()
         self.cmd_class = command_class(self.model.order, params["cmd_type"])
         topic = CMD_ACCEL if self.model.order == 2 else CMD_VEL
@@ -145,6 +147,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
             raise ParameterError("mode bridge: one agent per process (one robot each)")
         super()._configure(p)
         self.rebuild_system()  # refuses d >= 4 and undamped second order before any topic
+        self.shaper = shaper_for(self.scene, self.layout.local[0], p)
         if self.model.order == 2 and p["pose_type"] != "odometry":
             raise ParameterError(
                 "mode bridge: a second-order scene needs the robot's velocity: "
@@ -178,7 +181,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
             self.measured = None
             return
         self.measured = SimpleNamespace(
-            x=got[0] - self.scene.origin, rot=got[1], v=velocity[0], w=velocity[1],
+            x=self.shaper.state_x(got[0], self.grp.to_matrices(got[1])[0]), rot=got[1],
+            v=velocity[0], w=velocity[1],
             heard=time.monotonic()
         )
 
@@ -252,10 +256,11 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.state = self._state_at(t, own)
         self.checkpoint.write(self.steps, t, self.state)  # what --save keeps if the run ends now
         super().publish_state()
-        request = SimpleNamespace(stage=self.state, fields=("rot", "x"))
+        fields = ("rot", "x", "v") if self.model.order == 2 else ("rot", "x")
+        request = SimpleNamespace(stage=self.state, fields=fields)
         heard = self.peers.in_range(self.peers.active(), self.state)  # a radio: peers in range
         ensemble = self.peers.ensemble(request, heard)  # type: ignore[arg-type]
-        twist = self._command(gi, row, ensemble, own)
+        twist = self._command(gi, row, ensemble, own, heard)
         if not twist.finite:
             self._hold("non-finite command", brake=True)
             return
@@ -265,15 +270,26 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.saturated = twist.saturated
 
     def _command(
-        self, gi: int, row: int, ensemble: Ensemble, own: SimpleNamespace
+        self, gi: int, row: int, ensemble: Ensemble, own: SimpleNamespace, heard: list[int]
     ) -> Twist:
         """The twist (A-2) or the acceleration (A-1) of this agent against ``ensemble``."""
-        p, rot = self.params, self.grp.to_matrices(own.rot)[0]
+        rot = self.grp.to_matrices(own.rot)[0]  # formation, safety filter, drive: core.shaping
+        sight = self._peer_sight() if self.shaper.safety is not None else None
+        return self.shaper.command(self.system, gi, row, ensemble, own, rot, self.state.t,
+                                   self.params, sight, time.monotonic() - own.heard)
+
+    def _peer_sight(self) -> PeerSight:
+        """Every peer ever heard, silent ones too (a robot dropped from the sums is still in
+        the room), with its stamp's age now on the ensemble's clock (the filter's peers)."""
+        known = [(a, e) for a, e in self.peers.latest.items() if e.x is not None]
+        now = time.time() - self.epoch
+        x = np.array([e.x for _, e in known]).reshape(len(known), self.model.dim)
+        ages = np.array([now - e.t for _, e in known])
+        v = None
         if self.model.order == 2:
-            return accel_command(self.system, gi, row, ensemble, rot, own.v, own.w,
-                                 p["command_frame"], p["max_linear_accel"], p["max_angular_accel"])
-        return command_from_ensemble(self.system, gi, row, ensemble, rot, p["command_frame"],
-                                     p["max_linear_speed"], p["max_angular_speed"])
+            v = np.array([e.v if e.v is not None else np.zeros(self.model.dim)
+                          for _, e in known]).reshape(len(known), self.model.dim)
+        return self.shaper.sight([a for a, _ in known], x, ages, v)
 
     def _state_at(self, t: float, own: SimpleNamespace) -> State:
         gi = self.layout.owner[self.layout.local[0]][0]
@@ -300,6 +316,9 @@ class BridgeAgent(RuntimeParams, AgentBase):
         note, extra = super().diagnostic_note()
         extra["commands"] = self.commands
         extra["holding"] = self.holding or "no"
+        extra.update(self.shaper.note())
+        if self.shaper.watch.deadlocked and not self.holding:
+            note = "deadlock: the safety filter holds the robot short of its place; " + note
         if self.peers.in_range_count is not None:
             extra["peers_in_range"] = self.peers.in_range_count
         return (f"robot held: {self.holding}; " if self.holding else note), extra
@@ -309,7 +328,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
 
     def loop(self) -> None:
         self.wait_for_discovery()
-        start = self._start_epoch()
+        start = self.epoch = self._start_epoch()
         next_tick = time.monotonic()
         while not self.stop_requested:
             self.apply_runtime()

@@ -228,6 +228,19 @@ AGENT = (
     Param("command_frame", "world", "bridge: cmd_vel / cmd_accel components in the world | body "
           "frame",
           choices=("world", "body")),
+    Param("drive", "holonomic", "bridge: the robot's base: holonomic | unicycle (differential "
+          "drive: v and omega of the point axle_offset ahead of its axle)",
+          choices=("holonomic", "unicycle")),
+    Param("axle_offset", 0.2, "bridge, drive unicycle: the driven point's distance ahead of the "
+          "axle (m)", (1e-6, 1e3)),
+    Param("safety_radius", 0.0, "bridge: the robots' radius for the safety filter (m; 0: the "
+          "scene's safety.radius, none without one)", (0.0, 1e6)),
+    Param("safety_alpha", 0.0, "bridge: the safety filter's rate alpha (1/s; 0: the scene's, "
+          "or 1)", (0.0, 1e6)),
+    Param("safety_latency", 0.05, "bridge: the safety filter looks one command period plus this "
+          "far ahead (s: the actuator's lag and the command's transport)", (0.0, 10.0)),
+    Param("safety_stale", 0.5, "bridge: a peer's pose older than this (s) is not filtered "
+          "against: the robot holds while that peer may be near", (0.0, 1e6)),
     Param(
         "run_id",
         0,

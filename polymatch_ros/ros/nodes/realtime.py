@@ -79,8 +79,9 @@ class PeerTable:
                              if g.graph is not None and g.graph.dynamic}
         dim = self.model.dim
         self.readers = LeanReaders(node, "_peers")
-        # the peers' velocities enter only the closed-form centroid flow (Proposition 2.1)
-        self.want_v = velocities and self.model.order == 2 and self.model.centroids_exact
+        # the peers' velocities enter the closed-form centroid flow (Proposition 2.1) and a
+        # second-order safety filter (``of_agent``)
+        self.want_v = velocities and self.model.order == 2
         # the run's exchange (wire.exchange): pinned to this run's id; packed processes send
         # their agents' states in one message a tick (a block), read as one reader a process
         if layout.blocks:
@@ -94,10 +95,14 @@ class PeerTable:
     @classmethod
     def of_agent(cls, agent: AgentBase, clock: ClockOffsets | None = None) -> PeerTable:
         """The table of a realtime or bridge agent (``AgentBase``), from its parameters; a bridge
-        agent (centroids measured, never advanced by the flow) hears no peer velocities."""
+        agent (centroids measured, never advanced by the flow) hears them only for its safety
+        filter (``core.shaping``)."""
         p = agent.params
+        shaper = getattr(agent, "shaper", None)
+        velocities = (agent.model.centroids_exact if agent.mode != "bridge"
+                      else shaper is not None and shaper.safety is not None)
         return cls(agent.node, agent.layout, p["run_id"], p["peer_timeout"], agent.drops,
-                   p["delay"], agent.scene.t_end, clock, velocities=agent.mode != "bridge")
+                   p["delay"], agent.scene.t_end, clock, velocities=velocities)
 
     def _entry(self, agent: int) -> SimpleNamespace:
         return self.latest.setdefault(

@@ -7,8 +7,9 @@ It receives ``cmd_vel`` (geometry_msgs/TwistStamped, or Twist with ``cmd_type:=t
 or body frame), tracks it with a first-order actuator lag (time constant ``lag``) under the
 speed limits, integrates its pose at ``rate`` Hz and publishes it with Gaussian noise on
 ``measured_pose`` (PoseStamped or nav_msgs/Odometry): the topics a real robot offers and
-receives.  It starts at agent ``agent``'s initial pose of the scene.  A robot without a command
-for ``cmd_timeout`` s stops by itself, as robot drivers do.
+receives.  It starts at agent ``agent``'s initial pose of the scene.  A robot applies a command
+for at most ``cmd_timeout`` s after it came (within a step too: the step's rest is braking) and
+then stops by itself, as robot drivers do.
 
 For a second-order scene (A-1) the robot is a double integrator: it receives ``cmd_accel``
 (geometry_msgs/AccelStamped, world or body frame), its acceleration tracks the command with the
@@ -34,6 +35,8 @@ import numpy as np
 
 from ...core.command import saturate
 from ...core.errors import ParameterError
+from ...core.formation import positions
+from ...core.unicycle import unicycle_step
 from .params import CMD_TYPES, Param, declare, scene_file
 from .process import ros_main
 
@@ -60,6 +63,9 @@ ROBOT = (
     Param("command_frame", "world", "cmd_vel / cmd_accel components in the world | body frame",
           choices=("world", "body")),
     Param("frame_id", "world", "frame_id of the measured pose"),
+    Param("drive", "holonomic", "holonomic | unicycle (a differential-drive base: it follows "
+          "only linear.x and angular.z of a body-frame cmd_vel)",
+          choices=("holonomic", "unicycle")),
     Param("pose_log", str, "file for one line per step: time, true and measured pose "
           "(declared when given)"),
 )
@@ -141,6 +147,23 @@ class SimulatedRobot:
         self.w = saturate(self.w + self.alpha * dt, self.max_angular)[0]
         self._move(dt)
 
+    def roll(self, dt: float, v: float, omega: float) -> None:
+        """Advance ``dt`` s as a differential-drive base (planar): forward speed and turn rate
+        track the commanded v (body linear.x) and omega (angular.z) with the lag; the pose moves
+        on the exact arc; it never moves sideways."""
+        from scipy.spatial.transform import Rotation
+
+        follow = self._follow(dt)
+        mat = self.rot.as_matrix()
+        heading = math.atan2(mat[1, 0], mat[0, 0])
+        speed = float(mat[:, 0] @ self.v) + follow * (v - float(mat[:, 0] @ self.v))
+        turn = self.w[2] + follow * (omega - self.w[2])
+        p, heading = unicycle_step(self.p, heading, speed, turn, dt)
+        self.p[:2] = p
+        self.rot = Rotation.from_rotvec([0.0, 0.0, heading])
+        self.v = speed * np.array([math.cos(heading), math.sin(heading), 0.0])
+        self.w = np.array([0.0, 0.0, turn])
+
     def body_twist(self) -> tuple[np.ndarray, np.ndarray]:
         """(linear, angular) velocity in the robot's own frame (an Odometry message's twist)."""
         mat = self.rot.as_matrix()
@@ -186,7 +209,8 @@ class RobotNode:
         assert gs is not None  # the scene's initial state has every group
         rot = model.rotations.to_matrices(model.rotations.take(gs.rot, [row]))[0]
         self.robot = SimulatedRobot(
-            gs.x[row] + scene.origin, rot, model.dim == 2, params["lag"],
+            positions(gs.x[[row]], scene.formation, scene.origin, np.array([params["agent"]]))[0],
+            rot, model.dim == 2, params["lag"],
             params["max_linear_speed"], params["max_angular_speed"],
         )
         self.second_order = model.order == 2
@@ -250,17 +274,27 @@ class RobotNode:
             now = time.monotonic()
             if now - last < period:
                 continue
-            linear, angular, heard = self.command
-            dt, frame = min(now - last, 5 * period), self.params["command_frame"]
-            if now - heard > self.params["cmd_timeout"]:  # the watchdog: velocity to zero
-                self.robot.step(dt, np.zeros(3), np.zeros(3))
-            elif self.second_order:
-                self.robot.accelerate(dt, linear, angular, frame)
-            else:
-                self.robot.step(dt, linear, angular, frame)
+            self._advance(min(now - last, 5 * period), now)
             last = now
             self._publish()
         return 0
+
+    def _advance(self, dt: float, now: float) -> None:
+        """Move the robot over the ``dt`` s before ``now`` (monotonic): the last command while
+        it is younger than ``cmd_timeout``, then the watchdog's stop (velocity to zero with the
+        lag) for the rest of the step."""
+        linear, angular, heard = self.command
+        valid = min(dt, max(0.0, heard + self.params["cmd_timeout"] - (now - dt)))
+        if valid > 0.0:
+            frame = self.params["command_frame"]
+            if self.second_order:
+                self.robot.accelerate(valid, linear, angular, frame)
+            elif self.params["drive"] == "unicycle":
+                self.robot.roll(valid, linear[0], angular[2])
+            else:
+                self.robot.step(valid, linear, angular, frame)
+        if dt - valid > 0.0:
+            self.robot.step(dt - valid, np.zeros(3), np.zeros(3))
 
     def destroy(self) -> None:
         if self.pose_log is not None:

@@ -7,6 +7,10 @@ matching diameter the monitor reports comes from measured poses, so it cannot fa
 the noise makes: the run's tolerance is the larger of the scene's and the noise floor
 (``core.command.noise_floor``).  With ``--robot-log DIR`` each robot also writes its true and
 measured pose at every step to ``DIR/robot_<i>.txt`` (``robot_sim.POSE_LOG_COLUMNS``).
+
+What the agents' safety filter assumes is what the robots do: a robot applies a command for at
+most one command period (``cmd_timeout`` = 1 / ``--rate``) and then brakes, and the latency the
+filter adds to that period is the robots' lag plus one of their steps (``ROBOT_RATE``).
 """
 
 from __future__ import annotations
@@ -52,11 +56,17 @@ def prepare(scene: Scene, bridge: BridgeOptions, only: str | None) -> Scene:
     return replace(scene, tolerance=max(scene.tolerance, floor))
 
 
+#: the simulated robots' integration and pose rate (Hz)
+ROBOT_RATE = 30.0
+
+
 def agent_args(bridge: BridgeOptions, order: int) -> list[str]:
     """Extra --ros-args of every bridged agent (``order``: the scene model's)."""
     out = [
+        "-p", f"safety_latency:={bridge.lag + 1.0 / ROBOT_RATE!r}",
         "-p", f"max_linear_speed:={bridge.max_linear_speed!r}",
         "-p", f"max_angular_speed:={bridge.max_angular_speed!r}",
+        "-p", f"drive:={bridge.drive}",
         "-p", f"cmd_type:={bridge.cmd_vel_type}",
     ]
     if order == 2:
@@ -91,7 +101,9 @@ def robots(plan: RunPlan, env: dict[str, str]) -> list[Child]:
             "-p", f"lag:={bridge.lag!r}",
             "-p", f"position_noise:={bridge.position_noise!r}",
             "-p", f"angle_noise:={bridge.angle_noise!r}",
-            "-p", "rate:=30.0",
+            "-p", f"rate:={ROBOT_RATE!r}",
+            "-p", f"cmd_timeout:={1.0 / plan.timing.rate!r}",
+            "-p", f"drive:={bridge.drive}",
             "-p", f"cmd_type:={bridge.cmd_vel_type}",
         ]
         if plan.scene.model.order == 2:

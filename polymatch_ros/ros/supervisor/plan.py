@@ -75,6 +75,7 @@ class BridgeOptions:
     max_linear_accel: float
     max_angular_accel: float
     robot_log: str | None      # a directory for the robots' pose logs
+    drive: str = "holonomic"   # holonomic | unicycle (differential-drive robots)
     cmd_vel_type: str = "twist_stamped"  # first order: the cmd_vel message (params.CMD_TYPES)
 
 
