@@ -87,11 +87,11 @@ def test_uniform_rotations_refused_from_a_lower_bound_thm_4_2():
 
 def test_explain_of_a_large_scene_takes_linear_time(tmp_path, capsys):
     """200,000 agents: the exact pairwise diameters took about half a minute here (7 s at
-    10^5, quadratic); the checks are O(N log N) now, about a second."""
+    10^5, quadratic); the checks are O(N log N) now, about a second of CPU."""
     path = tmp_path / "large.yaml"
     path.write_text("dimension: 3\nmodel: {order: 1}\ntime: {t_end: 10}\n"
                     "groups:\n  - {shape: tetrahedron, count: 200000}\n")
-    start = time.perf_counter()
+    start = time.process_time()      # CPU seconds: a loaded machine stretches wall time
     assert cli.main(["explain", str(path)]) == 0
-    assert time.perf_counter() - start < 15.0
+    assert time.process_time() - start < 10.0
     assert "not certified: D0 >= " in capsys.readouterr().out
