@@ -62,6 +62,9 @@ def add_arguments(p):
     add_number(p, "--starts", 0, 20, "random starts per row of the separation table "
                "(formation, safety filter, unicycle bases; 0: no such table)", int)
     add_number(p, "--separation-t-end", 1.0, 25.0, "wall seconds per separation run", float)
+    p.add_argument("--separation-filter", choices=("both", "on", "off"), default="both",
+                   help="the separation table's rows with the safety filter, without, or both "
+                   "(default both)")
     p.add_argument("--separation-only", action="store_true",
                    help="only the separation table (not the noise x lag grid)")
 
@@ -311,7 +314,9 @@ def run(args, log):
         if starts:
             from .bridge_separation import run_separation, separation_table
 
-            separated = run_separation(env, workdir, starts, args.separation_t_end, log)
+            filters = {"both": (True, False), "on": (True,), "off": (False,)}
+            separated = run_separation(env, workdir, starts, args.separation_t_end, log,
+                                       filters[args.separation_filter])
             separation_table(report, separated, starts, args.separation_t_end)
     if not grid:
         return report

@@ -112,12 +112,13 @@ def one_run(env, workdir, case, t_end):
     return log_figures(got, offsets, AXLE if drive == "unicycle" else 0.0, t_end)
 
 
-def run_separation(env, workdir, count, t_end, log):
-    """{(config, filtered): [figures or reason per start]} over ``count`` starts."""
+def run_separation(env, workdir, count, t_end, log, filters=(True, False)):
+    """{(config, filtered): [figures or reason per start]} over ``count`` starts, with the
+    safety filter on and/or off (``filters``)."""
     found = {}
     points = starts(count)
     for config in CONFIGS:
-        for filtered in (True, False):
+        for filtered in filters:
             runs = []
             for k, p in enumerate(points):
                 log(f"{config[0]}, filter {'on' if filtered else 'off'}, start {k + 1}/{count}")
@@ -142,7 +143,7 @@ def _summary(runs):
 
 def separation_table(report, found, count, t_end):
     rows = [[config[0], "on" if filtered else "off"] + _summary(found[(config, filtered)])
-            for config in CONFIGS for filtered in (True, False)]
+            for config in CONFIGS for filtered in (True, False) if (config, filtered) in found]
     report.table(
         ["robots", "safety filter", "min distance (m)", "median of run minima (m)",
          f"runs below 2 r = {2 * RADIUS:g}", f"formation reached (< {TOLERANCE:g} m)",

@@ -192,9 +192,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=int,
         default=None,
         metavar="K",
-        help="agents per process (default: lockstep up to 4096, the fastest measured packing; "
-        "realtime 1, or the fewest that keep the processes within the 32 DDS participants that "
-        "LOCALHOST discovery reaches); the first line says which and why",
+        help="agents per process (default: lockstep and realtime up to 4096 a process, the "
+        "measured packing; bridge, and realtime on a host of some agents (--only), 1, or the "
+        "fewest that keep the processes within the 32 DDS participants that LOCALHOST discovery "
+        "reaches); the first line says which and why",
     )
     p.add_argument(
         "--agent-nodes",

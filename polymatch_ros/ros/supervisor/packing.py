@@ -55,9 +55,10 @@ def fewest_agents_per_process(n_agents: int, own: int) -> int:
 
 
 def choose_packing(packing: Packing, n_agents: int, localhost: bool) -> PackingChoice:
-    """-k as given (checked against the participant limit); else lockstep's measured rule, or
-    one process per agent in realtime and bridge modes while the processes fit; with the agent
-    nodes for that packing (``agent_nodes``)."""
+    """-k as given (checked against the participant limit); else the measured rule of lockstep
+    and of realtime (the whole run on this host), or one process per agent (bridge; realtime
+    with ``--only``) while the processes fit; with the agent nodes for that packing
+    (``agent_nodes``)."""
     choice = _agents_per_process(packing, n_agents, localhost)
     k = choice.agents_per_process
     return PackingChoice(k, choice.reason, agent_nodes(packing.agent_nodes, min(k, n_agents)))
