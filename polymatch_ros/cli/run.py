@@ -18,8 +18,9 @@ from ..core.errors import ParameterError, PolymatchError
 from ..core.scene import Scene, resolve_scene_path
 from ..core.simulate import plan as numerical_plan
 from ..ros.nodes.params import CMD_TYPES
-from ..ros.supervisor.plan import MODES, BridgeOptions, Hosts, Outputs, RunPlan, Timing
+from ..ros.supervisor.plan import BridgeOptions, Hosts, Outputs, RunPlan, Timing
 from ..ros.supervisor.recovery import POLICIES, RestartPolicy
+from ..ros.wire.modes import MODES, Mode
 from .scene_commands import check_integrator_option, load_scene_options, naming_dt_option
 
 # (flag, type, default, help) of the options that set how the agents step and wait
@@ -62,15 +63,15 @@ def build_plan(args: argparse.Namespace) -> RunPlan:
     check_integrator_option(args.integrator)
     scene_path = resolve_scene_path(args.scene)
     scene = load_scene_options(scene_path, args.t_end)
-    bridge = None
-    if args.mode == "bridge":
+    bridge, mode = None, Mode(args.mode)
+    if mode.drives_robots:
         from ..ros.supervisor import bridge_run
 
         bridge = _bridge_options(args)
         scene = bridge_run.prepare(scene, bridge, args.only)  # the noise-floor tolerance
     timing = _timing(args, bridge is not None)
-    dt = timing.time_scale / timing.rate if args.mode != "lockstep" else args.dt
-    with naming_dt_option(args.dt if args.mode == "lockstep" else None):  # errors first
+    dt = mode.tick_step(timing.rate, timing.time_scale) if mode.ticks else args.dt
+    with naming_dt_option(args.dt if mode.exact else None):  # errors first
         numerics = numerical_plan(scene, args.integrator, dt, distributed=True)
     outputs = Outputs(
         save=writable_output(args.save, ".npz") if args.save else None,  # before a long run
@@ -83,7 +84,7 @@ def build_plan(args: argparse.Namespace) -> RunPlan:
     )
     hosts = _hosts(args, scene, bridge is not None)
     on_failure = RestartPolicy(restart=args.on_failure == "restart")
-    return RunPlan(scene_path, scene, numerics, args.mode, hosts, timing, outputs, bridge,
+    return RunPlan(scene_path, scene, numerics, mode, hosts, timing, outputs, bridge,
                    on_failure)
 
 
@@ -180,7 +181,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "run", help="run the distributed ROS 2 ensemble of a scene (a node per agent)"
     )
     p.add_argument("scene", help="scene file or shipped scene name")
-    p.add_argument("--mode", choices=MODES, default="lockstep",
+    p.add_argument("--mode", choices=MODES, default=Mode.LOCKSTEP.value,
                    help="bridge: simulated robots driven by bridged agents")
     p.add_argument("--integrator", "-i", metavar="NAME",
                    help="fixed-step integrator (default: the scene's)")

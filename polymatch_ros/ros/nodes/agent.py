@@ -10,6 +10,7 @@ one in a lifecycle node.
 
 from __future__ import annotations
 
+import importlib
 import sys
 from typing import TYPE_CHECKING
 
@@ -22,19 +23,19 @@ if TYPE_CHECKING:
     from .managed import ManagedAgent
 
 
+#: each mode's agent class, as module and class name (imported on demand: each its own module)
+AGENT_CLASSES: dict[wire.Mode, tuple[str, str]] = {
+    wire.Mode.LOCKSTEP: ("polymatch_ros.ros.nodes.lockstep", "LockstepAgent"),
+    wire.Mode.REALTIME: ("polymatch_ros.ros.nodes.realtime", "RealtimeAgent"),
+    wire.Mode.BRIDGE: ("polymatch_ros.ros.nodes.bridge", "BridgeAgent"),
+}
+
+
 def agent_class(mode: str) -> type[AgentBase]:
-    """The agent class of a mode (imported on demand: each mode's module is its own)."""
-    if mode == "lockstep":
-        from .lockstep import LockstepAgent
-
-        return LockstepAgent
-    if mode == "bridge":
-        from .bridge import BridgeAgent
-
-        return BridgeAgent
-    from .realtime import RealtimeAgent
-
-    return RealtimeAgent
+    """The agent class of a mode (``AGENT_CLASSES``)."""
+    module, name = AGENT_CLASSES[wire.mode_of(mode)]
+    cls: type[AgentBase] = getattr(importlib.import_module(module), name)
+    return cls
 
 
 def make_agent(argv: list[str] | None = None) -> ManagedAgent:
@@ -47,7 +48,7 @@ def make_agent(argv: list[str] | None = None) -> ManagedAgent:
 
     node = lifecycle_node("agent", wire.namespace(wire.DEFAULT_ENSEMBLE))
     params = resolve_agent(check(AGENT, given_values(node, AGENT)))
-    pin(node, AGENT, params, RUNTIME if params["mode"] != "lockstep" else ())
+    pin(node, AGENT, params, RUNTIME if wire.mode_of(params["mode"]).ticks else ())
     cls = agent_class(params["mode"])
     return ManagedAgent(node, lambda n, ex: cls(n, params, ex), params["autostart"])
 

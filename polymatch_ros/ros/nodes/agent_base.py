@@ -59,7 +59,7 @@ class AgentBase(NodeApp):
     Subclasses set ``mode`` and define ``step_size()`` and ``loop()``.
     """
 
-    mode: str  # each mode's class names its mode
+    mode: wire.Mode  # each mode's class names its mode
 
     def __init__(
         self, node: Node, params: dict[str, Any], executor: Executor | None = None
@@ -115,7 +115,7 @@ class AgentBase(NodeApp):
         # packed processes (lockstep, realtime) send their agents' states in one message a block
         # and step (tick)
         self.exchange_blocks = self.layout.local_blocks() if (
-            self.mode in wire.BLOCK_MODES and self.layout.blocks) else None
+            self.mode.packs and self.layout.blocks) else None
         # writers by agent, or by block: (key of the per-step topic, of the final one), indices
         keys, by = ("state", "final_state"), local
         if self.exchange_blocks is not None:
@@ -144,7 +144,7 @@ class AgentBase(NodeApp):
         local, level = self.layout.local, self.params["agent_nodes"]
         if len(local) < 2 or level == "none":
             return None
-        runtime = RUNTIME if self.mode != "lockstep" else ()
+        runtime = RUNTIME if self.mode.ticks else ()
         return HostedAgents(self.node, local, self.params, self.control, runtime,
                             full=level == "full")
 

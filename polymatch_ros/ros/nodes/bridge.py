@@ -120,7 +120,7 @@ def fill_twist(msg: Any, twist: Twist) -> Any:
 class BridgeAgent(RuntimeParams, AgentBase):
     """One agent per process; see the module doc."""
 
-    mode = "bridge"
+    mode = wire.Mode.BRIDGE
 
     def __init__(
         self, node: Node, params: dict[str, Any], executor: Executor | None = None

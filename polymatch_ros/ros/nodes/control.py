@@ -80,11 +80,11 @@ def describe_command(msg: Any) -> str:
 LOCKSTEP_START = "lockstep agents start once every peer is matched"
 
 
-def reset_refusal(mode: str) -> str | None:
+def reset_refusal(mode: wire.Mode) -> str | None:
     """Why ``reset`` does not apply in this mode, or None (realtime)."""
-    if mode == "lockstep":
+    if mode.exact:
         return "a lockstep run is reproducible: start a new run to begin again"
-    if mode == "bridge":
+    if mode.drives_robots:
         return "a bridged agent's state is its robot's measured pose: move the robot"
     return None
 
@@ -108,7 +108,7 @@ class AgentControl:
     """
 
     def __init__(self, mode: str, on_pause: Callable[[bool], None] | None = None) -> None:
-        self.mode = mode
+        self.mode = wire.mode_of(mode)
         self.on_pause = on_pause
         self.stop_requested = False
         self.start_epoch: float | None = None
@@ -128,7 +128,7 @@ class AgentControl:
         if verb == "stop":
             self.stop_requested = True
             return True, "stopping" + (" (every process at the same step)"
-                                       if self.mode == "lockstep" else "")
+                                       if self.mode.exact else "")
         if verb == "received":
             self.final_received = True
             return True, "final poses received"
@@ -142,7 +142,7 @@ class AgentControl:
         return self._reset(epoch)
 
     def _start(self, epoch: float | None) -> Answer:
-        if self.mode == "lockstep":
+        if self.mode.exact:
             return True, LOCKSTEP_START
         if self.start_epoch is None:
             self.start_epoch = epoch
@@ -211,7 +211,7 @@ class EnsembleControl:
     def __init__(self, node: Node, mode: str) -> None:
         from std_srvs.srv import SetBool, Trigger
 
-        self.node, self.mode = node, mode
+        self.node, self.mode = node, wire.mode_of(mode)
         self.log = node.get_logger()
         self.pub = wire.publisher(node, "control")
         self.epoch: float | None = None
@@ -228,7 +228,7 @@ class EnsembleControl:
         self.log.info(f"control: {describe_command(msg)}")
 
     def _start(self) -> Answer:
-        if self.mode == "lockstep":
+        if self.mode.exact:
             return True, LOCKSTEP_START
         again = self.epoch is not None
         if not again:

@@ -284,7 +284,7 @@ class LockstepExchange:
 class LockstepAgent(AgentBase):
     """Rounds with the group's stages; the trajectory equals the centralised simulator's."""
 
-    mode = "lockstep"
+    mode = wire.Mode.LOCKSTEP
 
     def __init__(
         self, node: Node, params: dict[str, Any], executor: Executor | None = None

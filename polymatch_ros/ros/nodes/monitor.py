@@ -103,7 +103,7 @@ class MonitorNode(NodeApp):
         self.model = self.scene.model
         self.grp = self.model.rotations
         self.n = self.model.n_agents
-        self.lockstep = params["mode"] == "lockstep"
+        self.lockstep = wire.mode_of(params["mode"]).exact
         self.drops = DropCounter(self.log)
         self.repeats = 0  # poses heard again at a stamp already heard: not a drop
         self.latest: dict[int, tuple[int, wire.Row, float]] = {}  # agent -> (t key, Row, heard)

@@ -24,16 +24,15 @@ from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ParameterError
 from ...core.limits import MIN_T_END
+from ..wire.modes import MODES, MONITOR_MODES, Mode, mode_of
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
     from ...core.model import Model
 
-MODES = ("lockstep", "realtime", "bridge")
 #: what a packed process gives each of its agents (``hosted``)
 AGENT_NODES = ("full", "lean", "none")  # not "off": a YAML boolean in -p
-MONITOR_MODES = ("lockstep", "realtime")
 #: a first-order bridge's command on cmd_vel: geometry_msgs/TwistStamped (the default: Jazzy's
 #: controllers) or Twist
 CMD_TYPES = ("twist_stamped", "twist")
@@ -91,7 +90,7 @@ AGENT = (
     Param("agent_nodes", "full", "a process hosting several agents gives each a node agent_<i>: "
           "full (its pose topics, services and parameters), lean (its pose topics), none (the "
           "process node alone)", choices=AGENT_NODES),
-    Param("mode", "lockstep", "lockstep | realtime | bridge", choices=MODES),
+    Param("mode", Mode.LOCKSTEP.value, " | ".join(MODES), choices=MODES),
     Param("autostart", True, "configure and activate the (lifecycle) agent by itself; false: "
           "wait for the lifecycle transitions (`ros2 lifecycle set`)"),
     Param("integrator", str, "integrator (see `polymatch integrators`): the scene's unless "
@@ -255,7 +254,7 @@ MONITOR = (
           "read"),
     Param(
         "mode",
-        "lockstep",
+        Mode.LOCKSTEP.value,
         "lockstep: report the latest simulated time all agents reached, at most "
         "'report_rate' Hz; realtime: report at 'rate' Hz from the latest poses (also for "
         "bridged agents)",
@@ -365,7 +364,7 @@ def check_gains(model: Model, mode: str, values: Mapping[str, Any]) -> Model:
     if model.order == 1 and not model.gamma > 0:
         raise ParameterError(f"parameter 'gamma': the first-order model (A-2) needs gamma > 0, "
                              f"got {model.gamma:g}")
-    if model.order == 2 and mode == "bridge" and not model.gamma > 0:
+    if model.order == 2 and mode_of(mode).drives_robots and not model.gamma > 0:
         raise ParameterError("parameter 'gamma': mode bridge: a second-order scene needs gamma "
                              "> 0 (without damping (A-1) never brings a robot to rest)")
     return model
@@ -477,8 +476,8 @@ def resolve_agent(values: dict[str, Any]) -> dict[str, Any]:
     from ...core.scene import load_scene
     from ...core.simulate import plan
 
-    v, mode = dict(values), values["mode"]
-    lockstep = mode == "lockstep"
+    v, mode = dict(values), mode_of(values["mode"])
+    lockstep = mode.exact
     _refuse_outside_mode(v, mode)
     path = scene_file(v["scene"])
     scene = load_scene(path, {"time.t_end": v["t_end"]})
@@ -486,24 +485,23 @@ def resolve_agent(values: dict[str, Any]) -> dict[str, Any]:
     v.update(scene=path, t_end=scene.t_end, kappa=model.kappa, gamma=model.gamma,
              mass=model.mass if model.order == 2 else None)
     v.update(_hosted(v["agent"], v["agents"]))
-    step = v["dt"] if lockstep else v["time_scale"] / v["rate"] if mode == "realtime" else (
-        1.0 / v["rate"])
+    step = v["dt"] if lockstep else mode.tick_step(v["rate"], v["time_scale"])
     the_plan = plan(replace(scene, model=model), v["integrator"], step, distributed=True)
     v.update(integrator=the_plan.name, dt=the_plan.dt if lockstep else None)
     v.update(_start(v["start"], v["start_time"]) if not lockstep else dict(start=None))
     return v
 
 
-def _refuse_outside_mode(v: Mapping[str, Any], mode: str) -> None:
+def _refuse_outside_mode(v: Mapping[str, Any], mode: Mode) -> None:
     """ParameterError for a given parameter that ``mode`` does not take."""
-    if mode == "lockstep":
+    if mode.exact:
         names = [k for k in (*GAINS, "start", "start_time") if v[k] is not None]
         why = ("realtime and bridge only (lockstep runs the scene's model, to equal the "
                "centralised simulation, and starts once every peer is matched)")
     else:
         names = ["dt"] if v["dt"] is not None else []
         why = "lockstep only (" + ("a realtime agent steps time_scale/rate simulated seconds a "
-                                   "tick" if mode == "realtime" else "a bridge agent takes no "
+                                   "tick" if not mode.drives_robots else "a bridge agent takes no "
                                    "step: its robot moves") + ")"
     if names:
         plural = "s" if len(names) > 1 else ""

@@ -87,10 +87,10 @@ class PeerTable:
         if layout.blocks:
             for b in layout.peer_blocks():
                 self.readers.subscribe("state_block", self._block_receiver(b), dim, b,
-                                       "realtime")
+                                       wire.Mode.REALTIME)
         else:
             for a in layout.peers:
-                self.readers.subscribe("state", self._receiver(a), dim, a, "realtime")
+                self.readers.subscribe("state", self._receiver(a), dim, a, wire.Mode.REALTIME)
 
     @classmethod
     def of_agent(cls, agent: AgentBase, clock: ClockOffsets | None = None) -> PeerTable:
@@ -99,7 +99,7 @@ class PeerTable:
         filter (``core.shaping``)."""
         p = agent.params
         shaper = getattr(agent, "shaper", None)
-        velocities = (agent.model.centroids_exact if agent.mode != "bridge"
+        velocities = (agent.model.centroids_exact if not agent.mode.drives_robots
                       else shaper is not None and shaper.safety is not None)
         return cls(agent.node, agent.layout, p["run_id"], p["peer_timeout"], agent.drops,
                    p["delay"], agent.scene.t_end, clock, velocities=velocities)
@@ -263,7 +263,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
     peer poses; starts now, on the runner's ``start <epoch>`` (start control) or at
     ``start_time``."""
 
-    mode = "realtime"
+    mode = wire.Mode.REALTIME
 
     def __init__(
         self, node: Node, params: dict[str, Any], executor: Executor | None = None

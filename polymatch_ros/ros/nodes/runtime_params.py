@@ -15,6 +15,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ParameterError
+from ..wire.modes import Mode
 from .params import AGENT, GAINS, RUNTIME, check_gains, check_value
 
 if TYPE_CHECKING:
@@ -58,7 +59,7 @@ class RuntimeParams:
     scene: Scene
     model: Model
     params: dict[str, Any]
-    mode: str
+    mode: Mode
     state: State
     pending: dict[str, Any]
 

@@ -86,12 +86,12 @@ def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> Pac
                 f"initial-peer range); use -k {need} or more"
             )
         return PackingChoice(packing.requested, f"-k {packing.requested} as asked")
-    if packing.mode == "lockstep":
+    if packing.mode.exact:
         k = max(need, min(n_agents, LOCKSTEP_AGENTS_PER_PROCESS))
         return PackingChoice(k, f"lockstep's fastest measured packing, up to "
                                 f"{LOCKSTEP_AGENTS_PER_PROCESS} agents a process "
                                 f"(docs/bench/packing.md); -k 1: a process per agent")
-    if packing.mode == "realtime" and packing.whole:
+    if packing.mode.packs and packing.whole:
         k = max(need, min(n_agents, REALTIME_AGENTS_PER_PROCESS))
         return PackingChoice(k, f"realtime's measured packing: the least CPU a tick, up to "
                                 f"{REALTIME_AGENTS_PER_PROCESS} agents a process "

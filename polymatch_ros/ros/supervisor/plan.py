@@ -11,15 +11,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from ..wire.modes import Mode
 from .recovery import RestartPolicy
 
 if TYPE_CHECKING:
     from ...core.scene import Scene
     from ...core.simulate import Plan
     from .discovery import DiscoverySpec
-
-MODES = ("lockstep", "realtime", "bridge")
-
 
 @dataclass(frozen=True)
 class Hosts:
@@ -86,9 +84,12 @@ class Packing:
     requested: int | None      # -k; None: the mode's default (``packing.choose_packing``)
     monitor: bool              # the monitor is one more participant on this host
     recorder: bool = False     # --record: the recorder is one more
-    mode: str = "lockstep"     # lockstep | realtime | bridge
+    mode: Mode = Mode.LOCKSTEP
     agent_nodes: str = "auto"  # --agent-nodes as asked
     whole: bool = True         # this host runs every agent (no --only): realtime may pack
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mode", Mode(self.mode))  # a mode's name is taken too
 
 
 @dataclass(frozen=True)
@@ -98,17 +99,20 @@ class RunPlan:
     scene_path: str            # the scene file (a shipped scene resolved)
     scene: Scene               # loaded, --t-end applied; bridge mode: noise-floor tolerance
     numerics: Plan             # the fixed-step integrator and its dt
-    mode: str                  # lockstep | realtime | bridge
+    mode: Mode
     hosts: Hosts
     timing: Timing
     outputs: Outputs
     bridge: BridgeOptions | None = None   # bridge mode only
     on_failure: RestartPolicy = field(default_factory=RestartPolicy)  # --on-failure
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mode", Mode(self.mode))  # a mode's name is taken too
+
     @property
     def realtime(self) -> bool:
         """The agents step on the wall clock (realtime and bridge mode)."""
-        return self.mode != "lockstep"
+        return self.mode.ticks
 
     @property
     def n_agents(self) -> int:

@@ -29,7 +29,7 @@ from typing import IO
 
 from ...core.errors import PolymatchError
 from ...core.integrators import METHODS
-from ..wire import run_records
+from ..wire import Mode, run_records
 from .packing import choose_packing
 from .plan import Packing
 
@@ -163,7 +163,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                         peer_timeout=1.0, delay=0.0, round_timeout=10.0)
         outputs = Outputs(save=None, records=args.records, quiet=True, verbose=False,
                           compare=False)
-        code = runner.run(RunPlan(args.scene, scene, numerics, "lockstep", hosts, timing,
+        code = runner.run(RunPlan(args.scene, scene, numerics, Mode.LOCKSTEP, hosts, timing,
                                   outputs))
     except PolymatchError as exc:
         print(f"polymatch: error: {json.dumps(str(exc))[1:-1]}", file=sys.stderr)

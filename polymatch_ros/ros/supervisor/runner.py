@@ -77,7 +77,7 @@ class RunContext:
         """K where the agents send their states a block of K at a time (packed lockstep and
         realtime processes)."""
         k = self.agents_per_process
-        return k if k > 1 and self.plan.mode in wire.BLOCK_MODES else None
+        return k if k > 1 and self.plan.mode.packs else None
 
     def checkpoint_path(self, name: str) -> str:
         """The checkpoint of the agent process ``name`` (a bridge agent's holds the measured
@@ -253,8 +253,7 @@ def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
     agent += _stepping_args(plan)
     if plan.bridge is not None:
         agent += bridge_run.agent_args(plan.bridge, plan.scene.model.order)
-    monitor_mode = "realtime" if plan.realtime else "lockstep"
-    monitor = common + ["-p", f"mode:={monitor_mode}"]
+    monitor = common + ["-p", f"mode:={plan.mode.monitored_as}"]
     monitor += ["-p", f"peer_timeout:={timing.peer_timeout!r}", "-p", f"run_id:={context.run_id}"]
     monitor += ["-p", f"agents_per_process:={k}"]  # how the agents' states come
     # the recorder (--record) hears every report, the first too (``report_readers``)

@@ -133,20 +133,20 @@ def _summary(plan: RunPlan, final: State, records: list[RunRecord], wall: float,
     print(format_table(summary_rows(scene, met), SUMMARY_HEADER))
     agents = [r for r in records if r.role == "agent"]
     text = f"t = {final.t:g}, wall time {wall:.2f} s"
-    if agents and mode == "lockstep":
+    if agents and mode.exact:
         text += f", {np.mean([r.rounds_per_second for r in agents]):.1f} rounds/s per agent (mean)"
     print(text)
     for rec in agents:
         if outputs.verbose or rec.dropped_total:
             print(rec.describe())
     for rec in records:  # lockstep: the monitor's last report is the final step's
-        if rec.role == "monitor" and (mode == "lockstep" or rec.dropped_total):
+        if rec.role == "monitor" and (mode.exact or rec.dropped_total):
             print(rec.describe())
     if watcher.ignored:
         print(f"runner: ignored {watcher.ignored} status message(s) not of this run")
     if outputs.save:
         _save(outputs.save, scene, final, watcher.pose_times())
-    if mode == "lockstep" and outputs.compare:
+    if mode.exact and outputs.compare:
         central = prepare(scene, the_plan, distributed=True)
         ref = simulate(
             replace(central, t_end=final.t),

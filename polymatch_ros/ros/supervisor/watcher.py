@@ -96,10 +96,11 @@ class Watcher:
         if blocks_of is not None:
             for b in range(-(-self.model.n_agents // blocks_of)):
                 self.finals.subscribe("final_state_block", self._final_block(b, blocks_of),
-                                      dim, b, "lockstep")
+                                      dim, b, wire.Mode.LOCKSTEP)
         else:
             for a in range(self.model.n_agents):
-                self.finals.subscribe("final_state", self._final(a), dim, a, "lockstep")
+                self.finals.subscribe("final_state", self._final(a), dim, a,
+                                      wire.Mode.LOCKSTEP)
 
     def _control(self, msg: Any) -> None:
         """A 'stop' on the control topic that the runner did not send: the ensemble's stop
@@ -298,7 +299,7 @@ class Watcher:
 
         return LifecycleDriver(self.node, self.node.get_namespace(), names, last_words)
 
-    def host_ensemble_services(self, mode: str) -> None:
+    def host_ensemble_services(self, mode: wire.Mode) -> None:
         """On a host that runs every agent and no monitor: this node offers them."""
         from ..nodes.control import EnsembleControl
 

@@ -33,6 +33,7 @@ from .exchange import (
     encode_exchange,
     encode_exchange_block,
 )
+from .modes import BLOCK_MODES, MODES, MONITOR_MODES, Mode, mode_of
 from .motion import (
     MOTIONS,
     Received,
@@ -49,7 +50,6 @@ from .motion import (
 )
 from .record import RECORD_KEY, RunRecord, drop_summary, echoed_run_records, run_records
 from .topics import (
-    BLOCK_MODES,
     DEFAULT_ENSEMBLE,
     TOPICS,
     Topic,

@@ -16,6 +16,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
+from .modes import Mode
+
 RECORD_KEY = "polymatch_run_record"
 RECORD_VERSION = 1
 
@@ -174,7 +176,7 @@ class RunRecord:
                 f"{self.agents_heard} agents heard, {self.reports} reports; "
                 f"{drop_summary(self.dropped)}"
             )
-        if self.mode == "lockstep":
+        if self.mode == Mode.LOCKSTEP:  # a record from the network may name any mode
             split = ", ".join(f"{k} {v:.2f}" for k, v in self.ms_per_round.items())
             text = (
                 f"finished at t = {self.t:.6g} after {self.steps} steps ({self.rounds} rounds, "

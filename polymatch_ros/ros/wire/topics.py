@@ -12,6 +12,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from .modes import Mode
+
 if TYPE_CHECKING:
     from rclpy.node import Node
     from rclpy.publisher import Publisher
@@ -19,9 +21,6 @@ if TYPE_CHECKING:
     from rclpy.subscription import Subscription
 
 DEFAULT_ENSEMBLE = "polymatch"
-#: the modes whose packed processes (K > 1) send their agents' states a block at a time
-#: (``state_block``); a bridge agent relays its own robot's pose, one agent a process
-BLOCK_MODES = ("lockstep", "realtime")
 
 
 @dataclass(frozen=True)
@@ -157,11 +156,11 @@ def publisher(node: Node, key: str, dim: int | None = None, agent: int | None = 
 
 
 def subscription(node: Node, key: str, callback: Callable[..., None], dim: int | None = None,
-                 agent: int | None = None, mode: str = "lockstep", resolver: Node | None = None,
+                 agent: int | None = None, mode: str = Mode.LOCKSTEP, resolver: Node | None = None,
                  **kwargs: Any) -> Subscription:
     t = TOPICS[key]
     _per_agent_events(agent, kwargs, "subscription")
-    qos = t.reader_qos or (t.realtime_reader_qos if mode == "realtime" else None) or t.qos
+    qos = t.reader_qos or (t.realtime_reader_qos if Mode(mode).ticks else None) or t.qos
     return node.create_subscription(
         message_type(t.kind, dim),
         _resolve(node, topic_name(key, agent), resolver),
