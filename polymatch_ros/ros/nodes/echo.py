@@ -16,7 +16,6 @@ in).  Once the topic is heard and no --timeout was given, it prints until Ctrl-C
 
 from __future__ import annotations
 
-import importlib
 import json
 import os
 import sys
@@ -24,6 +23,8 @@ import time
 from typing import TYPE_CHECKING, Any, TextIO
 
 from ...core.errors import PolymatchError
+from ..wire.recording import message_class
+from ..wire.topics import matching_profile
 from .process import ros_main
 
 if TYPE_CHECKING:
@@ -32,6 +33,8 @@ if TYPE_CHECKING:
 
 #: how long `polymatch echo` waits for a topic's first message when no --timeout is given (s)
 FIRST_MESSAGE_SECONDS = 10.0
+#: the echo's history: a few messages, it prints as they come
+ECHO_DEPTH = 10
 
 
 def listening_in() -> str:
@@ -90,12 +93,6 @@ def message_to_dict(msg: Any) -> dict[str, Any]:
     return out
 
 
-def message_class(type_name: str) -> type:
-    """'std_msgs/msg/Float64' -> the Python class."""
-    pkg, _, cls = type_name.partition("/msg/")
-    return getattr(importlib.import_module(f"{pkg}.msg"), cls)
-
-
 class Echo:
     """Print every message of ``topic`` until --count, --until-below or --timeout (exit 1)."""
 
@@ -121,8 +118,6 @@ class Echo:
 
     def _qos(self) -> tuple[type, QoSProfile]:
         """The publishers' type, and a QoS that matches them (a latched topic's last value too)."""
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
         infos: list[TopicEndpointInfo] = []
         while not infos:
             infos = self.node.get_publishers_info_by_topic(self.topic)
@@ -130,13 +125,7 @@ class Echo:
                 raise PolymatchError(f"no publisher on {self.topic} within {self.timeout:g} s in "
                                      f"{listening_in()}")
             self._spin()
-        latched = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
-        reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
-        qos = QoSProfile(
-            depth=10,
-            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        )
+        qos = matching_profile([i.qos_profile for i in infos], ECHO_DEPTH)
         return message_class(infos[0].topic_type), qos
 
     def _receive(self, msg: Any) -> None:

@@ -39,7 +39,7 @@ from ..wire.recording import (
     message_class,
     recorder_qos,
 )
-from ..wire.topics import QOS, qos_profiles
+from ..wire.topics import QOS, matching_profile, qos_profiles
 from .params import Param, declare
 from .process import NodeApp, ros_main
 
@@ -159,23 +159,11 @@ class Recorder(NodeApp):
 
     def _discover(self) -> None:
         """Subscribe to the waiting topics whose publishers have appeared, as they offer."""
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
         for topic in list(self.waiting):
             infos = self.node.get_publishers_info_by_topic(topic.name)
             if not infos:
                 continue
-            latched = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                          for i in infos)
-            reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE
-                           for i in infos)
-            qos = QoSProfile(
-                depth=RECORDER_DEPTH,
-                reliability=ReliabilityPolicy.RELIABLE if reliable
-                else ReliabilityPolicy.BEST_EFFORT,
-                durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
-                else DurabilityPolicy.VOLATILE,
-            )
+            qos = matching_profile([i.qos_profile for i in infos], RECORDER_DEPTH)
             self.subscriptions.append(
                 self._subscribe(topic.name, topic.type or infos[0].topic_type, qos,
                                 [i.qos_profile for i in infos]))

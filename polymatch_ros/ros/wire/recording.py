@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, BinaryIO
 
 from ...core.errors import PolymatchError
-from .topics import QOS, TOPICS, full_name, message_type
+from .topics import QOS, TOPICS, full_name, message_type, profile
 
 if TYPE_CHECKING:
     from mcap.writer import Writer
@@ -145,14 +145,8 @@ def run_topics(ensemble: str, n_agents: int, dim: int, order: int,
 def recorder_qos(key: str) -> QoSProfile:
     """A recorder's reader of a topic whose writers use ``QOS[key]``: their reliability and
     durability (so it matches them and takes a latched topic's last value), a deep history."""
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
     _, reliable, latched = QOS[key]
-    return QoSProfile(
-        depth=RECORDER_DEPTH,
-        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-    )
+    return profile(RECORDER_DEPTH, reliable, latched)
 
 
 def _duration(ns: int) -> dict[str, int]:

@@ -8,7 +8,7 @@ is the ROS-wide aggregate topic and stays absolute.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -201,19 +201,30 @@ QOS = {
 }
 
 
-def qos_profiles() -> dict[str, QoSProfile]:
-    """The rclpy QoSProfile of each entry of ``QOS`` (imported lazily: rclpy is only needed
-    here)."""
+def profile(depth: int | None, reliable: bool, latched: bool) -> QoSProfile:
+    """The rclpy QoSProfile: keep the last ``depth`` (None: keep all), reliable or best effort,
+    transient local (latched) or volatile (rclpy imported lazily: only needed here)."""
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    def profile(depth: int | None, reliable: bool, latched: bool) -> QoSProfile:
-        history: dict[str, Any] = {"history": HistoryPolicy.KEEP_ALL}
-        if depth is not None:
-            history = {"history": HistoryPolicy.KEEP_LAST, "depth": depth}
-        return QoSProfile(
-            **history,
-            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-        )
+    history: dict[str, Any] = {"history": HistoryPolicy.KEEP_ALL}
+    if depth is not None:
+        history = {"history": HistoryPolicy.KEEP_LAST, "depth": depth}
+    return QoSProfile(
+        **history,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )
 
+
+def matching_profile(offered: Sequence[QoSProfile], depth: int) -> QoSProfile:
+    """A reader's profile that every writer offering ``offered`` matches: reliable only if all
+    of them are, latched only if all are (so it takes a latched topic's last value)."""
+    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+    return profile(depth, all(p.reliability == ReliabilityPolicy.RELIABLE for p in offered),
+                   all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in offered))
+
+
+def qos_profiles() -> dict[str, QoSProfile]:
+    """The rclpy QoSProfile of each entry of ``QOS``."""
     return {kind: profile(*spec) for kind, spec in QOS.items()}
