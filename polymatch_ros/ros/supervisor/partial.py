@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
-from ...core.model import GroupState, State
+from ...core.model import State
 from .. import wire
 
 if TYPE_CHECKING:
@@ -60,18 +60,15 @@ def last_state(scene: Scene, finals: Mapping[int, tuple[float, wire.Row]],
             latest[a] = (t, row)
     model, grp = scene.model, scene.model.rotations
     times: dict[int, float] = {}
-    groups = []
+    rows: dict[int, wire.Row] = {}
     for gi, g in enumerate(model.groups):
         initial = scene.initial.groups[gi]
         assert initial is not None  # a scene's initial state has every group
-        rows = {}
         for a in g.indices:
             if a in latest:
-                times[a], rows[a - g.start] = latest[a]
+                times[a], rows[a] = latest[a]
             else:  # never stepped: where it began
                 r = a - g.start
                 times[a] = 0.0
-                rows[r] = wire.Row(initial.x[r], grp.take(initial.rot, [r]))
-        e = wire.assemble(grp, model.dim, rows, full=True)
-        groups.append(GroupState(e.x, e.rot))
-    return State(min(times.values()), tuple(groups)), times
+                rows[a] = wire.Row(initial.x[r], grp.take(initial.rot, [r]))
+    return wire.state_of(model, rows, min(times.values())), times

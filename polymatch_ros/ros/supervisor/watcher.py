@@ -10,7 +10,7 @@ from collections.abc import Callable, Collection, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ...core.errors import PolymatchError
-from ...core.model import GroupState, State
+from ...core.model import State
 from .. import wire
 from ..nodes.control import ControlClient, command_message, parse_command
 from ..nodes.exchange import LeanReaders
@@ -309,16 +309,8 @@ class Watcher:
         """The final pose of every agent as a core State (None if some agent never reported)."""
         if len(self.poses) < self.model.n_agents:
             return None
-        groups = []
-        for g in self.model.groups:
-            rows = {a - g.start: self.poses[a][1] for a in g.indices}
-            with_v = self.model.order == 2 and all(a in self.velocities for a in g.indices)
-            if with_v:
-                for a in g.indices:
-                    rows[a - g.start].v, rows[a - g.start].w = self.velocities[a]
-            e = wire.assemble(self.grp, self.model.dim, rows, with_v=with_v, with_w=with_v)
-            groups.append(GroupState(e.x, e.rot, e.v, e.w))
-        return State(min(p[0] for p in self.poses.values()), tuple(groups))
+        return wire.state_of(self.model, {a: p[1] for a, p in self.poses.items()},
+                             min(p[0] for p in self.poses.values()), self.velocities)
 
     def destroy(self) -> None:
         self.finals.destroy()

@@ -25,7 +25,7 @@ from .codec import (
     stamp_of,
     time_key,
 )
-from .ensemble import Row, assemble, assemble_rows
+from .ensemble import Row, assemble, assemble_rows, state_of
 from .exchange import (
     Motion,
     decode_exchange,

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from ...core.model import GroupState
+    from ...core.model import GroupState, Model, State
     from ...core.so import RotationGroup
     from .codec import StageRows
 
@@ -53,6 +53,27 @@ def assemble(grp: RotationGroup, dim: int, rows: Mapping[int, Row],
     if with_w:
         out.w = grp.algebra_concat([rows[r].w for r in index.tolist()])  # type: ignore[misc]
     return out
+
+
+def state_of(model: Model, rows: Mapping[int, Row], t: float,
+             velocities: Mapping[int, tuple[np.ndarray, np.ndarray]] | None = None) -> State:
+    """The model's State at time ``t`` from every agent's row ({agent: Row}); a second-order
+    group gets the (v, w) of ``velocities`` where it has every agent's, else none."""
+    from ...core.model import GroupState, State
+
+    groups = []
+    for g in model.groups:
+        present = {a - g.start: rows[a] for a in g.indices}
+        with_v = (model.order == 2 and velocities is not None
+                  and all(a in velocities for a in g.indices))
+        if with_v:
+            assert velocities is not None
+            present = {r: Row(row.x, row.rot, *velocities[r + g.start])
+                       for r, row in present.items()}
+        e = assemble(model.rotations, model.dim, present, with_v=with_v, with_w=with_v,
+                     full=True)
+        groups.append(GroupState(e.x, e.rot, e.v, e.w))
+    return State(t, tuple(groups))
 
 
 def assemble_rows(grp: RotationGroup, dim: int, start: int, size: int,

@@ -21,8 +21,8 @@ import numpy as np
 
 from ...core.errors import ParameterError
 from ...core.metrics import ensemble_metrics
-from ...core.model import GroupState, State
-from .ensemble import Row, assemble
+from ...core.model import State
+from .ensemble import Row, state_of
 from .motion import Received, decode_pose_msg
 from .recording import METADATA_NAME, SCENE_ATTACHMENT
 
@@ -170,13 +170,9 @@ def _keys(rec: Recording) -> list[int]:
 
 
 def _state(scene: Scene, latest: dict[int, Received], key: int) -> State:
-    model = scene.model
-    groups = []
-    for g in model.groups:
-        rows = {a - g.start: Row(latest[a].vec - scene.origin, latest[a].rot) for a in g.indices}
-        e = assemble(model.rotations, model.dim, rows, full=True)
-        groups.append(GroupState(e.x, e.rot))
-    return State(key * 1e-9, tuple(groups))
+    rows = {a: Row(latest[a].vec - scene.origin, latest[a].rot)
+            for a in range(scene.model.n_agents)}
+    return state_of(scene.model, rows, key * 1e-9)
 
 
 def states(rec: Recording, keys: Sequence[int]) -> Iterator[State]:
