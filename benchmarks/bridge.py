@@ -12,7 +12,7 @@ matching diameters max_{i,j,a} |x^i_a - x^j_a|:
   true      of the robots' actual poses (what a robot team achieves),
 
 and reports them over the last ``--window`` seconds of the run (median and max) beside the
-noise floor ``core.command.noise_floor`` (6 sqrt(2) (sigma sqrt(d) + sigma r_max), the
+noise floor ``core.robot_commands.noise_floor`` (6 sqrt(2) (sigma sqrt(d) + sigma r_max), the
 measured diameter noise alone makes) and the time, from the robots' first motion, after which
 each stays below it.  A second table varies the agents' rate at one noise level and lag.
 Time starts at the first robot motion; every run has its own domain id and a timeout.
@@ -333,7 +333,7 @@ def _scene(scene_path, t_end, workdir):
     """(scene with ``t_end``, its path); the quick scene, written to ``workdir``, if None."""
     from dataclasses import replace
 
-    from polymatch_ros.core.command import bridge_model
+    from polymatch_ros.core.robot_commands import bridge_model
     from polymatch_ros.core.scene import load_scene
 
     if scene_path is None:
@@ -366,7 +366,8 @@ def _tables(report, scene, grid, rates, found, timing):
         "- true: the diameter of the robots' actual poses (their `pose_log`); measured: of the "
         "noisy poses the agents act on. Both sampled every 1/30 s, each robot at its latest "
         "step; times count from the first robot motion.",
-        "- noise floor: `core.command.noise_floor`, 6 sqrt(2) (sigma sqrt(d) + sigma r_max), "
+        "- noise floor: `core.robot_commands.noise_floor`, 6 sqrt(2) (sigma sqrt(d) + "
+        "sigma r_max), "
         "the measured diameter noise alone makes (the tolerance of a bridge run); with "
         "sigma = 0 the scene's tolerance. 'below floor from': the time after which the "
         "diameter stays below it to the end ('-': not by the end). 'run': how long every "

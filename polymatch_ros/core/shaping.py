@@ -22,15 +22,15 @@ from typing import Any
 
 import numpy as np
 
-from .command import (
+from .errors import ParameterError
+from .model import System
+from .robot_commands import (
     Twist,
     model_accelerations,
     model_rates,
     saturate,
     twist_command,
 )
-from .errors import ParameterError
-from .model import System
 from .safety import (
     DeadlockWatch,
     Filtered,

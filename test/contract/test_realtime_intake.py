@@ -10,7 +10,7 @@ from collections import deque
 
 import pytest
 
-from polymatch_ros.ros.nodes.exchange import drain, received_at
+from polymatch_ros.ros.nodes.process_io import drain, received_at
 
 
 def _clocks():

@@ -862,7 +862,7 @@ def test_a_run_record_reads_back_as_it_was_sent():
 def test_a_flood_of_drops_is_counted_in_full_and_warned_once_a_second_per_reason():
     """Every dropped message is counted; the warnings are throttled before the logger is
     called (a flood must not cost a logger call per message)."""
-    from polymatch_ros.ros.nodes.exchange import DropCounter
+    from polymatch_ros.ros.nodes.process_io import DropCounter
 
     class Logger:
         def __init__(self):

@@ -10,7 +10,10 @@ import pytest
 from ros_harness import scene_path
 from scipy.spatial.transform import Rotation
 
-from polymatch_ros.core.command import (
+from polymatch_ros.core.errors import ParameterError
+from polymatch_ros.core.metrics import ensemble_metrics
+from polymatch_ros.core.model import GroupState, State
+from polymatch_ros.core.robot_commands import (
     bridge_model,
     bridge_system,
     command_from_ensemble,
@@ -18,9 +21,6 @@ from polymatch_ros.core.command import (
     saturate,
     twist_command,
 )
-from polymatch_ros.core.errors import ParameterError
-from polymatch_ros.core.metrics import ensemble_metrics
-from polymatch_ros.core.model import GroupState, State
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import simulate
 from polymatch_ros.ros.nodes.robot import SimulatedRobot

@@ -7,7 +7,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from polymatch_ros.core.command import (
+from polymatch_ros.core.errors import ParameterError
+from polymatch_ros.core.model import GroupState, State
+from polymatch_ros.core.robot_commands import (
     STILL,
     accel_command,
     axial,
@@ -16,8 +18,6 @@ from polymatch_ros.core.command import (
     bridge_system,
     is_still,
 )
-from polymatch_ros.core.errors import ParameterError
-from polymatch_ros.core.model import GroupState, State
 from polymatch_ros.core.scene import load_scene, resolve_scene_path
 
 SCENE_3D = """\

@@ -12,8 +12,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from polymatch_ros.core.command import bridge_system
 from polymatch_ros.core.errors import ParameterError
+from polymatch_ros.core.robot_commands import bridge_system
 from polymatch_ros.core.safety import MotionBounds
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.shaping import CommandShaper, shaper_for

@@ -12,7 +12,12 @@ from scipy.linalg import expm
 
 from polymatch_ros.core.so import SO3, SO4, SOn, base, group_for
 from polymatch_ros.core.so.cayley import SERIES_LIMIT, cayley_series
-from polymatch_ros.core.so.so4 import cayley4, dcay_inv4, pair_matrices, quaternion_pairs
+from polymatch_ros.core.so.so4_quaternions import (
+    cayley4,
+    dcay_inv4,
+    pair_matrices,
+    quaternion_pairs,
+)
 from polymatch_ros.core.solver import lincomb
 
 

@@ -14,7 +14,7 @@ from exactness import central_vertices, received_vertices
 from ros_harness import PY, needs_ros
 
 from polymatch_ros.core.scene import load_scene
-from polymatch_ros.ros.nodes.exchange import Layout
+from polymatch_ros.ros.nodes.process_io import Layout
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros

@@ -35,7 +35,7 @@ Representations
 from .base import RotationGroup, polar_newton_schulz
 from .so2 import SO2
 from .so3 import SO3
-from .so4_group import SO4
+from .so4 import SO4
 from .son import SOn
 
 __all__ = ["SO2", "SO3", "SO4", "SOn", "RotationGroup", "group_for", "polar_newton_schulz"]

@@ -18,7 +18,7 @@ from .base import (
     scratch,
 )
 from .cayley import cayley_series, dcay_inv_series
-from .so4 import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
+from .so4_quaternions import cayley4_retract, dcay_inv4, quaternion_pairs, so4_split, unit_pairs
 
 #: J G for a (N, 2, 2) batch G is (rows of G reversed) times these signs, J = [[0, -1], [1, 0]]
 _J_SIGNS = np.array([[-1.0], [1.0]])

@@ -24,10 +24,10 @@ from ...core.simulate import plan, prepare
 from .. import wire
 from .checkpoint import CheckpointFile
 from .control import AgentControl, describe_command, offer_agent_services, parse_command
-from .exchange import DropCounter, Layout
 from .hosted import HostedAgents
 from .params import RUNTIME
 from .process import NodeApp
+from .process_io import DropCounter, Layout
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor

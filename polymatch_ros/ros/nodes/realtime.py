@@ -36,8 +36,8 @@ from ...core.solver import Method
 from .. import wire
 from .agent_base import AgentBase, local_state
 from .clock_offset import ClockOffsets
-from .exchange import LeanReaders, MessageInfo, received_at
 from .params import declare_resolved
+from .process_io import LeanReaders, MessageInfo, received_at
 from .runtime_params import SPEC, RuntimeParams
 
 if TYPE_CHECKING:
@@ -45,7 +45,7 @@ if TYPE_CHECKING:
     from rclpy.node import Node
 
     from ...core.model import Request, State
-    from .exchange import DropCounter, Layout
+    from .process_io import DropCounter, Layout
 
 #: per group the arrays the core asks for (``wire.assemble``), None for groups not needed
 Ensemble = tuple[SimpleNamespace | None, ...]

@@ -33,9 +33,9 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
-from ...core.command import saturate
 from ...core.errors import ParameterError
 from ...core.formation import positions
+from ...core.robot_commands import saturate
 from ...core.unicycle import unicycle_step
 from .params import CMD_TYPES, Param, declare, scene_file
 from .process import ros_main

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import wire
-from .exchange import quiet_events
+from .process_io import quiet_events
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 
     from ...core.model import Request
     from ...core.so import RotationGroup
-    from .exchange import Layout
+    from .process_io import Layout
 
 #: the kept rounds as data: (turn, ((writer key: agent or block, message data), ...)), ...
 Kept = tuple[tuple[int, tuple[tuple[int, bytes], ...]], ...]

@@ -13,7 +13,7 @@ from ...core.errors import PolymatchError
 from ...core.model import State
 from .. import wire
 from ..nodes.control import ControlClient, command_message, parse_command
-from ..nodes.exchange import LeanReaders
+from ..nodes.process_io import LeanReaders
 
 if TYPE_CHECKING:
     from rclpy.executors import SingleThreadedExecutor
