@@ -47,7 +47,7 @@ from .discovery import (
 from .environment import describe_domain, ros_environment, run_domain_id
 from .packing import PackingChoice, choose_packing
 from .plan import RunPlan
-from .recording import report_recording, start_recorder
+from .recorder_child import report_recording, start_recorder
 from .shm import SegmentLedger
 from .summary import RunOutcome, report, verdict
 from .watcher import Watcher

@@ -48,7 +48,7 @@ from .motion import (
     twist_message,
     twist_to_state,
 )
-from .record import RECORD_KEY, RunRecord, drop_summary, echoed_run_records, run_records
+from .run_record import RECORD_KEY, RunRecord, drop_summary, echoed_run_records, run_records
 from .topics import (
     DEFAULT_ENSEMBLE,
     TOPICS,

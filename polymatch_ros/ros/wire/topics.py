@@ -60,7 +60,7 @@ TOPICS = {
     # lockstep with K agents per process: the rows of block b (agents bK .. bK + K - 1)
     "stage_block": Topic("stages/block_{agent}", "stage", "stage", reader_qos="stage_in"),
     "control": Topic("control", "control", "control"),
-    # the run record of every agent process and the monitor (wire.record), latched per writer
+    # the run record of every agent process and the monitor (wire.run_record), latched per writer
     "status": Topic("status", "record", "status", reader_qos="status_in"),
     "diameter": Topic("diameter", "float64", "latched"),
     "diameter_centroid": Topic("diameter/centroid", "float64", "latched"),
