@@ -79,6 +79,7 @@ def _row(n, rate, packing, got):
 def run(args, log):
     from .report import Report
     from .ros_runs import private_runs, write_scene
+    from .timing import load_span
 
     report = Report(NAME, "Realtime at the scale of a swarm (`python -m benchmarks "
                           "realtime_scale`)")
@@ -106,9 +107,7 @@ def run(args, log):
          "wall / simulated time", "end"],
         rows,
         caption=f"Realtime, N congruent triangles (first order), time scale 1, {seconds} "
-        f"simulated s per run, the monitor running; load averages (1, 5, 15 min) at the start "
-        f"{'/'.join(f'{v:.1f}' for v in load[0])}, at the end "
-        f"{'/'.join(f'{v:.1f}' for v in load[-1])}, on {os.cpu_count()} cores",
+        f"simulated s per run, the monitor running; {load_span(load)}",
     )
     report.text(
         "- A tick is late when it starts more than one period after its due time.",

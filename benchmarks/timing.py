@@ -94,6 +94,15 @@ def fmt_ms(seconds):
     return f"{seconds * 1e3:.3f}" if seconds < 0.1 else f"{seconds * 1e3:.1f}"
 
 
+def load_span(load):
+    """'load averages (1, 5, 15 min) at the start a/b/c, at the end d/e/f, on N cores' of the
+    ``os.getloadavg()`` samples ``load`` taken during a family's runs (first and last)."""
+    def fmt(sample):
+        return "/".join(f"{v:.1f}" for v in sample)
+    return (f"load averages (1, 5, 15 min) at the start {fmt(load[0])}, at the end "
+            f"{fmt(load[-1])}, on {os.cpu_count()} cores")
+
+
 def machine_lines():
     """A few lines that say on what the figures were measured."""
     cpu = platform.processor() or platform.machine()

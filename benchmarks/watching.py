@@ -57,6 +57,7 @@ def _median(values):
 def run(args, log):
     from .report import Report
     from .ros_runs import private_runs, write_scene
+    from .timing import load_span
 
     report = Report(NAME, "What watching costs (`python -m benchmarks watching`)")
     sizes = [8] if args.quick else args.agents
@@ -85,9 +86,7 @@ def run(args, log):
          "median without", "with / without"],
         rows,
         caption=f"Lockstep rounds/s, N congruent triangles, rkmk4, rounds a run by N "
-        f"({', '.join(captions)}), default packing, {repeats} alternating runs each; load "
-        f"averages (1, 5, 15 "
-        f"min) at the start {'/'.join(f'{v:.1f}' for v in load[0])}, at the end "
-        f"{'/'.join(f'{v:.1f}' for v in load[-1])}, on {os.cpu_count()} cores",
+        f"({', '.join(captions)}), default packing, {repeats} alternating runs each; "
+        f"{load_span(load)}",
     )
     return report

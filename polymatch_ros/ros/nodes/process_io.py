@@ -9,6 +9,7 @@ them exactly as the centralised simulator does.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections import Counter
@@ -229,10 +230,10 @@ class LeanReaders:
         self.subscriptions.append((sub, callback))
         return sub
 
-    def drain(self, per_reader: int) -> None:
-        """Take what the readers hold, at most ``per_reader`` messages of each."""
+    def drain(self, per_reader: int | None = None) -> None:
+        """Take what the readers hold, at most ``per_reader`` messages of each (None: all)."""
         for sub, callback in self.subscriptions:
-            for _ in range(per_reader):
+            for _ in range(per_reader) if per_reader is not None else itertools.count():
                 with sub.handle:
                     got = sub.handle.take_message(sub.msg_type, sub.raw)
                 if got is None:

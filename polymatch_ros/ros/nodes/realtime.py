@@ -80,8 +80,10 @@ class PeerTable:
         dim = self.model.dim
         self.readers = LeanReaders(node, "_peers")
         # the peers' velocities enter the closed-form centroid flow (Proposition 2.1) and a
-        # second-order safety filter (``of_agent``)
-        self.want_v = velocities and self.model.order == 2
+        # second-order safety filter (``of_agent``): the peers of this process's groups
+        self.velocity_from = frozenset(
+            a for a in layout.peers if layout.owner[a][0] in layout.local_groups
+        ) if velocities and self.model.order == 2 else frozenset()
         # the run's exchange (wire.exchange): pinned to this run's id; packed processes send
         # their agents' states in one message a tick (a block), read as one reader a process
         if layout.blocks:
@@ -116,8 +118,7 @@ class PeerTable:
         if self.clock is not None:
             self.clock.add(agent, got.t, wall)
         self.pending[agent].append((mono, "pose", (got.t, got.x, got.rot)))
-        if self.want_v and got.v is not None and \
-                self.layout.owner[agent][0] in self.layout.local_groups:
+        if got.v is not None and agent in self.velocity_from:
             self.pending[agent].append((mono, "twist", got.v))
 
     def _receiver(self, agent: int) -> Callable[[Any, MessageInfo], None]:

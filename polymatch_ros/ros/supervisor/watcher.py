@@ -28,11 +28,6 @@ if TYPE_CHECKING:
 #: it has finished, and before that (a final state can come first, or from a silent process)
 FINALS_PERIOD = 0.2
 FINALS_IDLE_PERIOD = 2.0
-#: the most messages a take reads from one final-state reader: all it holds in practice.  The
-#: readers keep every sample (``final_in``), so another writer flooding an agent's topic queues
-#: ahead of the agent's own final state; a take that read only a few a reader would fall ever
-#: further behind such a flood and never reach it
-FINALS_PER_READER = 100_000
 
 
 class Watcher:
@@ -173,7 +168,10 @@ class Watcher:
         ending = any(rec.finished for rec in self.agents.values())
         if now - self._finals_taken_at >= (FINALS_PERIOD if ending else FINALS_IDLE_PERIOD):
             self._finals_taken_at = now
-            self.finals.drain(per_reader=FINALS_PER_READER)
+            # all a reader holds: the readers keep every sample (``final_in``), so another
+            # writer flooding an agent's topic queues ahead of the agent's own final state; a
+            # take of a few a reader would fall ever further behind and never reach it
+            self.finals.drain()
 
     def agent_time(self) -> dict[int, float]:
         """{agent: simulated time} from the agents' run records."""
