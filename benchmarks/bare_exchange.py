@@ -79,7 +79,7 @@ def _endpoints(node, me, k, inbox, kind):
     """This process's writer and a reader of every peer's topic; a reader files each round's
     message under ``inbox[round]``."""
     from polymatch_ros.ros import wire
-    from polymatch_ros.ros.nodes.process_io import quiet_events
+    from polymatch_ros.ros.wire.intake import quiet_events
 
     pub_events, sub_events = quiet_events()
     qos = wire.qos_profiles()
@@ -150,7 +150,7 @@ def main(argv=None):
     from rclpy.duration import Duration
 
     rclpy.init()
-    from polymatch_ros.ros.nodes.process_io import lean_node
+    from polymatch_ros.ros.wire.intake import lean_node
     node, executor = lean_node(f"bare_{me}")
     inbox = {}
     kind = MESSAGES[message_kind]()

@@ -289,7 +289,7 @@ def run(args, log):
 
     from polymatch_ros.core.errors import PolymatchError
     from polymatch_ros.core.scene import resolve_scene_path
-    from polymatch_ros.ros.supervisor.environment import private_ros_environment
+    from polymatch_ros.ros.network.environment import private_ros_environment
 
     from .report import Report
 

@@ -286,7 +286,7 @@ def _notes(report, sizes, deployed):
 def run(args, log):
     from domain_coordinator import domain_id
 
-    from polymatch_ros.ros.supervisor.environment import private_ros_environment
+    from polymatch_ros.ros.network.environment import private_ros_environment
 
     from .report import Report
 

@@ -87,7 +87,7 @@ def _measure(n, per_process, rounds, repeats, workdir, env, log, failures):
 def run(args, log):
     from domain_coordinator import domain_id
 
-    from polymatch_ros.ros.supervisor.environment import ros_environment
+    from polymatch_ros.ros.network.environment import ros_environment
 
     from .report import Report
 

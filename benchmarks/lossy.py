@@ -89,7 +89,7 @@ def _records(path):
 def _echo_status(net, seconds):
     """``during``: `polymatch echo` of the status topic inside the lead host while the hosts
     run; returns (the echo process, the packets the loss rules dropped)."""
-    from polymatch_ros.ros.supervisor import discovery
+    from polymatch_ros.ros.network import discovery
 
     def observe(procs, started, env):
         echo_env = discovery.discovery_environments("subnet").for_role("client", env)

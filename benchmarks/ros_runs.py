@@ -15,7 +15,7 @@ def private_runs():
     runs last): where a family writes its scenes and how it starts `polymatch`."""
     from domain_coordinator import domain_id
 
-    from polymatch_ros.ros.supervisor.environment import private_ros_environment
+    from polymatch_ros.ros.network.environment import private_ros_environment
 
     with tempfile.TemporaryDirectory() as workdir, domain_id() as dom:
         yield workdir, private_ros_environment(dom)

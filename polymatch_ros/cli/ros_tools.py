@@ -13,7 +13,7 @@ import argparse
 import os
 
 from ..core.errors import ParameterError
-from ..ros.nodes.params import RUNTIME
+from ..ros.config.params import RUNTIME
 
 
 def cmd_echo(args: argparse.Namespace) -> int:
@@ -22,8 +22,8 @@ def cmd_echo(args: argparse.Namespace) -> int:
         raise ParameterError(f"topic must be absolute (start with /), got {args.topic!r}")
     if args.timeout is not None and not args.timeout > 0:
         raise ParameterError(f"--timeout must be > 0 s, got {args.timeout:g}")
+    from ..ros.network.environment import ros_environment
     from ..ros.nodes.echo import echo
-    from ..ros.supervisor.environment import ros_environment
 
     os.environ.update(ros_environment())  # the discovery of `polymatch run` unless set otherwise
     return echo(args.topic, args.count, args.until_below, args.timeout, as_json=args.json)
@@ -31,7 +31,7 @@ def cmd_echo(args: argparse.Namespace) -> int:
 
 def cmd_set(args: argparse.Namespace) -> int:
     """Set ``args.name`` on every agent of ``args.ensemble``; ends the process with the code."""
-    from ..ros.nodes.teardown import end_process
+    from ..ros.process.teardown import end_process
     from ..ros.supervisor.param_set import set_parameter
 
     code = set_parameter(args.name, args.value, args.ensemble, args.timeout)

@@ -17,7 +17,7 @@ from ..console import add_number_options, positive_float, writable_output
 from ..core.errors import ParameterError, PolymatchError
 from ..core.scene import Scene, resolve_scene_path
 from ..core.simulate import plan as numerical_plan
-from ..ros.nodes.params import CMD_TYPES
+from ..ros.config.params import CMD_TYPES
 from ..ros.supervisor.plan import BridgeOptions, Hosts, Outputs, RunPlan, Timing
 from ..ros.supervisor.recovery import POLICIES, RestartPolicy
 from ..ros.wire.modes import MODES, Mode
@@ -50,7 +50,7 @@ ROBOT_OPTIONS = (
 def cmd_run(args: argparse.Namespace) -> int:
     """Build the plan (every check first), run it, end this process with the run's code."""
     run_plan = build_plan(args)
-    from ..ros.nodes.teardown import end_process
+    from ..ros.process.teardown import end_process
     from ..ros.supervisor.runner import run
 
     code = run(run_plan)
@@ -128,8 +128,8 @@ def _bridge_options(args: argparse.Namespace) -> BridgeOptions:
 
 def _hosts(args: argparse.Namespace, scene: Scene, bridge: bool) -> Hosts:
     """This host's share of the ensemble: -k, the namespace, --only, discovery."""
+    from ..ros.network.discovery import parse_discovery_spec
     from ..ros.supervisor.children import parse_only
-    from ..ros.supervisor.discovery import parse_discovery_spec
 
     requested = 1 if bridge else args.agents_per_process  # bridge: one robot, one agent
     if requested is not None and requested < 1:
@@ -146,7 +146,7 @@ def _hosts(args: argparse.Namespace, scene: Scene, bridge: bool) -> Hosts:
         raise ParameterError("--isolated: a run across hosts (--only) needs the same "
                              "ROS_DOMAIN_ID on every host, not a private one")
     if not args.isolated:
-        from ..ros.supervisor.environment import user_domain_id
+        from ..ros.network.environment import user_domain_id
 
         try:
             user_domain_id()

@@ -1,6 +1,12 @@
-"""The package's layers, as imports: arrows run one way and no module reaches itself.
+r"""The package's layers, as imports: arrows run one way and no module reaches itself.
 
-    cli -> ros.supervisor -> ros.nodes -> ros.wire -> core
+    cli -> ros.supervisor ---------------------> ros.network -> ros.process -> ros.wire -> core
+                          \-> ros.config ----------------------------------/
+           ros.nodes -> ros.agents -> ros.config, ros.process -> ros.wire -> core
+
+The supervisor imports no node and no agent module: what it shares with the processes it starts
+(the checkpoint format, control commands, reading the exchange, the parameter table, the process
+shell, the environment) lives in the rooms below both.
 
 ``core`` is pure numerics (no ROS import); ``console`` and ``figures`` serve the commands and
 the supervisor's summary; nothing outside ``cli`` imports ``cli``; nothing in the package
@@ -25,8 +31,17 @@ ALLOWED = {
     "polymatch_ros.console": ("polymatch_ros.core",),
     "polymatch_ros.figures": ("polymatch_ros.core",),
     "polymatch_ros.ros.wire": ("polymatch_ros.core",),
-    "polymatch_ros.ros.nodes": ("polymatch_ros.ros.wire", "polymatch_ros.core"),
-    "polymatch_ros.ros.supervisor": ("polymatch_ros.ros.nodes", "polymatch_ros.ros.wire",
+    "polymatch_ros.ros.process": ("polymatch_ros.ros.wire", "polymatch_ros.core"),
+    "polymatch_ros.ros.config": ("polymatch_ros.ros.wire", "polymatch_ros.core"),
+    "polymatch_ros.ros.network": ("polymatch_ros.ros.process", "polymatch_ros.ros.wire",
+                                  "polymatch_ros.core"),
+    "polymatch_ros.ros.agents": ("polymatch_ros.ros.config", "polymatch_ros.ros.process",
+                                 "polymatch_ros.ros.wire", "polymatch_ros.core"),
+    "polymatch_ros.ros.nodes": ("polymatch_ros.ros.agents", "polymatch_ros.ros.config",
+                                "polymatch_ros.ros.process", "polymatch_ros.ros.wire",
+                                "polymatch_ros.core"),
+    "polymatch_ros.ros.supervisor": ("polymatch_ros.ros.config", "polymatch_ros.ros.network",
+                                     "polymatch_ros.ros.process", "polymatch_ros.ros.wire",
                                      "polymatch_ros.core", "polymatch_ros.console"),
     "polymatch_ros.cli": ("polymatch_ros",),
 }

@@ -12,9 +12,9 @@ from ros_harness import REPO, scene_path
 
 from polymatch_ros.core.robot_commands import ZERO, bridge_model
 from polymatch_ros.core.scene import load_scene
-from polymatch_ros.ros.nodes.bridge import BridgeAgent
-from polymatch_ros.ros.nodes.params import AGENT, check
-from polymatch_ros.ros.nodes.runtime_params import validate
+from polymatch_ros.ros.agents.bridge import BridgeAgent
+from polymatch_ros.ros.config.params import AGENT, check
+from polymatch_ros.ros.config.runtime_params import validate
 
 
 def test_second_order_hold_brakes_a_moving_robot_then_sends_one_zero():
@@ -86,7 +86,7 @@ def test_cmd_vel_twist_stamped_by_default_twist_on_request(cmd_type, message_typ
 
     from polymatch_ros.cli import build_parser
     from polymatch_ros.core.robot_commands import Twist
-    from polymatch_ros.ros.nodes.bridge import command_class
+    from polymatch_ros.ros.agents.bridge import command_class
     from polymatch_ros.ros.nodes.robot import ROBOT, RobotNode
     from polymatch_ros.ros.supervisor.bridge_run import agent_args
 

@@ -1,9 +1,9 @@
-"""Realtime peers' clock offsets estimated from pose stamps (``ros/nodes/clock_offset.py``)."""
+"""Realtime peers' clock offsets estimated from pose stamps (``ros/agents/clock_offset.py``)."""
 
 import numpy as np
 import pytest
 
-from polymatch_ros.ros.nodes.clock_offset import ClockOffsets
+from polymatch_ros.ros.agents.clock_offset import ClockOffsets
 from polymatch_ros.ros.wire import RunRecord
 
 EPOCH, SCALE, RATE = 1000.0, 3.0, 20.0

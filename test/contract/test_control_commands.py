@@ -5,7 +5,7 @@ import pytest
 from builtin_interfaces.msg import Time
 
 from polymatch_interfaces.msg import ControlCommand
-from polymatch_ros.ros.nodes.control import AgentControl, command_message, parse_command
+from polymatch_ros.ros.wire.control import AgentControl, command_message, parse_command
 
 
 def _command(text):

@@ -9,8 +9,8 @@ from xml.etree import ElementTree
 import pytest
 
 from polymatch_ros.core.errors import ParameterError, PolymatchError
-from polymatch_ros.ros.supervisor import discovery
-from polymatch_ros.ros.supervisor.discovery import DiscoverySpec, parse_discovery_spec
+from polymatch_ros.ros.network import discovery
+from polymatch_ros.ros.network.discovery import DiscoverySpec, parse_discovery_spec
 
 # -- the spec parser ------------------------------------------------------------------------
 
@@ -146,7 +146,7 @@ def test_free_udp_port_is_free():
     (["--port", "7000", "--id", "300"], "0..255"),
 ])
 def test_server_command_rejects_bad_arguments(argv, words):
-    server = "polymatch_ros.ros.supervisor.discovery_server"
+    server = "polymatch_ros.ros.network.discovery_server"
     out = subprocess.run([sys.executable, "-m", server] + argv, check=False,
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2

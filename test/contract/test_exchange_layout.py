@@ -4,7 +4,7 @@ blocks a packed process sends and reads)."""
 
 from polymatch_ros.core.model import System
 from polymatch_ros.core.scene import load_scene
-from polymatch_ros.ros.nodes.process_io import Layout
+from polymatch_ros.ros.wire.intake import Layout
 
 SCENE = """\
 name: graph_case

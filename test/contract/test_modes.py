@@ -8,8 +8,8 @@ import pytest
 from polymatch_ros.cli import build_parser
 from polymatch_ros.cli.reference import subcommands
 from polymatch_ros.core.errors import ParameterError
+from polymatch_ros.ros.config.params import AGENT, MONITOR
 from polymatch_ros.ros.nodes.agent import agent_class
-from polymatch_ros.ros.nodes.params import AGENT, MONITOR
 from polymatch_ros.ros.wire.modes import Mode, mode_of
 
 #: mode: (equals the centralised run, ticks on the wall clock, drives robots, packs agents,

@@ -9,7 +9,7 @@ import pytest
 import yaml
 from ros_harness import CONFIG
 
-from polymatch_ros.ros.nodes.params import (
+from polymatch_ros.ros.config.params import (
     AGENT,
     MONITOR,
     check,

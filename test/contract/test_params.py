@@ -15,7 +15,7 @@ from ros_harness import CONFIG, needs_ros, scene_path
 
 from polymatch_ros.core.errors import ParameterError, PolymatchError
 from polymatch_ros.core.scene import load_scene
-from polymatch_ros.ros.nodes.params import (
+from polymatch_ros.ros.config.params import (
     AGENT,
     MONITOR,
     check,
@@ -359,7 +359,7 @@ def test_the_gains_are_checked_against_the_model_of_eqs_a1_a2():
 def test_a_runtime_gain_is_checked_against_the_model_then_applied_at_the_next_tick():
     """The set callback of a realtime agent: gamma 0 would divide (A-2) by zero and is refused
     with the reason; 0.5 is accepted and the next tick's model uses it."""
-    from polymatch_ros.ros.nodes.realtime import RealtimeAgent
+    from polymatch_ros.ros.agents.realtime import RealtimeAgent
 
     agent = object.__new__(RealtimeAgent)  # the callback and the tick alone, without a node
     scene = load_scene(scene_path("congruent_triangles"))

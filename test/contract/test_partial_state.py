@@ -14,8 +14,8 @@ def test_a_partial_state_from_a_projection_methods_checkpoint_is_in_the_scenes_r
     from polymatch_ros.core.model import GroupState, State
     from polymatch_ros.core.scene import load_scene
     from polymatch_ros.core.simulate import plan, prepare
-    from polymatch_ros.ros.nodes.checkpoint import Checkpoint
     from polymatch_ros.ros.supervisor.partial import last_state
+    from polymatch_ros.ros.wire.checkpoint import Checkpoint
 
     scene = load_scene(scene_path(SCENE))
     computed = prepare(scene, plan(scene, "rk4_proj", 0.05, distributed=True), distributed=True)

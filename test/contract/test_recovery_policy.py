@@ -130,7 +130,7 @@ def test_a_failure_is_one_records_line_that_run_record_readers_skip():
 def test_a_process_with_a_restart_delay_waits_for_it():
     """The discovery server comes back only once its clients' lease ran out
     (``DiscoveryServer.restart_delay``), whatever the policy's back-off."""
-    from polymatch_ros.ros.supervisor.discovery import DiscoveryServer, lease_seconds
+    from polymatch_ros.ros.network.discovery import DiscoveryServer, lease_seconds
 
     recovery = Recovery(RestartPolicy(backoff=0.5))
     server = DeadProcess("discovery_server")

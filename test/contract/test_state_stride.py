@@ -11,7 +11,7 @@ import itertools
 
 import pytest
 
-from polymatch_ros.ros.nodes.state_stride import MOST_STEPS, StateStride, power_of_two_within
+from polymatch_ros.ros.agents.state_stride import MOST_STEPS, StateStride, power_of_two_within
 
 
 class FakeClock:

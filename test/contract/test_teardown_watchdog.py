@@ -10,10 +10,10 @@ import subprocess
 import sys
 import textwrap
 
-from polymatch_ros.ros.nodes.teardown import hung_in_teardown
+from polymatch_ros.ros.process.teardown import hung_in_teardown
 
 HUNG = textwrap.dedent("""
-    from polymatch_ros.ros.nodes.teardown import teardown_watchdog
+    from polymatch_ros.ros.process.teardown import teardown_watchdog
     from polymatch_ros.ros.wire import RunRecord
     rec = RunRecord(role="agent", mode="lockstep", t=1.0, agents=(3,), finished=True, steps=20,
     rounds=20)
@@ -26,7 +26,7 @@ HUNG = textwrap.dedent("""
 
 CLEAN = textwrap.dedent("""
     import time
-    from polymatch_ros.ros.nodes.teardown import teardown_watchdog
+    from polymatch_ros.ros.process.teardown import teardown_watchdog
     print("agent 3: finished", flush=True)
     with teardown_watchdog(0.3, exit_code=5):
         pass
@@ -51,10 +51,10 @@ def test_hung_teardown_is_ended_by_the_watchdog_with_the_process_s_own_exit_code
 
 def test_without_a_native_timer_faulthandler_ends_the_hung_teardown_with_1():
     no_timer = HUNG.replace(
-        "from polymatch_ros.ros.nodes.teardown import teardown_watchdog",
-        "import polymatch_ros.ros.nodes.exit_timer as t\n"
+        "from polymatch_ros.ros.process.teardown import teardown_watchdog",
+        "import polymatch_ros.ros.process.exit_timer as t\n"
         "t.native_exit_timer = lambda *a: None\n"
-        "from polymatch_ros.ros.nodes.teardown import teardown_watchdog",
+        "from polymatch_ros.ros.process.teardown import teardown_watchdog",
     )
     code, lines = _run(no_timer)
     assert code == 1

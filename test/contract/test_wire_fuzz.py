@@ -669,7 +669,7 @@ def _command_outcome(case, expected):
     from builtin_interfaces.msg import Time
 
     from polymatch_interfaces.msg import ControlCommand
-    from polymatch_ros.ros.nodes import control
+    from polymatch_ros.ros.wire import control
 
     sec, nanosec = case["epoch"]
     got = control.parse_command(ControlCommand(command=case["command"],
@@ -734,7 +734,7 @@ def test_a_decoder_that_drops_everything_fails_its_fuzzer(name, monkeypatch):
 def test_the_other_fuzzers_fail_on_a_decoder_that_drops_everything(examples, outcome,
                                                                    monkeypatch):
     from polymatch_ros.ros import wire
-    from polymatch_ros.ros.nodes import control
+    from polymatch_ros.ros.wire import control
 
     monkeypatch.setattr(wire, "decode_pose_msg", lambda *args, **kw: (None, "dropped"))
     monkeypatch.setattr(wire, "decode_twist_msg", lambda *args, **kw: (None, "dropped"))
@@ -862,7 +862,7 @@ def test_a_run_record_reads_back_as_it_was_sent():
 def test_a_flood_of_drops_is_counted_in_full_and_warned_once_a_second_per_reason():
     """Every dropped message is counted; the warnings are throttled before the logger is
     called (a flood must not cost a logger call per message)."""
-    from polymatch_ros.ros.nodes.process_io import DropCounter
+    from polymatch_ros.ros.wire.intake import DropCounter
 
     class Logger:
         def __init__(self):

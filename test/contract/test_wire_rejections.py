@@ -545,7 +545,7 @@ def _command(command, epoch=EPOCH):
 ])
 def test_every_control_command_of_the_msg_file_is_accepted(constant, expected):
     from polymatch_interfaces.msg import ControlCommand
-    from polymatch_ros.ros.nodes.control import parse_command
+    from polymatch_ros.ros.wire.control import parse_command
 
     assert parse_command(_command(getattr(ControlCommand, constant))) == expected
 
@@ -562,6 +562,6 @@ COMMAND_CASES = [  # (what, command, epoch)
 
 @pytest.mark.parametrize("what,command,epoch", COMMAND_CASES, ids=[c[0] for c in COMMAND_CASES])
 def test_control_command_is_refused(what, command, epoch):
-    from polymatch_ros.ros.nodes.control import parse_command
+    from polymatch_ros.ros.wire.control import parse_command
 
     assert parse_command(_command(command, epoch)) is None

@@ -37,7 +37,7 @@ def _server_processes(port):
                 argv = fh.read().split(b"\0")
         except OSError:
             continue
-        if b"polymatch_ros.ros.supervisor.discovery_server" in argv and str(port).encode() in argv:
+        if b"polymatch_ros.ros.network.discovery_server" in argv and str(port).encode() in argv:
             found.append(int(cmdline))
     return found
 

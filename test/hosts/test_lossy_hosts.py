@@ -21,7 +21,7 @@ from ros_harness import needs_ros
 
 from benchmarks.hosts.runs import lockstep_argvs, scene_with
 from polymatch_ros.core.scene import load_scene
-from polymatch_ros.ros.supervisor import discovery
+from polymatch_ros.ros.network import discovery
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros

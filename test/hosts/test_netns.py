@@ -17,7 +17,7 @@ from netns_hosts import Capture, provided_hosts, root_interfaces, unavailable_re
 from proc_group import Processes
 from ros_harness import needs_ros
 
-from polymatch_ros.ros.supervisor import discovery
+from polymatch_ros.ros.network import discovery
 
 HOSTS = 3
 SERVER_PORT = 11811          # inside host 0's own namespace: no other run can hold it

@@ -1,4 +1,4 @@
-"""Every agent is its own node at any packing (``nodes/hosted.py``).
+"""Every agent is its own node at any packing (``agents/hosted.py``).
 
 A process hosting several agents is the node ``agents_<first>_<last>`` and gives each agent a
 lean node ``agent_<i>``: seen through rclpy's graph API, as ``ros2 node list``, ``ros2 topic

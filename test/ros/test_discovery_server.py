@@ -17,7 +17,7 @@ from proc_group import Processes
 from ros_harness import needs_ros
 
 from polymatch_ros.core.errors import PolymatchError
-from polymatch_ros.ros.supervisor import discovery
+from polymatch_ros.ros.network import discovery
 
 # 34 publishers and 2 listeners: more participants than LOCALHOST discovery reaches (32)
 PUBLISHERS = 34

@@ -30,7 +30,7 @@ PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
                      "service_probe.py")
 BOUND = 150  # s: only a hang takes this long
 BRIDGE_AGENTS = 4
-SERVER_MODULE = b"polymatch_ros.ros.supervisor.discovery_server"
+SERVER_MODULE = b"polymatch_ros.ros.network.discovery_server"
 DEVIATION = re.compile(r"max vertex deviation (\S+)")
 FAILURE = re.compile(r"^  (\S+) \(pid (\d+)\) (killed by \w+|exit code -?\d+|hung \(stopped\) "
                      r"for)[^;]*? (?:at t = (\S+)|"

@@ -14,8 +14,8 @@ from exactness import central_vertices, received_vertices
 from ros_harness import PY, needs_ros
 
 from polymatch_ros.core.scene import load_scene
-from polymatch_ros.ros.nodes.process_io import Layout
 from polymatch_ros.ros.wire import run_records
+from polymatch_ros.ros.wire.intake import Layout
 
 pytestmark = needs_ros
 

@@ -36,7 +36,7 @@ def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
         "/polymatch/monitor",
         "/polymatch/runner",
     ]
-    # packed 4 a process: each agent is its own node too, here a lean one (``nodes/hosted.py``)
+    # packed 4 a process: each agent is its own node too, here a lean one (``agents/hosted.py``)
     second = ["/second/agents_0_3", "/second/agents_4_7", "/second/monitor", "/second/runner"]
     second += [f"/second/agent_{i}" for i in range(8)]
     probe = ros.start([PY, "-c", PROBE, json.dumps(first + second)], timeout=200)

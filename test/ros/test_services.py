@@ -146,7 +146,7 @@ STOP_TIME = """
 import sys
 import rclpy
 from polymatch_ros.core.scene import load_scene
-from polymatch_ros.ros.nodes.control import command_message
+from polymatch_ros.ros.wire.control import command_message
 from polymatch_ros.ros.supervisor.watcher import Watcher
 from polymatch_ros.ros.wire import RunRecord
 

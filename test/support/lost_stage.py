@@ -26,9 +26,9 @@ from polymatch_ros.core.model import System
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import drive, plan, prepare, simulate, step_grid
 from polymatch_ros.ros import wire
-from polymatch_ros.ros.nodes import lockstep
-from polymatch_ros.ros.nodes.agent_base import local_state
-from polymatch_ros.ros.nodes.process_io import DropCounter, Layout
+from polymatch_ros.ros.agents import lockstep
+from polymatch_ros.ros.agents.agent_base import local_state
+from polymatch_ros.ros.wire.intake import DropCounter, Layout
 
 DT, LOST = 0.05, (0, 1, 2)  # the swallowed message: block 0, step 1, stage 2
 STALL = 8.0  # s: stall_timeout; resends come after 1 s, even on a loaded machine

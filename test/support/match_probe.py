@@ -24,7 +24,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from polymatch_interfaces.action import Match
-from polymatch_ros.ros.nodes.teardown import end_process, teardown_watchdog
+from polymatch_ros.ros.process.teardown import end_process, teardown_watchdog
 
 BOUND = 150.0
 FEEDBACK_FIELDS = ("t", "diameter", "diameter_centroid", "diameter_rotation", "agents_heard",

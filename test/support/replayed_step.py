@@ -23,7 +23,7 @@ from lost_stage import DT, Side, report
 
 from polymatch_ros.core.scene import load_scene
 from polymatch_ros.core.simulate import drive, plan, prepare, step_grid
-from polymatch_ros.ros.nodes import lockstep
+from polymatch_ros.ros.agents import lockstep
 
 STALL = 8.0  # s: a replay not answered stalls this long, then fails
 

@@ -47,7 +47,7 @@ class Ros:
     """A test's private ROS world: one domain id, loopback discovery, processes ended by PID."""
 
     def __init__(self, domain):
-        from polymatch_ros.ros.supervisor.environment import private_ros_environment
+        from polymatch_ros.ros.network.environment import private_ros_environment
 
         self.domain = domain
         self.env = private_ros_environment(domain)

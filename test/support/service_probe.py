@@ -27,7 +27,7 @@ from rclpy.node import Node
 from std_srvs.srv import SetBool, Trigger
 
 from polymatch_interfaces.msg import RunRecord as RunRecordMsg
-from polymatch_ros.ros.nodes.teardown import end_process, teardown_watchdog
+from polymatch_ros.ros.process.teardown import end_process, teardown_watchdog
 from polymatch_ros.ros.wire import RunRecord
 
 BOUND = 60.0

@@ -15,19 +15,19 @@ import sys
 from typing import TYPE_CHECKING
 
 from .. import wire
-from .params import AGENT, RUNTIME, check, given_values, pin, resolve_agent
-from .process import ros_main
+from ..config.params import AGENT, RUNTIME, check, given_values, pin, resolve_agent
+from ..process.shell import ros_main
 
 if TYPE_CHECKING:
-    from .agent_base import AgentBase
-    from .managed import ManagedAgent
+    from ..agents.agent_base import AgentBase
+    from ..agents.managed import ManagedAgent
 
 
 #: each mode's agent class, as module and class name (imported on demand: each its own module)
 AGENT_CLASSES: dict[wire.Mode, tuple[str, str]] = {
-    wire.Mode.LOCKSTEP: ("polymatch_ros.ros.nodes.lockstep", "LockstepAgent"),
-    wire.Mode.REALTIME: ("polymatch_ros.ros.nodes.realtime", "RealtimeAgent"),
-    wire.Mode.BRIDGE: ("polymatch_ros.ros.nodes.bridge", "BridgeAgent"),
+    wire.Mode.LOCKSTEP: ("polymatch_ros.ros.agents.lockstep", "LockstepAgent"),
+    wire.Mode.REALTIME: ("polymatch_ros.ros.agents.realtime", "RealtimeAgent"),
+    wire.Mode.BRIDGE: ("polymatch_ros.ros.agents.bridge", "BridgeAgent"),
 }
 
 
@@ -44,7 +44,7 @@ def make_agent(argv: list[str] | None = None) -> ManagedAgent:
 
     Its parameters hold what it uses (``params.resolve_agent``: the scene's gains, integrator,
     step and end time unless given); in realtime and bridge modes ``RUNTIME`` may be set."""
-    from .managed import ManagedAgent, lifecycle_node
+    from ..agents.managed import ManagedAgent, lifecycle_node
 
     node = lifecycle_node("agent", wire.namespace(wire.DEFAULT_ENSEMBLE))
     params = resolve_agent(check(AGENT, given_values(node, AGENT)))

@@ -23,9 +23,9 @@ import time
 from typing import TYPE_CHECKING, Any, TextIO
 
 from ...core.errors import PolymatchError
+from ..process.shell import ros_main
 from ..wire.recording import message_class
 from ..wire.topics import matching_profile
-from .process import ros_main
 
 if TYPE_CHECKING:
     from rclpy.qos import QoSProfile

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
     from ...core.certificate import CertificateKeeper
     from ...core.metrics import EnsembleMetrics
-    from .control import EnsembleControl
+    from ..wire.control import EnsembleControl
 
 #: how long the monitor, once stopped, serves the goals' results (wall-clock seconds)
 RESULT_SECONDS = 2.0

@@ -61,12 +61,12 @@ from ...core.metrics import ensemble_metrics
 from ...core.model import GroupState, State
 from ...core.proximity import ComponentTracker
 from .. import wire
-from .control import EnsembleControl
+from ..config.params import MONITOR, declare, resolve_monitor
+from ..process.shell import NodeApp, ros_main
+from ..wire.control import EnsembleControl
+from ..wire.intake import DropCounter, LeanReaders, received_at
 from .match_action import MatchServer
 from .monitor_output import certificate_status, diagnostics, markers
-from .params import MONITOR, declare, resolve_monitor
-from .process import NodeApp, ros_main
-from .process_io import DropCounter, LeanReaders, received_at
 from .sim_clock import SimClock
 
 if TYPE_CHECKING:
@@ -74,7 +74,7 @@ if TYPE_CHECKING:
 
     from ...core.metrics import EnsembleMetrics
     from ...core.model import Model
-    from .process_io import MessageInfo
+    from ..wire.intake import MessageInfo
 
 #: how long the monitor waits for its report topics' readers (``report_readers``); the
 #: agents' discovery timeout, for which they wait for the monitor, is longer

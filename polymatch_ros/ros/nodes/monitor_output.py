@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from ...core.model import Group, Model
     from ...core.scene import Scene
     from ...core.so import RotationGroup
-    from .process_io import DropCounter
+    from ..wire.intake import DropCounter
 
 GROUP_COLOURS = [
     (0.12, 0.47, 0.71),

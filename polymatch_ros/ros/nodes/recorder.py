@@ -31,6 +31,8 @@ from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ParameterError
 from .. import wire
+from ..config.params import Param, declare
+from ..process.shell import NodeApp, ros_main
 from ..wire.recording import (
     RECORDER_DEPTH,
     SCENE_ATTACHMENT,
@@ -40,8 +42,6 @@ from ..wire.recording import (
     recorder_qos,
 )
 from ..wire.topics import QOS, matching_profile, qos_profiles
-from .params import Param, declare
-from .process import NodeApp, ros_main
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -37,8 +37,8 @@ from ...core.errors import ParameterError
 from ...core.formation import positions
 from ...core.robot_commands import saturate
 from ...core.unicycle import unicycle_step
-from .params import CMD_TYPES, Param, declare, scene_file
-from .process import ros_main
+from ..config.params import CMD_TYPES, Param, declare, scene_file
+from ..process.shell import ros_main
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -185,7 +185,7 @@ class RobotNode:
 
     def __init__(self, node: Node, params: dict[str, Any]) -> None:
         from ...core.scene import load_scene, resolve_scene_path
-        from .bridge import (
+        from ..agents.bridge import (
             CMD_ACCEL,
             CMD_VEL,
             MEASURED_POSE,

@@ -1,4 +1,5 @@
 """What starts, watches, summarises and ends ROS processes: ``polymatch run`` (the
-launch-free runner and its children), the lifecycle driver, the Fast DDS discovery server,
-``polymatch set``, and the environment every child gets (loopback discovery, its own domain).
+launch-free runner and its children), the lifecycle driver, the recorder child and
+``polymatch set``.  It imports no node module: what it shares with the nodes is in ``wire``,
+``config``, ``process`` and ``network``.
 """

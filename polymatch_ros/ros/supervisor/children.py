@@ -16,13 +16,13 @@ from typing import TYPE_CHECKING
 from ...console import Progress
 from ...core.errors import ParameterError
 from .. import wire
-from ..nodes.teardown import EXIT_GRACE, TEARDOWN_SECONDS, hung_in_teardown
+from ..process.teardown import EXIT_GRACE, TEARDOWN_SECONDS, hung_in_teardown
 from .plan import RunPlan
 from .recovery import Recovery
 from .shm import SegmentLedger
 
 if TYPE_CHECKING:
-    from .discovery import DiscoveryServer
+    from ..network.discovery import DiscoveryServer
     from .lifecycle_driver import LifecycleDriver
     from .watcher import Watcher
 

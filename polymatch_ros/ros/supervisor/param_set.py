@@ -23,10 +23,10 @@ from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ParameterError, PolymatchError
 from .. import wire
-from ..nodes.params import RUNTIME, check_value
-from ..nodes.runtime_params import SPEC
-from ..nodes.teardown import teardown_watchdog
-from .environment import ros_environment
+from ..config.params import RUNTIME, check_value
+from ..config.runtime_params import SPEC
+from ..network.environment import ros_environment
+from ..process.teardown import teardown_watchdog
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor

@@ -18,7 +18,7 @@ from .. import wire
 if TYPE_CHECKING:
     from ...core.scene import Scene
     from ...core.so import RotationGroup
-    from ..nodes.checkpoint import Checkpoint
+    from ..wire.checkpoint import Checkpoint
 
 #: agent -> (its simulated time, its row)
 AgentRows = dict[int, tuple[float, wire.Row]]

@@ -17,7 +17,7 @@ from .recovery import RestartPolicy
 if TYPE_CHECKING:
     from ...core.scene import Scene
     from ...core.simulate import Plan
-    from .discovery import DiscoverySpec
+    from ..network.discovery import DiscoverySpec
 
 @dataclass(frozen=True)
 class Hosts:

@@ -22,7 +22,7 @@ from .children import Child
 from .plan import RunPlan
 
 if TYPE_CHECKING:
-    from .discovery import DiscoveryEnvironments
+    from ..network.discovery import DiscoveryEnvironments
 
 #: SIGINT to SIGTERM: its drain (1 s), the file's summary, the DDS teardown
 RECORDER_GRACE_SECONDS = 10.0

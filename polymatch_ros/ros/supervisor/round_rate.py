@@ -140,9 +140,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     """The measuring process: SCENE METHOD DT T_END TIMEOUT RECORDS; ends with the run's code."""
     from ...core.scene import load_scene
     from ...core.simulate import plan
-    from ..nodes.teardown import end_process
+    from ..network.discovery import parse_discovery_spec
+    from ..process.teardown import end_process
     from . import runner
-    from .discovery import parse_discovery_spec
     from .plan import Hosts, Outputs, RunPlan, Timing
 
     p = argparse.ArgumentParser(prog="round_rate")

@@ -25,8 +25,16 @@ from types import FrameType
 from ...console import Progress
 from ...core.errors import PolymatchError
 from .. import wire
-from ..nodes.checkpoint import Checkpoint, CheckpointFile
-from ..nodes.teardown import teardown_watchdog
+from ..network.discovery import (
+    DISCOVERY_VARIABLES,
+    DiscoveryEnvironments,
+    DiscoveryServer,
+    discovery_environments,
+    start_discovery_server,
+)
+from ..network.environment import describe_domain, ros_environment, run_domain_id
+from ..process.teardown import teardown_watchdog
+from ..wire.checkpoint import Checkpoint, CheckpointFile
 from . import bridge_run
 from .children import (  # noqa: F401 (API)
     REMOTE_FINAL_POSE_SECONDS,
@@ -37,14 +45,6 @@ from .children import (  # noqa: F401 (API)
     partition,
     stop_all,
 )
-from .discovery import (
-    DISCOVERY_VARIABLES,
-    DiscoveryEnvironments,
-    DiscoveryServer,
-    discovery_environments,
-    start_discovery_server,
-)
-from .environment import describe_domain, ros_environment, run_domain_id
 from .packing import PackingChoice, choose_packing
 from .plan import RunPlan
 from .recorder_child import report_recording, start_recorder

@@ -19,7 +19,7 @@ from ..wire import RunRecord
 from .plan import RunPlan
 
 if TYPE_CHECKING:
-    from ..nodes.checkpoint import Checkpoint
+    from ..wire.checkpoint import Checkpoint
     from .children import Child
     from .recovery import Failure
     from .watcher import Watcher

@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING, Any
 from ...core.errors import PolymatchError
 from ...core.model import State
 from .. import wire
-from ..nodes.control import ControlClient, command_message, parse_command
-from ..nodes.process_io import LeanReaders
+from ..wire.control import ControlClient, command_message, parse_command
+from ..wire.intake import LeanReaders
 
 if TYPE_CHECKING:
     from rclpy.executors import SingleThreadedExecutor
@@ -299,7 +299,7 @@ class Watcher:
 
     def host_ensemble_services(self, mode: wire.Mode) -> None:
         """On a host that runs every agent and no monitor: this node offers them."""
-        from ..nodes.control import EnsembleControl
+        from ..wire.control import EnsembleControl
 
         self.ensemble_control = EnsembleControl(self.node, mode)
 

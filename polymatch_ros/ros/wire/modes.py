@@ -38,7 +38,7 @@ class Mode(StrEnum):
 
     @property
     def drives_robots(self) -> bool:
-        """Agents read their robots' poses and command them (``ros/nodes/bridge.py``)."""
+        """Agents read their robots' poses and command them (``ros/agents/bridge.py``)."""
         return self is Mode.BRIDGE
 
     @property

@@ -13,7 +13,7 @@ the endpoints they match.  *Super clients* (whole-graph tools: the monitor, `pol
 learn of every participant (``ROS_SUPER_CLIENT=TRUE``).  The *server* is a plain rclpy
 participant whose default XML profile makes it a Fast DDS discovery server (``discoveryProtocol``
 SERVER, GUID prefix ``44.53.<id>.5f.45.50.52.4f.53.49.4d.41``, a unicast metatraffic locator): see
-``server_profile_xml`` and ``python -m polymatch_ros.ros.supervisor.discovery_server``.
+``server_profile_xml`` and ``python -m polymatch_ros.ros.network.discovery_server``.
 Domain ids do not
 separate runs that share a server, so each run gets its own server port (``free_udp_port``).
 Under a server there is no 32-participant limit: clients talk to the server, not to probed ports.
@@ -258,7 +258,7 @@ def discovery_environments(spec: str | DiscoverySpec, directory: str | None = No
 
 
 class DiscoveryServer:
-    """A ``python -m polymatch_ros.ros.supervisor.discovery_server`` (bounded by ``timeout``),
+    """A ``python -m polymatch_ros.ros.network.discovery_server`` (bounded by ``timeout``),
     supervised like the run's other processes (``recovery.Process``): restarted on the same
     address, its clients find it again."""
 
@@ -351,7 +351,7 @@ def start_discovery_server(port: int, host: str = DEFAULT_SERVER_HOST, seconds: 
         import tempfile
         log_path = tempfile.mkstemp(prefix=f"polymatch_ds_{port}_", suffix=".log")[1]
     argv = list(prefix) + ["timeout", "-k", "5", str(seconds), sys.executable, "-m",
-                           "polymatch_ros.ros.supervisor.discovery_server", "--host", host,
+                           "polymatch_ros.ros.network.discovery_server", "--host", host,
                            "--port", str(port), "--seconds", str(seconds)]
     server = DiscoveryServer(argv, os.environ if env is None else env, host, port, log_path)
     server.launch()

@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Any
 from ...core.simulate import drive, step_grid
 from ...core.solver import Method
 from .. import wire
+from ..wire.intake import RoundTimeout, lean_node
 from .agent_base import AgentBase
-from .process_io import RoundTimeout, lean_node
 from .stage_links import AgentLinks, BlockLinks, local_fields
 from .state_stride import StateStride
 
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from rclpy.node import Node
 
     from ...core.model import Request
-    from .process_io import DropCounter, Layout
+    from ..wire.intake import DropCounter, Layout
 
 #: a round: (step, stage)
 Round = tuple[int, int]

@@ -24,7 +24,7 @@ from .. import wire
 
 if TYPE_CHECKING:
     from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-    from rclpy.executors import Executor, SingleThreadedExecutor
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.impl.rcutils_logger import RcutilsLogger
     from rclpy.node import Node
     from rclpy.subscription import Subscription
@@ -177,21 +177,6 @@ def lean_node(name: str, namespace: str | None = None) -> tuple[Node, SingleThre
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     return node, executor
-
-
-def drain(executor: Executor, taken: Callable[[], int], most: int) -> None:
-    """Run the callbacks that are ready in ``executor`` now, at most ``most`` of them;
-    ``taken()`` counts the callbacks run so far.
-
-    rclpy's ``spin_once(0)`` runs one callback of its last wait's ready entities, and once they
-    are done the next call comes back empty (the wait's timeout has passed); the call after that
-    waits anew.  So two empty calls in a row mean nothing was ready.
-    """
-    first, empty = taken(), 0
-    while empty < 2 and taken() - first < most:
-        before = taken()
-        executor.spin_once(timeout_sec=0.0)
-        empty = empty + 1 if taken() == before else 0
 
 
 class LeanReaders:

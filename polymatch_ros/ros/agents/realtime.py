@@ -34,18 +34,18 @@ from ...core.model import System
 from ...core.simulate import drive
 from ...core.solver import Method
 from .. import wire
+from ..config.params import declare_resolved
+from ..config.runtime_params import SPEC, RuntimeParams
+from ..wire.intake import LeanReaders, MessageInfo, received_at
 from .agent_base import AgentBase, local_state
 from .clock_offset import ClockOffsets
-from .params import declare_resolved
-from .process_io import LeanReaders, MessageInfo, received_at
-from .runtime_params import SPEC, RuntimeParams
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor
     from rclpy.node import Node
 
     from ...core.model import Request, State
-    from .process_io import DropCounter, Layout
+    from ..wire.intake import DropCounter, Layout
 
 #: per group the arrays the core asks for (``wire.assemble``), None for groups not needed
 Ensemble = tuple[SimpleNamespace | None, ...]

@@ -22,12 +22,12 @@ from ...core.errors import ParameterError, PolymatchError
 from ...core.model import GroupState, State, System
 from ...core.simulate import plan, prepare
 from .. import wire
-from .checkpoint import CheckpointFile
-from .control import AgentControl, describe_command, offer_agent_services, parse_command
+from ..config.params import RUNTIME
+from ..process.shell import NodeApp
+from ..wire.checkpoint import CheckpointFile
+from ..wire.control import AgentControl, describe_command, offer_agent_services, parse_command
+from ..wire.intake import DropCounter, Layout
 from .hosted import HostedAgents
-from .params import RUNTIME
-from .process import NodeApp
-from .process_io import DropCounter, Layout
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor

@@ -55,9 +55,9 @@ from ...core.robot_commands import (
 from ...core.safety import PeerSight
 from ...core.shaping import shaper_for
 from .. import wire
+from ..config.runtime_params import RuntimeParams
 from .agent_base import AgentBase
 from .realtime import PeerTable, RealtimeAgent
-from .runtime_params import RuntimeParams
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor

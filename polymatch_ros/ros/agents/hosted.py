@@ -31,8 +31,8 @@ import threading
 from collections.abc import Collection, Iterable, Mapping
 from typing import TYPE_CHECKING, Any
 
-from .control import AgentControl, offer_agent_services
-from .params import AGENT, read_only_descriptor
+from ..config.params import AGENT, read_only_descriptor
+from ..wire.control import AgentControl, offer_agent_services
 
 if TYPE_CHECKING:
     from rclpy.executors import SingleThreadedExecutor

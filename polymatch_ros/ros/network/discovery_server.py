@@ -1,6 +1,6 @@
 """A Fast DDS discovery server as a small rclpy process.
 
-    python -m polymatch_ros.ros.supervisor.discovery_server --port 11811 [--host 127.0.0.1]
+    python -m polymatch_ros.ros.network.discovery_server --port 11811 [--host 127.0.0.1]
         [--id 0] [--seconds 3600]
 
 The Fast DDS wheel's own ``fast-discovery-server`` does not start as installed, but any
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import NoReturn
 
 from ...core.errors import ParameterError, PolymatchError
-from ..nodes.teardown import end_process, teardown_watchdog
+from ..process.teardown import end_process, teardown_watchdog
 from . import discovery
 from .discovery import READY_LINE
 
@@ -49,7 +49,7 @@ class ServerOptions:
 
 def parse(argv: Sequence[str]) -> tuple[ServerOptions, discovery.DiscoverySpec]:
     """The checked options and their server spec; ParameterError (one line) otherwise."""
-    parser = _Parser(prog="python -m polymatch_ros.ros.supervisor.discovery_server")
+    parser = _Parser(prog="python -m polymatch_ros.ros.network.discovery_server")
     parser.add_argument("--port", type=int, required=True)
     parser.add_argument("--host", default=discovery.DEFAULT_SERVER_HOST)
     parser.add_argument("--id", type=int, default=0, dest="server_id")

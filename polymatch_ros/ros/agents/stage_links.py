@@ -24,7 +24,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import wire
-from .process_io import quiet_events
+from ..wire.checkpoint import Kept
+from ..wire.intake import quiet_events
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -33,10 +34,8 @@ if TYPE_CHECKING:
 
     from ...core.model import Request
     from ...core.so import RotationGroup
-    from .process_io import Layout
+    from ..wire.intake import Layout
 
-#: the kept rounds as data: (turn, ((writer key: agent or block, message data), ...)), ...
-Kept = tuple[tuple[int, tuple[tuple[int, bytes], ...]], ...]
 #: a peer's decoded stage message (its rows), and a dropped message (source, reason)
 OnStage = Callable[[wire.StageRows], None]
 OnDrop = Callable[[str, str], None]

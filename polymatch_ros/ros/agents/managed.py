@@ -23,7 +23,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from ...core.errors import PolymatchError
-from .process import NodeApp
+from ..process.shell import NodeApp
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor

@@ -28,7 +28,10 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from ...core.model import State
-    from .stage_links import Kept
+
+#: the kept rounds of a lockstep process, as data: (turn, ((writer key: agent or block,
+#: message data), ...)), ...
+Kept = tuple[tuple[int, tuple[tuple[int, bytes], ...]], ...]
 
 #: a slot's header: the payload's length and CRC-32
 HEADER = struct.Struct("<QI")
