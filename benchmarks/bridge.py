@@ -12,7 +12,8 @@ matching diameters max_{i,j,a} |x^i_a - x^j_a|:
   true      of the robots' actual poses (what a robot team achieves),
 
 and reports them over the last ``--window`` seconds of the run (median and max) beside the
-noise floor ``core.robot_commands.noise_floor`` (6 sqrt(2) (sigma sqrt(d) + sigma r_max), the
+noise floor ``core.robots.robot_commands.noise_floor`` (6 sqrt(2) (sigma sqrt(d) + sigma r_max),
+the
 measured diameter noise alone makes) and the time, from the robots' first motion, after which
 each stays below it.  A second table varies the agents' rate at one noise level and lag.
 Time starts at the first robot motion; every run has its own domain id and a timeout.
@@ -266,7 +267,7 @@ def _model_alone(scene, t_end, window):
     """Median matching diameter of (A-2) itself (no noise, no lag) over the window."""
     import numpy as np
 
-    from polymatch_ros.core.simulate import simulate
+    from polymatch_ros.core.stepping.simulate import simulate
 
     samples = np.linspace(max(0.0, t_end - window), t_end, 9)
     traj = simulate(scene, "rkmk4", 0.01, samples=samples)
@@ -288,7 +289,7 @@ def run(args, log):
     from domain_coordinator import domain_id
 
     from polymatch_ros.core.errors import PolymatchError
-    from polymatch_ros.core.scene import resolve_scene_path
+    from polymatch_ros.core.scenes.scene import resolve_scene_path
     from polymatch_ros.ros.network.environment import private_ros_environment
 
     from .report import Report
@@ -333,8 +334,8 @@ def _scene(scene_path, t_end, workdir):
     """(scene with ``t_end``, its path); the quick scene, written to ``workdir``, if None."""
     from dataclasses import replace
 
-    from polymatch_ros.core.robot_commands import bridge_model
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.robots.robot_commands import bridge_model
+    from polymatch_ros.core.scenes.scene import load_scene
 
     if scene_path is None:
         scene_path = os.path.join(workdir, "bridge_quick.yaml")
@@ -366,7 +367,7 @@ def _tables(report, scene, grid, rates, found, timing):
         "- true: the diameter of the robots' actual poses (their `pose_log`); measured: of the "
         "noisy poses the agents act on. Both sampled every 1/30 s, each robot at its latest "
         "step; times count from the first robot motion.",
-        "- noise floor: `core.robot_commands.noise_floor`, 6 sqrt(2) (sigma sqrt(d) + "
+        "- noise floor: `core.robots.robot_commands.noise_floor`, 6 sqrt(2) (sigma sqrt(d) + "
         "sigma r_max), "
         "the measured diameter noise alone makes (the tolerance of a bridge run); with "
         "sigma = 0 the scene's tolerance. 'below floor from': the time after which the "

@@ -61,7 +61,7 @@ def log_figures(logs, offsets, ell, t_end):
     """(min distance, reached-from time or None, final heading spread) of one run's logs."""
     from scipy.spatial.transform import Rotation
 
-    from polymatch_ros.core.unicycle import heading_spread
+    from polymatch_ros.core.robots.unicycle import heading_spread
 
     from .bridge import first_motion
 
@@ -91,7 +91,7 @@ def log_figures(logs, offsets, ell, t_end):
 
 def one_run(env, workdir, case, t_end):
     """Figures of one start: (min distance, reached, heading spread, final error) or a reason."""
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.scenes.scene import load_scene
 
     from .bridge import read_robot_logs
     from .ros_runs import run_cli, write_scene

@@ -191,7 +191,7 @@ class _Settings:
 def _settings(args):
     """Settings from the options; a scene the scipy right-hand side cannot model is refused."""
     from polymatch_ros.core import load_scene
-    from polymatch_ros.core.scene import resolve_scene_path
+    from polymatch_ros.core.scenes.scene import resolve_scene_path
 
     t_end = args.t_end if args.t_end is not None else (5.0 if args.quick else None)
     scene = load_scene(resolve_scene_path(args.scene), {"time.t_end": t_end})

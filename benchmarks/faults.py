@@ -173,7 +173,7 @@ def _soak_rows(s):
 def run(args, log):
     from domain_coordinator import domain_id
 
-    from polymatch_ros.core.scene import resolve_scene_path
+    from polymatch_ros.core.scenes.scene import resolve_scene_path
     from polymatch_ros.ros.network.environment import private_ros_environment
 
     from .report import Report

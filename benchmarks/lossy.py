@@ -186,7 +186,7 @@ def _central_time(scene, t_end):
     """The centralised run's time to tolerance with the realtime step h = time scale / rate."""
     from dataclasses import replace
 
-    from polymatch_ros.core.simulate import plan, simulate
+    from polymatch_ros.core.stepping.simulate import plan, simulate
 
     dt = TIME_SCALE / RATE
     method = plan(scene, None, dt, distributed=True).name
@@ -206,7 +206,7 @@ def _interruptible():
 
 def _measure(args, log, net, workdir, captures):
     """(realtime cells, lockstep cells) over the hosts ``net``."""
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.scenes.scene import load_scene
 
     from .hosts.runs import scene_with
 
@@ -232,7 +232,7 @@ def _measure(args, log, net, workdir, captures):
 
 
 def run(args, log):
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.scenes.scene import load_scene
 
     from .hosts.namespaces import NetnsHosts, unavailable_reason
     from .report import Report
@@ -374,7 +374,7 @@ def central_deviation(scene, path):
     from dataclasses import replace
 
     from polymatch_ros.core.metrics import vertices
-    from polymatch_ros.core.simulate import plan, simulate
+    from polymatch_ros.core.stepping.simulate import plan, simulate
 
     t, got = saved_vertices(scene, path)
     method = plan(scene, None, None, distributed=True).name

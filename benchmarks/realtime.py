@@ -66,7 +66,7 @@ def _row(rate, runs, n_agents, cores):
 def run(args, log):
     from domain_coordinator import domain_id
 
-    from polymatch_ros.core.scene import load_scene, resolve_scene_path
+    from polymatch_ros.core.scenes.scene import load_scene, resolve_scene_path
     from polymatch_ros.ros.network.environment import private_ros_environment
 
     from .report import Report

@@ -17,7 +17,7 @@ def add_arguments(p):
 
 
 def _scene(dim, n, t_end, **model):
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.scenes.scene import load_scene
     shape = {2: "triangle", 3: "tetrahedron"}[dim]
     spec = {"dimension": dim, "seed": 3,
             "model": {"order": 1, "kappa": 1.0, "gamma": 1.0, **model},
@@ -42,7 +42,7 @@ def _vertices(scene, state, rot):
 def _timed(scene, method, dt, repeats):
     import time
 
-    from polymatch_ros.core.simulate import simulate
+    from polymatch_ros.core.stepping.simulate import simulate
     best, traj = float("inf"), None
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -85,7 +85,7 @@ def _compare(case, repeats, log):
 
 def _two_groups(m, t_end):
     """m triangles and m tetrahedra without the inter-group potential (kappa_2 = 0)."""
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.scenes.scene import load_scene
 
     return load_scene({"dimension": 3, "seed": 5, "model": {"order": 1, "kappa_2": 0.0, "L": 3.0},
                        "time": {"t_end": t_end, "samples": {"count": 2}},
@@ -97,7 +97,7 @@ def _two_groups(m, t_end):
 
 def _unweighted(n, t_end, like):
     """``like``'s agents in a scene that states no scale weights."""
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.scenes.scene import load_scene
 
     sim = load_scene({"dimension": 3, "seed": 3, "time": {"t_end": t_end, "samples": {"count": 2}},
                       "groups": [{"name": "a", "shape": "tetrahedron", "count": n,
@@ -122,7 +122,7 @@ def _cases(n, t_end):
     of every reduction, built one at a time as they are run."""
     from dataclasses import replace
 
-    from polymatch_ros.core.simulate import with_representation
+    from polymatch_ros.core.stepping.simulate import with_representation
 
     s2 = _scene(2, n, t_end)
     yield ("2-D: angles (Kuramoto) vs 2x2 matrices", with_representation(s2, "matrix"), "rkmk4",

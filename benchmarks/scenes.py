@@ -8,7 +8,7 @@ def timing_scene(n, dim, order=1, representation="auto", seed=0):
     velocities; first order (A-2): kappa = gamma = 1.  The values do not change
     the cost of a step, only the shapes of the arrays do.
     """
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.scenes.scene import load_scene
     model = {"order": order, "kappa": 1.0, "gamma": 1.0, "representation": representation}
     group = {"name": "simplices", "shape": {"simplex": dim}, "count": int(n),
              "centroids": {"box": [-5.0, 5.0]}, "rotations": "uniform"}

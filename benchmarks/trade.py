@@ -47,7 +47,7 @@ def add_arguments(p):
 def _vertex_error_over_run(scene, method, dt, ref):
     import numpy as np
 
-    from polymatch_ros.core.simulate import simulate
+    from polymatch_ros.core.stepping.simulate import simulate
 
     traj = simulate(scene, method, dt, samples=ref["times"], metrics=False)
     worst = 0.0
@@ -69,7 +69,7 @@ def _verts(scene, state):
 def _reference(scene, times):
     import numpy as np
 
-    from polymatch_ros.core.simulate import simulate
+    from polymatch_ros.core.stepping.simulate import simulate
 
     traj = simulate(scene, "adaptive", tolerance=1e-12, samples=np.asarray(times), metrics=False)
     return {"times": np.array(traj.times), "verts": [_verts(scene, st) for st in traj.states]}
@@ -99,7 +99,7 @@ def _lockstep_row(setup, method, dt, log):
     """One integrator at one dt: its agents' round rate in a real run, its error centrally."""
     import numpy as np
 
-    from polymatch_ros.core.integrators import METHODS
+    from polymatch_ros.core.stepping.integrators import METHODS
 
     from .ros_runs import agent_records, run_cli
 
@@ -202,7 +202,7 @@ def run(args, log):
     import numpy as np
     from domain_coordinator import domain_id
 
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.scenes.scene import load_scene
     from polymatch_ros.ros.network.environment import private_ros_environment
 
     from .report import Report

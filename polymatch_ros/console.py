@@ -10,11 +10,11 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any, TextIO
 
 from .core.errors import ParameterError
-from .core.limits import MIN_RELATIVE_TOLERANCE, parse_size
+from .core.scenes.limits import MIN_RELATIVE_TOLERANCE, parse_size
 
 if TYPE_CHECKING:
     from .core.metrics import EnsembleMetrics
-    from .core.scene import Scene
+    from .core.scenes.scene import Scene
 
 
 def positive_float(text: str) -> float:

@@ -14,8 +14,8 @@ from .core.metrics import vertices
 
 if TYPE_CHECKING:
     from .core.model import Group, State
-    from .core.scene import Scene
-    from .core.simulate import Trajectory
+    from .core.scenes.scene import Scene
+    from .core.stepping.simulate import Trajectory
     from .core.sweep.run import BatchResult
 
 #: where a figure goes: a file name, returned as it was given

@@ -133,7 +133,7 @@ def equilibrium(v, name, order, rep):
 
 
 def equilibrium_verdict(v):
-    from polymatch_ros.core.simulate import convergence_verdict
+    from polymatch_ros.core.stepping.simulate import convergence_verdict
     sc = lib.scene(2, 1, count=2, shape="triangle", rotations={"angles": [0.0, math.pi]},
                    t_end=10.0,
                    centroids={"points": [[-1.0, 0.0], [1.0, 0.0]]})

@@ -151,7 +151,7 @@ def lockstep_argvs(scene_file, n, out, t_end=1.0, timeout=100):
 def scene_with(directory, name, count):
     """A copy of a scene (file or shipped name) with ``count`` agents in every group, written
     to ``directory`` (seeded: reproducible)."""
-    from polymatch_ros.core.scene import resolve_scene_path
+    from polymatch_ros.core.scenes.scene import resolve_scene_path
 
     with open(resolve_scene_path(name)) as fh:
         data = yaml.safe_load(fh)

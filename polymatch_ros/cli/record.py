@@ -38,7 +38,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     if args.duration is not None:
         argv += ["-p", f"duration:={args.duration!r}"]
     if args.scene is not None:
-        from ..core.scene import load_scene, resolve_scene_path
+        from ..core.scenes.scene import load_scene, resolve_scene_path
 
         scene_file = resolve_scene_path(args.scene)
         load_scene(scene_file)  # a bad scene is an error now, not an unreadable recording

@@ -15,8 +15,8 @@ import os
 
 from ..console import add_number_options, positive_float, writable_output
 from ..core.errors import ParameterError, PolymatchError
-from ..core.scene import Scene, resolve_scene_path
-from ..core.simulate import plan as numerical_plan
+from ..core.scenes.scene import Scene, resolve_scene_path
+from ..core.stepping.simulate import plan as numerical_plan
 from ..ros.config.params import CMD_TYPES
 from ..ros.supervisor.plan import BridgeOptions, Hosts, Outputs, RunPlan, Timing
 from ..ros.supervisor.recovery import POLICIES, RestartPolicy

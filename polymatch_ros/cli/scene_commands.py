@@ -28,13 +28,13 @@ from ..console import (
     writable_output,
 )
 from ..core.certificate import certify
-from ..core.checks import did_you_mean
 from ..core.errors import ParameterError, PolymatchError, SceneError, StabilityError
-from ..core.limits import Limits
 from ..core.model import GroupState
-from ..core.preflight import check_run
-from ..core.scene import INTEGRATOR_NAMES, Scene, load_scene, shipped_config_dirs
-from ..core.simulate import Trajectory, convergence_verdict
+from ..core.scenes.checks import did_you_mean
+from ..core.scenes.limits import Limits
+from ..core.scenes.preflight import check_run
+from ..core.scenes.scene import INTEGRATOR_NAMES, Scene, load_scene, shipped_config_dirs
+from ..core.stepping.simulate import Trajectory, convergence_verdict
 
 
 def _limits(args: argparse.Namespace) -> Limits | None:
@@ -80,7 +80,7 @@ def naming_dt_option(dt: float | None) -> Iterator[None]:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """A centralised run of a scene: progress, summary table, verdict; npz and figure."""
-    from ..core.simulate import explain, plan, simulate
+    from ..core.stepping.simulate import explain, plan, simulate
     save = writable_output(args.save, ".npz") if args.save else None
     figure = writable_output(args.figure, ".png") if args.figure else None
     check_integrator_option(args.integrator)
@@ -154,7 +154,7 @@ def save_npz(traj: Trajectory, path: str) -> None:
 def cmd_explain(args: argparse.Namespace) -> int:
     """Which model, representation and integrator a scene uses, and why; then, for a run
     that ``simulate`` would refuse, the refusal as an error (exit code 2)."""
-    from ..core.simulate import explain, plan
+    from ..core.stepping.simulate import explain, plan
     check_integrator_option(args.integrator)
     scene = load_scene(args.scene, limits=_limits(args))
     check_run(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed,
@@ -174,8 +174,8 @@ def certificate_line(scene: Scene) -> str:
 
 def cmd_integrators(args: argparse.Namespace) -> int:
     """The integrator registry as a table."""
-    from ..core.adaptive import AdaptiveLie
-    from ..core.integrators import METHODS
+    from ..core.stepping.adaptive import AdaptiveLie
+    from ..core.stepping.integrators import METHODS
     rows = []
     for m in list(METHODS.values()) + [AdaptiveLie]:
         i = m.info
@@ -190,7 +190,7 @@ def cmd_integrators(args: argparse.Namespace) -> int:
 def cmd_scenes(args: argparse.Namespace) -> int:
     """The shipped scenes as a table; ``simulate`` says whether the scene runs as shipped or is
     kept to show a refusal (``polymatch simulate`` exits 2 with the reason)."""
-    from ..core.simulate import plan
+    from ..core.stepping.simulate import plan
     rows: list[list[object]] = []
     for d in shipped_config_dirs()[:1]:
         for sub in ("", "extremes"):

@@ -22,8 +22,8 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from ..console import format_table, positive_float, writable_output
 from ..core.errors import ParameterError
-from ..core.preflight import check_run
-from ..core.scene import Scene, load_scene, resolve_scene_path
+from ..core.scenes.preflight import check_run
+from ..core.scenes.scene import Scene, load_scene, resolve_scene_path
 from ..core.trade import MAX_SAMPLES, Row, TradeResult, trade
 
 if TYPE_CHECKING:
@@ -120,7 +120,7 @@ def _measured_setting(result: TradeResult, scene: Scene) -> tuple[str, float]:
         pick = min(fixed, key=lambda r: r.error or 0.0) if fixed else None
     if pick is not None:
         return pick.setting.solver, pick.setting.value
-    from ..core.simulate import plan
+    from ..core.stepping.simulate import plan
     p = plan(scene, distributed=True)
     assert p.dt is not None  # a distributed plan takes fixed steps
     return p.name, p.dt

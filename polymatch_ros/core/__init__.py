@@ -10,7 +10,6 @@ The ROS agents, the monitor and the benchmarks use exactly these pieces:
 ``ensemble_metrics`` (an ``EnsembleMetrics`` record).
 """
 
-from .decompose import decompose
 from .errors import (
     ParameterError,
     PolymatchError,
@@ -19,17 +18,26 @@ from .errors import (
     StabilityError,
     StepLimitError,
 )
-from .integrators import METHODS, check_stability, get_method, max_stable_dt
 from .metrics import EnsembleMetrics, GroupMetrics, ensemble_metrics, point_set_diameter
 from .model import Coupling, GroupState, Model, State, System, lohe_torque
-from .scene import Scene, load_scene
-from .simulate import Trajectory, drive, explain, plan, recommend, simulate, with_representation
+from .scenes.decompose import decompose
+from .scenes.scene import Scene, load_scene
+from .stepping.integrators import METHODS, check_stability, get_method, max_stable_dt
+from .stepping.simulate import (
+    Trajectory,
+    drive,
+    explain,
+    plan,
+    recommend,
+    simulate,
+    with_representation,
+)
 
 
 def __getattr__(name):
     """AdaptiveLie on first use: it pulls in scipy.integrate, which a ROS agent never needs."""
     if name == "AdaptiveLie":
-        from .adaptive import AdaptiveLie
+        from .stepping.adaptive import AdaptiveLie
         return AdaptiveLie
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 

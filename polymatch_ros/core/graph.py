@@ -37,9 +37,9 @@ if TYPE_CHECKING:  # scipy is imported where it is used: a complete-graph scene 
     from scipy import sparse
 
 from . import proximity
-from .checks import Map, number
 from .errors import SceneError
-from .limits import MAX_LENGTH, MIN_SIZE
+from .scenes.checks import Map, number
+from .scenes.limits import MAX_LENGTH, MIN_SIZE
 
 KINDS = ("complete", "ring", "k_nearest", "random", "edges", "radius")
 NORMALISATIONS = ("size", "degree")

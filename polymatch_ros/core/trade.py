@@ -2,7 +2,7 @@
 
 Every registered fixed-step method whose model orders include the scene's, at a ladder of
 steps; the adaptive DOP853-Lie method and scipy's DOP853 (on the flattened model,
-``core.flat``) at a ladder of tolerances.  Each run's error is the whole run's
+``core.stepping.flat``) at a ladder of tolerances.  Each run's error is the whole run's
 
     max over the sample times t_s, agents i and vertices a of |x^i_a(t_s) - x^i_a,ref(t_s)|,
 
@@ -34,11 +34,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .errors import ParameterError, PolymatchError, StabilityError
-from .integrators import METHODS
+from .stepping.integrators import METHODS
 from .trade_runs import SCIPY_NAME, Output, OverBudget, Runs, max_vertex_error
 
 if TYPE_CHECKING:
-    from .scene import Scene
+    from .scenes.scene import Scene
 
 __all__ = ["DEFAULT_TOLERANCES", "Reference", "Row", "SCIPY", "Setting", "TradeResult",
            "fastest", "sample_times", "step_ladder", "trade"]
@@ -439,7 +439,7 @@ def trade(scene: Scene, target: float, budget: float, *, distributed: bool = Fal
     say = notice or (lambda text: None)
     from scipy.integrate import solve_ivp  # noqa: F401 -- imported before the clock starts
 
-    from . import adaptive  # noqa: F401
+    from .stepping import adaptive  # noqa: F401
     grid = _Grid(scene, times, budget, distributed)
     rows = candidates(scene, steps, tolerances)
     probes = _probes(rows)

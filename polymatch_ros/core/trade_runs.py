@@ -2,7 +2,8 @@
 
 Our integrators run the centralised simulator's own loop (``simulate.plan``, ``prepare``, the
 method's ``solver``), timed around the stepping alone, with the deadline checked after every
-step; scipy's DOP853 integrates the flattened model (``core.flat``) with the deadline checked at
+step; scipy's DOP853 integrates the flattened model (``core.stepping.flat``) with the deadline
+checked at
 every evaluation.  A run past the deadline raises ``OverBudget``.
 """
 
@@ -15,14 +16,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import PolymatchError
-from .flat import FlatModel
 from .metrics import vertices
 from .model import State, System
-from .simulate import plan, prepare
-from .solver import RUNNING
+from .stepping.flat import FlatModel
+from .stepping.simulate import plan, prepare
+from .stepping.solver import RUNNING
 
 if TYPE_CHECKING:
-    from .scene import Scene
+    from .scenes.scene import Scene
 
 __all__ = ["OverBudget", "Output", "Runs", "SCIPY_NAME", "max_vertex_error"]
 
@@ -93,7 +94,7 @@ class Runs:
         return out
 
     def scipy(self, tol: float) -> Output:
-        """scipy's DOP853 at rtol = atol = tol on the flattened model (``core.flat``)."""
+        """scipy's DOP853 at rtol = atol = tol on the flattened model (``core.stepping.flat``)."""
         from scipy.integrate import solve_ivp
 
         if self.flat is None:

@@ -299,8 +299,8 @@ def test_lossy_deviation_of_the_centralised_run_itself_is_zero(tmp_path):
     import numpy as np
 
     from benchmarks.lossy import central_deviation
-    from polymatch_ros.core.scene import load_scene, resolve_scene_path
-    from polymatch_ros.core.simulate import plan, simulate
+    from polymatch_ros.core.scenes.scene import load_scene, resolve_scene_path
+    from polymatch_ros.core.stepping.simulate import plan, simulate
 
     scene = load_scene(resolve_scene_path("congruent_triangles"), {"time.t_end": 0.2})
     method = plan(scene, None, None, distributed=True).name

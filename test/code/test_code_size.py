@@ -1,5 +1,6 @@
 """Size rules, as lines: a module holds one concept (about 400 lines, at most 600), a function
-at most 60.  They cover the package and the benchmarks beside it.
+at most 60.  They cover the package and the benchmarks beside it.  A folder of the package is a
+room of at most 15 modules (its ``__init__`` aside); a larger one splits into rooms.
 
 A function's length is ``end_lineno - lineno + 1`` of its ``def`` (docstring and body, no
 decorators); nested functions and methods count on their own as well as inside their parent.
@@ -13,6 +14,7 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 MODULE_LINES = 600
 FUNCTION_LINES = 60
+FOLDER_MODULES = 15
 TREES = ("polymatch_ros", "benchmarks")
 
 
@@ -43,6 +45,15 @@ def test_functions_are_at_most_60_lines(path):
     found = long_functions(path.read_text(encoding="utf-8"))
     assert not found, "; ".join(f"{path.relative_to(ROOT)}:{line} {name} ({n} lines)"
                                 for name, line, n in found)
+
+
+PACKAGE_FOLDERS = sorted(p.parent for p in (ROOT / "polymatch_ros").rglob("__init__.py"))
+
+
+@pytest.mark.parametrize("folder", PACKAGE_FOLDERS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_a_package_folder_holds_at_most_15_modules(folder):
+    modules = [p for p in folder.glob("*.py") if p.name not in ("__init__.py", "__main__.py")]
+    assert len(modules) <= FOLDER_MODULES, f"{folder.relative_to(ROOT)}: {len(modules)} modules"
 
 
 def _function(name, lines, indent=""):

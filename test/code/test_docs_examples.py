@@ -17,7 +17,7 @@ import yaml
 
 from polymatch_ros.cli import NODES, build_parser
 from polymatch_ros.core.errors import PolymatchError
-from polymatch_ros.core.scene import load_scene, resolve_scene_path
+from polymatch_ros.core.scenes.scene import load_scene, resolve_scene_path
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 PAGES = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md")])

@@ -10,8 +10,8 @@ import pytest
 import yaml
 from ros_harness import REPO, scene_path
 
-from polymatch_ros.core.robot_commands import ZERO, bridge_model
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.robots.robot_commands import ZERO, bridge_model
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.agents.bridge import BridgeAgent
 from polymatch_ros.ros.config.params import AGENT, check
 from polymatch_ros.ros.config.runtime_params import validate
@@ -85,7 +85,7 @@ def test_cmd_vel_twist_stamped_by_default_twist_on_request(cmd_type, message_typ
     from rclpy.serialization import deserialize_message, serialize_message
 
     from polymatch_ros.cli import build_parser
-    from polymatch_ros.core.robot_commands import Twist
+    from polymatch_ros.core.robots.robot_commands import Twist
     from polymatch_ros.ros.agents.bridge import command_class
     from polymatch_ros.ros.nodes.robot import ROBOT, RobotNode
     from polymatch_ros.ros.supervisor.bridge_run import agent_args

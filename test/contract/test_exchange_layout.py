@@ -3,7 +3,7 @@ integrated with the stages, everyone where their exact flow reads every centroid
 blocks a packed process sends and reads)."""
 
 from polymatch_ros.core.model import System
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire.intake import Layout
 
 SCENE = """\

@@ -9,7 +9,7 @@ import os
 import pytest
 
 from polymatch_ros import cli
-from polymatch_ros.core.scene import shipped_config_dirs
+from polymatch_ros.core.scenes.scene import shipped_config_dirs
 
 CONFIG = shipped_config_dirs()[0]
 SCENES = sorted(os.path.join(sub, f[:-5]) if sub else f[:-5]

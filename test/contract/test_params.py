@@ -14,7 +14,7 @@ from param_tables import LOCKSTEP_TABLE, REALTIME_TABLE
 from ros_harness import CONFIG, needs_ros, scene_path
 
 from polymatch_ros.core.errors import ParameterError, PolymatchError
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.config.params import (
     AGENT,
     MONITOR,

@@ -8,12 +8,13 @@ SCENE = "congruent_triangles"
 
 
 def test_a_partial_state_from_a_projection_methods_checkpoint_is_in_the_scenes_rotations():
-    """A 2-D projection integrator's agents checkpoint matrices (``core.simulate.prepare``)
+    """A 2-D projection integrator's agents checkpoint matrices
+    (``core.stepping.simulate.prepare``)
     where the scene keeps angles: the partial state holds each agent's checkpointed rotation
     in the scene's representation (an agent without a checkpoint: its initial one)."""
     from polymatch_ros.core.model import GroupState, State
-    from polymatch_ros.core.scene import load_scene
-    from polymatch_ros.core.simulate import plan, prepare
+    from polymatch_ros.core.scenes.scene import load_scene
+    from polymatch_ros.core.stepping.simulate import plan, prepare
     from polymatch_ros.ros.supervisor.partial import last_state
     from polymatch_ros.ros.wire.checkpoint import Checkpoint
 

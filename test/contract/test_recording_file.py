@@ -19,7 +19,7 @@ from ros_harness import needs_ros
 from polymatch_ros.cli import main
 from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState, State
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 
 pytestmark = needs_ros
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from ros_harness import scene_path
 
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros import wire
 
 

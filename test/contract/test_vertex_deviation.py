@@ -8,7 +8,7 @@ import pytest
 from ros_harness import scene_path
 
 from polymatch_ros.core.model import GroupState, State
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.supervisor.summary import vertex_deviation
 
 

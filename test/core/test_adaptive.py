@@ -6,7 +6,7 @@ from core_testlib import make_scene
 from scipy.integrate._ivp import dop853_coefficients
 
 from polymatch_ros.core import simulate
-from polymatch_ros.core.adaptive import CAP_FRACTION, AdaptiveLie
+from polymatch_ros.core.stepping.adaptive import CAP_FRACTION, AdaptiveLie
 
 
 def _dop853_stability(z):

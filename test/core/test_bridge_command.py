@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from polymatch_ros.core.errors import ParameterError
 from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState, State
-from polymatch_ros.core.robot_commands import (
+from polymatch_ros.core.robots.robot_commands import (
     bridge_model,
     bridge_system,
     command_from_ensemble,
@@ -21,8 +21,8 @@ from polymatch_ros.core.robot_commands import (
     saturate,
     twist_command,
 )
-from polymatch_ros.core.scene import load_scene
-from polymatch_ros.core.simulate import simulate
+from polymatch_ros.core.scenes.scene import load_scene
+from polymatch_ros.core.stepping.simulate import simulate
 from polymatch_ros.ros.nodes.robot import SimulatedRobot
 
 SCENE_3D = """\

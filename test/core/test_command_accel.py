@@ -9,7 +9,7 @@ import pytest
 
 from polymatch_ros.core.errors import ParameterError
 from polymatch_ros.core.model import GroupState, State
-from polymatch_ros.core.robot_commands import (
+from polymatch_ros.core.robots.robot_commands import (
     STILL,
     accel_command,
     axial,
@@ -18,7 +18,7 @@ from polymatch_ros.core.robot_commands import (
     bridge_system,
     is_still,
 )
-from polymatch_ros.core.scene import load_scene, resolve_scene_path
+from polymatch_ros.core.scenes.scene import load_scene, resolve_scene_path
 
 SCENE_3D = """\
 name: tetrahedra_3d_second_order

@@ -9,8 +9,8 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import special_ortho_group
 
 from polymatch_ros.core import SceneError, ShapeError, decompose
-from polymatch_ros.core.decompose import RotationNotUniqueWarning
-from polymatch_ros.core.shapes import hypercube, polygon, simplex
+from polymatch_ros.core.scenes.decompose import RotationNotUniqueWarning
+from polymatch_ros.core.scenes.shapes import hypercube, polygon, simplex
 
 SHAPES = {2: [polygon(5), hypercube(2)], 3: [simplex(3), hypercube(3)],
           4: [simplex(4), hypercube(4)]}

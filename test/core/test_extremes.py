@@ -666,7 +666,7 @@ def test_extreme_non_consensus_equilibrium_reproduced_roundoff_grows_at_linear_r
 @pytest.mark.parametrize("scene_file", ["antipodal_triangles_2d.yaml",
                                         "antipodal_tetrahedra_3d.yaml", "splay_triangles_2d.yaml"])
 def test_extreme_non_consensus_equilibrium_verdict_names_it_D0_ge_1(scene_file):
-    from polymatch_ros.core.simulate import convergence_verdict
+    from polymatch_ros.core.stepping.simulate import convergence_verdict
     scene = load_scene(EXTREMES / scene_file)
     traj = simulate(scene)
     assert not traj.converged and traj.stationarity < 1e-10
@@ -837,7 +837,7 @@ def test_extreme_dt_larger_than_t_end_stiff_scene_still_refused_section_5():
 @pytest.mark.parametrize("dim", [2, 3, 4])
 @pytest.mark.parametrize("order", [1, 2])
 def test_extreme_one_agent_trivially_converged_any_integrator_theorem_4_2(order, dim):
-    from polymatch_ros.core.simulate import convergence_verdict
+    from polymatch_ros.core.stepping.simulate import convergence_verdict
     names = [n for n, m in METHODS.items() if order in m.info.models] + ["adaptive"]
     for name in names:
         velocities = {"angular": {"normal": 0.5}, "centroid": {"normal": 0.5}}

@@ -1,4 +1,4 @@
-"""Formations (core/formation.py): consensus on x_i - c_i.
+"""Formations (core/robots/formation.py): consensus on x_i - c_i.
 
 Prop. 2.1 under the change of variable y_i = x_i - c_i: first order, the centroids follow
 x_i(t) = c_i + ybar + exp(-kappa t / gamma) (x_i(0) - c_i - ybar), written out here and
@@ -15,7 +15,7 @@ import pytest
 from polymatch_ros.core import load_scene, simulate
 from polymatch_ros.core.certificate import certify
 from polymatch_ros.core.errors import SceneError
-from polymatch_ros.core.formation import positions
+from polymatch_ros.core.robots.formation import positions
 
 SCENE = {
     "name": "formation", "dimension": 2, "seed": 3,

@@ -23,11 +23,11 @@ from scipy.spatial.transform import Rotation
 from polymatch_ros.core import load_scene
 from polymatch_ros.core.errors import SceneError
 from polymatch_ros.core.graph import Graph
-from polymatch_ros.core.integrators import get_method
 from polymatch_ros.core.model import GroupState, State, System
-from polymatch_ros.core.simulate import convergence_verdict, explain, simulate
 from polymatch_ros.core.so import group_for
-from polymatch_ros.core.solver import drive
+from polymatch_ros.core.stepping.integrators import get_method
+from polymatch_ros.core.stepping.simulate import convergence_verdict, explain, simulate
+from polymatch_ros.core.stepping.solver import drive
 
 
 def scene(dim=2, order=1, *, graph=None, count=8, seed=1, t_end=2.0, dt=0.02, method="rkmk4",

@@ -15,11 +15,11 @@ from scipy.spatial.distance import cdist, pdist, squareform
 from polymatch_ros.core import load_scene, proximity
 from polymatch_ros.core.errors import SceneError
 from polymatch_ros.core.graph import Graph
-from polymatch_ros.core.integrators import check_stability, get_method, max_stable_dt
 from polymatch_ros.core.model import GroupState, State, System
-from polymatch_ros.core.simulate import convergence_verdict, explain, simulate
 from polymatch_ros.core.so import group_for
-from polymatch_ros.core.solver import drive
+from polymatch_ros.core.stepping.integrators import check_stability, get_method, max_stable_dt
+from polymatch_ros.core.stepping.simulate import convergence_verdict, explain, simulate
+from polymatch_ros.core.stepping.solver import drive
 
 
 def brute_weights(x, radius, cutoff="smooth"):

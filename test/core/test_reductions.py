@@ -9,8 +9,8 @@ runs reduced and full side by side; `polymatch bench reductions` reports the cos
 
 import numpy as np
 
-from polymatch_ros.core.scene import load_scene
-from polymatch_ros.core.simulate import simulate
+from polymatch_ros.core.scenes.scene import load_scene
+from polymatch_ros.core.stepping.simulate import simulate
 
 
 def _scene(**over):

@@ -1,4 +1,4 @@
-"""The safety filter (core/safety.py): a control barrier function per agent.
+"""The safety filter (core/robots/safety.py): a control barrier function per agent.
 
 Oracles: the projection onto one half-plane in closed form; scipy's SLSQP on the same
 quadratic programme; the barrier's claim (h_ij >= 0 is forward invariant: no two robots come
@@ -10,7 +10,7 @@ import pytest
 from scipy.optimize import minimize
 
 from polymatch_ros.core.errors import SceneError
-from polymatch_ros.core.safety import (
+from polymatch_ros.core.robots.safety import (
     DeadlockWatch,
     MotionBounds,
     PeerSight,

@@ -8,7 +8,7 @@ import pytest
 from core_testlib import defect, rot_matrices, skew_matrices
 
 from polymatch_ros.core import SceneError, load_scene
-from polymatch_ros.core.shapes import polygon
+from polymatch_ros.core.scenes.shapes import polygon
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 TRI = polygon(3).vertices
@@ -163,7 +163,8 @@ def test_explicit_vertices_round_trip_section_3():
 
 
 # ---------------------------------------------------------------------------------------------
-# bounds, tried exactly at and just past each edge (core.limits, core.checks, core.scene)
+# bounds, tried exactly at and just past each edge (core.scenes.limits, core.scenes.checks,
+# core.scenes.scene)
 
 
 def _simplices(dim, count=2):

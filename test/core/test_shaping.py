@@ -1,9 +1,9 @@
-"""What a bridged agent sends its robot (core/shaping.py): formation, safety filter, drive.
+"""What a bridged agent sends its robot (core/robots/shaping.py): formation, safety filter, drive.
 
 Oracles: (A-2) written out here for the formation's velocity (kappa/(gamma N) sum_k (y_k - y_i)
 with y = q - c); the barrier's half-plane (2 (p_i - p_j) . u >= -(alpha/2) h) checked on the
 command sent; the point ahead of the axle moved by the sent (v, omega) over a short arc
-(core.unicycle's arc, itself checked against solve_ivp) agrees with the filtered velocity.
+(core.robots.unicycle's arc, itself checked against solve_ivp) agrees with the filtered velocity.
 """
 
 import math
@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from polymatch_ros.core.errors import ParameterError
-from polymatch_ros.core.robot_commands import bridge_system
-from polymatch_ros.core.safety import MotionBounds
-from polymatch_ros.core.scene import load_scene
-from polymatch_ros.core.shaping import CommandShaper, shaper_for
-from polymatch_ros.core.unicycle import point_ahead, unicycle_step
+from polymatch_ros.core.robots.robot_commands import bridge_system
+from polymatch_ros.core.robots.safety import MotionBounds
+from polymatch_ros.core.robots.shaping import CommandShaper, shaper_for
+from polymatch_ros.core.robots.unicycle import point_ahead, unicycle_step
+from polymatch_ros.core.scenes.scene import load_scene
 
 LIMITS = {"command_frame": "world", "max_linear_speed": 1e6, "max_angular_speed": 1e6,
           "max_linear_accel": 1e6, "max_angular_accel": 1e6}

@@ -18,7 +18,7 @@ from polymatch_ros.core.so.so4_quaternions import (
     pair_matrices,
     quaternion_pairs,
 )
-from polymatch_ros.core.solver import lincomb
+from polymatch_ros.core.stepping.solver import lincomb
 
 
 def _skew(rng, n, d, scale):

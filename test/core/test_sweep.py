@@ -8,7 +8,7 @@ from input_fuzz import run_main
 from scipy.integrate._ivp import dop853_coefficients
 
 from polymatch_ros.core import METHODS, simulate
-from polymatch_ros.core.rk import RKMK
+from polymatch_ros.core.stepping.rk import RKMK
 from polymatch_ros.core.sweep.batch import HalfAngles, pair_diameters
 from polymatch_ros.core.sweep.run import batch_plan, classify, run_batch
 from polymatch_ros.core.sweep.scenes import Cell, cell_scenes, rotations_at_diameter, template

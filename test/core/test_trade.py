@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 
 from polymatch_ros.cli import main
 from polymatch_ros.core import load_scene, simulate
-from polymatch_ros.core.flat import FlatModel
+from polymatch_ros.core.stepping.flat import FlatModel
 from polymatch_ros.core.trade import trade
 
 TRIANGLES = triangles_yaml("four_triangles", seed=5, count=4, method="rkmk4", dt=0.05, t_end=4.0,

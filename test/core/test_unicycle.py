@@ -1,4 +1,4 @@
-"""Differential-drive bases (core/unicycle.py).
+"""Differential-drive bases (core/robots/unicycle.py).
 
 Claims: the point ell ahead of the axle moves with the commanded velocity (feedback
 linearisation): checked by differentiating q = p + ell (cos theta, sin theta) numerically
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from polymatch_ros.core.unicycle import (
+from polymatch_ros.core.robots.unicycle import (
     heading_spread,
     point_ahead,
     unicycle_command,

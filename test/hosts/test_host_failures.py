@@ -38,7 +38,7 @@ from ros_harness import needs_ros, scene_path
 from shm_watch import ShmWatch
 
 from benchmarks.hosts.runs import argv_of, descendants, lockstep_argvs, node_name, scene_with
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.network import discovery
 
 pytestmark = needs_ros

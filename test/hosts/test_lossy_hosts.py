@@ -20,7 +20,7 @@ import pytest
 from ros_harness import needs_ros
 
 from benchmarks.hosts.runs import lockstep_argvs, scene_with
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.network import discovery
 from polymatch_ros.ros.wire import run_records
 

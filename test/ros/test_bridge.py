@@ -13,7 +13,7 @@ import pytest
 from ros_harness import PY, REPO, needs_ros, scene_path
 from scipy.spatial.transform import Rotation
 
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 
 PARAMS_FILE = os.path.join(REPO, "config", "params", "bridge_agent.yaml")
 
@@ -296,7 +296,7 @@ def test_robots_crossing_to_their_formation_places_never_come_closer_than_2r(ros
     model alone drives them through each other.  With the safety filter, the robots' logged
     true positions (the oracle: the simulated robots' own log, not the agents' view) stay at
     least 2 r apart (to 1 %: 20 Hz commands, 0.05 s lag), and the formation is reached;
-    unicycle bases the same, for the points ahead of their axles (core.unicycle)."""
+    unicycle bases the same, for the points ahead of their axles (core.robots.unicycle)."""
     scene = _scene(tmp_path, SCENE_CROSSING.format())
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene, "--mode", "bridge",
                       "--rate", "20", "--lag", "0.05", "--drive", drive, "--hold", "1e9",

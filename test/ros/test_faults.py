@@ -19,8 +19,8 @@ from ros_harness import PY, cli_argv, needs_ros, placed_vertices, scene_path
 from shm_watch import ShmWatch
 
 from benchmarks.hosts.runs import argv_of, children, descendants, node_name, scene_with
-from polymatch_ros.core.scene import load_scene
-from polymatch_ros.core.simulate import plan, simulate
+from polymatch_ros.core.scenes.scene import load_scene
+from polymatch_ros.core.stepping.simulate import plan, simulate
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros

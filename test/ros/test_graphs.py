@@ -13,7 +13,7 @@ import pytest
 from exactness import central_vertices, received_vertices
 from ros_harness import PY, needs_ros
 
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire import run_records
 from polymatch_ros.ros.wire.intake import Layout
 

@@ -15,7 +15,7 @@ from shm_watch import ShmWatch
 
 from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState, State
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros

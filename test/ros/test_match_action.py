@@ -15,7 +15,7 @@ import numpy as np
 from ros_harness import PY, REPO, cli_argv, needs_ros, scene_path
 from scipy.spatial.transform import Rotation
 
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 
 pytestmark = needs_ros
 

@@ -50,7 +50,7 @@ def test_an_agent_written_from_the_msg_files_joins_and_the_ensemble_matches_theo
     for r in rot:  # saved in SO(2)
         assert abs(np.linalg.det(r) - 1) < 1e-9 and np.allclose(r.T @ r, np.eye(2), atol=1e-9)
     # agent 7's saved state is the foreign agent's own (relative to the scene's origin there)
-    from polymatch_ros.core.scene import load_scene
+    from polymatch_ros.core.scenes.scene import load_scene
 
     origin = load_scene(scene_path(SCENE)).origin
     assert np.allclose(x[AGENT] - origin, ast.literal_eval(said.group(2)), atol=1e-9)

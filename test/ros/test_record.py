@@ -14,7 +14,7 @@ from ros_harness import cli_argv, needs_ros
 
 from polymatch_ros.cli import main
 from polymatch_ros.core.metrics import ensemble_metrics
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros

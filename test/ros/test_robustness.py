@@ -22,8 +22,8 @@ import yaml
 from ros_harness import PY, REPO, _children, cli_argv, needs_ros, node_argv, scene_path
 
 from benchmarks.hosts.runs import descendants
-from polymatch_ros.core.scene import load_scene
-from polymatch_ros.core.simulate import simulate
+from polymatch_ros.core.scenes.scene import load_scene
+from polymatch_ros.core.stepping.simulate import simulate
 
 pytestmark = needs_ros
 

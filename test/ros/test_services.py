@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from ros_harness import PY, cli_argv, needs_ros, scene_path
 
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros
@@ -145,7 +145,7 @@ def test_a_run_stopped_by_the_stop_service_says_so_and_exits_4(ros):
 STOP_TIME = """
 import sys
 import rclpy
-from polymatch_ros.core.scene import load_scene
+from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire.control import command_message
 from polymatch_ros.ros.supervisor.watcher import Watcher
 from polymatch_ros.ros.wire import RunRecord

@@ -15,7 +15,7 @@ from ros_harness import cli_argv, needs_ros, placed_vertices
 from scipy.spatial.distance import pdist
 
 from polymatch_ros.core import load_scene
-from polymatch_ros.core.simulate import plan
+from polymatch_ros.core.stepping.simulate import plan
 
 pytestmark = needs_ros
 

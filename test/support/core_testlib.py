@@ -146,8 +146,8 @@ def agents_of_one_row(sc, method, h, steps, ensemble_for):
     by ``method``; at each stage agent i is answered with the one-group ensemble
     ``ensemble_for(i, system_i, request_i, rows)`` (``rows``: every agent's stage group state).
     Returns every agent's final state."""
-    from polymatch_ros.core.integrators import get_method
     from polymatch_ros.core.model import GroupState, State, System
+    from polymatch_ros.core.stepping.integrators import get_method
 
     model, grp = sc.model, sc.model.rotations
     n = model.groups[0].size

@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 from ros_harness import placed_vertices
 
-from polymatch_ros.core.simulate import simulate
+from polymatch_ros.core.stepping.simulate import simulate
 
 
 def central_vertices(scene, integrator, t):

@@ -10,8 +10,8 @@ from proc_group import REPO
 
 from benchmarks.hosts import runs as netns_run
 from benchmarks.hosts.runs import host_argv, lockstep_split
-from polymatch_ros.core.scene import load_scene
-from polymatch_ros.core.simulate import plan
+from polymatch_ros.core.scenes.scene import load_scene
+from polymatch_ros.core.stepping.simulate import plan
 from polymatch_ros.ros.wire import echoed_run_records
 
 DEVIATION = re.compile(r"max vertex deviation (\S+)")

@@ -23,8 +23,8 @@ import rclpy
 from rclpy.node import Node
 
 from polymatch_ros.core.model import System
-from polymatch_ros.core.scene import load_scene
-from polymatch_ros.core.simulate import drive, plan, prepare, simulate, step_grid
+from polymatch_ros.core.scenes.scene import load_scene
+from polymatch_ros.core.stepping.simulate import drive, plan, prepare, simulate, step_grid
 from polymatch_ros.ros import wire
 from polymatch_ros.ros.agents import lockstep
 from polymatch_ros.ros.agents.agent_base import local_state

@@ -21,8 +21,8 @@ import threading
 import rclpy
 from lost_stage import DT, Side, report
 
-from polymatch_ros.core.scene import load_scene
-from polymatch_ros.core.simulate import drive, plan, prepare, step_grid
+from polymatch_ros.core.scenes.scene import load_scene
+from polymatch_ros.core.stepping.simulate import drive, plan, prepare, step_grid
 from polymatch_ros.ros.agents import lockstep
 
 STALL = 8.0  # s: a replay not answered stalls this long, then fails

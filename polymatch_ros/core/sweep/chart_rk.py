@@ -19,10 +19,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..adaptive_chart import Chart
 from ..model import Coupling, State, System
-from ..rk import RKMK
-from ..solver import Stepper
+from ..stepping.adaptive_chart import Chart
+from ..stepping.rk import RKMK
+from ..stepping.solver import Stepper
 
 
 class ChartRK(RKMK):

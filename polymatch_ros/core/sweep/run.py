@@ -35,12 +35,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ParameterError
-from ..integrators import check_stability
 from ..model import State
-from ..scene import Scene
-from ..simulate import Plan, plan, prepare
+from ..scenes.scene import Scene
 from ..so.base import Array, RotationGroup
-from ..solver import RUNNING
+from ..stepping.integrators import check_stability
+from ..stepping.simulate import Plan, plan, prepare
+from ..stepping.solver import RUNNING
 from . import chart_rk
 from .batch import (
     BatchSystem,

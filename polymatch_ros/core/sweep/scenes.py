@@ -21,10 +21,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import ParameterError, SceneError
-from ..limits import DEFAULT_MEMORY
 from ..model import GroupState, State
-from ..scene import Scene, build_scene, resolve_scene_path
-from ..yamlfile import parse_yaml, read_scene_file
+from ..scenes.limits import DEFAULT_MEMORY
+from ..scenes.scene import Scene, build_scene, resolve_scene_path
+from ..scenes.yamlfile import parse_yaml, read_scene_file
 
 #: bytes a batch holds per state entry: stage copies, slopes, metrics and the D0 draw
 BYTES_PER_ENTRY = 8 * 64

@@ -20,7 +20,7 @@ import numpy as np
 
 from ...core.errors import ParameterError, PolymatchError
 from ...core.model import GroupState, State, System
-from ...core.simulate import plan, prepare
+from ...core.stepping.simulate import plan, prepare
 from .. import wire
 from ..config.params import RUNTIME
 from ..process.shell import NodeApp
@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from rclpy.node import Node
     from rclpy.publisher import Publisher
 
-    from ...core.scene import Scene
+    from ...core.scenes.scene import Scene
 
 
 def local_state(scene: Scene, layout: Layout) -> State:
@@ -78,7 +78,7 @@ class AgentBase(NodeApp):
         self._make_publishers()
 
     def _configure(self, p: dict[str, Any]) -> None:
-        from ...core.scene import load_scene, resolve_scene_path
+        from ...core.scenes.scene import load_scene, resolve_scene_path
 
         scene = load_scene(resolve_scene_path(p["scene"]), {"time.t_end": p["t_end"]})
         local = p["agents"]

@@ -10,7 +10,8 @@ Every tick (``rate`` Hz) the agent takes its own pose from ``measured_pose`` (Po
 nav_msgs/Odometry), relays it on ``agent_<i>/pose`` for its peers and the monitor (stamped
 with the seconds since the ensemble's start), and publishes on ``cmd_vel`` (Twist or
 TwistStamped) linear = xbar_i' and angular = the axial vector of W_i of (A-2) against the
-peers' latest poses (``core.robot_commands``), saturated, in the world or the robot's body frame.
+peers' latest poses (``core.robots.robot_commands``), saturated, in the world or the robot's body
+frame.
 
 Second-order scene: ``measured_pose`` must be nav_msgs/Odometry (``pose_type:=odometry``): its
 twist, in the child (body) frame as Odometry specifies, turned into the world frame with the
@@ -28,7 +29,8 @@ is in the diagnostics.
 
 A second-order robot keeps its velocity under a zero acceleration, so a pause and a non-finite
 command brake it instead: every tick, while its fresh measured velocity is above
-``core.robot_commands.STILL``, the damped stop of (A-1) without coupling (a = -(gamma/m) v, alpha =
+``core.robots.robot_commands.STILL``, the damped stop of (A-1) without coupling (a = -(gamma/m) v,
+alpha =
 -(gamma/m) omega); at rest, one zero command and quiet.  A stale pose, the end of the run and a
 shutdown leave no measured velocity (or no agent) to close that loop, and a held braking
 acceleration would drive the robot backwards after m/gamma s: they publish one zero
@@ -45,15 +47,15 @@ import numpy as np
 
 from ...core.errors import ParameterError
 from ...core.model import GroupState, State
-from ...core.robot_commands import (
+from ...core.robots.robot_commands import (
     ZERO,
     brake_command,
     bridge_system,
     is_still,
     rotation3,
 )
-from ...core.safety import PeerSight
-from ...core.shaping import shaper_for
+from ...core.robots.safety import PeerSight
+from ...core.robots.shaping import shaper_for
 from .. import wire
 from ..config.runtime_params import RuntimeParams
 from .agent_base import AgentBase
@@ -64,7 +66,7 @@ if TYPE_CHECKING:
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
 
-    from ...core.robot_commands import Twist
+    from ...core.robots.robot_commands import Twist
     from .realtime import Ensemble
 
 #: relative names: remap them to a robot's topics (``-r cmd_vel:=/robot3/cmd_vel``)
@@ -110,7 +112,7 @@ def pose_of(msg: Any) -> Any:
 
 
 def fill_twist(msg: Any, twist: Twist) -> Any:
-    """Write ``twist`` (``core.robot_commands.Twist``) into a Twist, TwistStamped or
+    """Write ``twist`` (``core.robots.robot_commands.Twist``) into a Twist, TwistStamped or
     AccelStamped message."""
     body = msg.twist if hasattr(msg, "twist") else msg.accel if hasattr(msg, "accel") else msg
     body.linear.x, body.linear.y, body.linear.z = map(float, twist.linear)
@@ -218,7 +220,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.holding = reason
 
     def _brake(self, reason: str) -> bool:
-        """Command the damped stop (``core.robot_commands.brake_command``) while the fresh measured
+        """Command the damped stop (``core.robots.robot_commands.brake_command``) while the fresh
+        measured
         velocity says the robot moves: True; False when it is at rest or not measured."""
         own = self.fresh_pose()
         if own is None:
@@ -274,7 +277,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self, gi: int, row: int, ensemble: Ensemble, own: SimpleNamespace, heard: list[int]
     ) -> Twist:
         """The twist (A-2) or the acceleration (A-1) of this agent against ``ensemble``."""
-        rot = self.grp.to_matrices(own.rot)[0]  # formation, safety filter, drive: core.shaping
+        # formation, safety filter, drive: core.robots.shaping
+        rot = self.grp.to_matrices(own.rot)[0]
         sight = self._peer_sight() if self.shaper.safety is not None else None
         return self.shaper.command(self.system, gi, row, ensemble, own, rot, self.state.t,
                                    self.params, sight, time.monotonic() - own.heard)

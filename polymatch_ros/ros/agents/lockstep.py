@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
-from ...core.simulate import drive, step_grid
-from ...core.solver import Method
+from ...core.stepping.simulate import drive, step_grid
+from ...core.stepping.solver import Method
 from .. import wire
 from ..wire.intake import RoundTimeout, lean_node
 from .agent_base import AgentBase

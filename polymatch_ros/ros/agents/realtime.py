@@ -31,8 +31,8 @@ import numpy as np
 
 from ...core import proximity
 from ...core.model import System
-from ...core.simulate import drive
-from ...core.solver import Method
+from ...core.stepping.simulate import drive
+from ...core.stepping.solver import Method
 from .. import wire
 from ..config.params import declare_resolved
 from ..config.runtime_params import SPEC, RuntimeParams
@@ -98,7 +98,7 @@ class PeerTable:
     def of_agent(cls, agent: AgentBase, clock: ClockOffsets | None = None) -> PeerTable:
         """The table of a realtime or bridge agent (``AgentBase``), from its parameters; a bridge
         agent (centroids measured, never advanced by the flow) hears them only for its safety
-        filter (``core.shaping``)."""
+        filter (``core.robots.shaping``)."""
         p = agent.params
         shaper = getattr(agent, "shaper", None)
         velocities = (agent.model.centroids_exact if not agent.mode.drives_robots

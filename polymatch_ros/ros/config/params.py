@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ParameterError
-from ...core.limits import MIN_T_END
+from ...core.scenes.limits import MIN_T_END
 from ..wire.modes import MODES, MONITOR_MODES, Mode, mode_of
 
 if TYPE_CHECKING:
@@ -455,14 +455,14 @@ def declare(
 
 def scene_file(name: str) -> str:
     """The scene file a 'scene' parameter names (a path, or a shipped scene's name)."""
-    from ...core.scene import resolve_scene_path
+    from ...core.scenes.scene import resolve_scene_path
 
     return os.path.abspath(resolve_scene_path(name))
 
 
 def resolve_monitor(values: dict[str, Any]) -> dict[str, Any]:
     """The monitor's values: the scene file read and its end time unless given."""
-    from ...core.scene import load_scene
+    from ...core.scenes.scene import load_scene
 
     path = scene_file(values["scene"])
     scene = load_scene(path, {"time.t_end": values["t_end"]})
@@ -473,8 +473,8 @@ def resolve_agent(values: dict[str, Any]) -> dict[str, Any]:
     """The agent's values: the scene file read, its end time, gains, integrator and step unless
     given, the agents this process hosts, how it starts; ParameterError for a parameter given
     that the mode does not take, or for gains the model cannot run with."""
-    from ...core.scene import load_scene
-    from ...core.simulate import plan
+    from ...core.scenes.scene import load_scene
+    from ...core.stepping.simulate import plan
 
     v, mode = dict(values), mode_of(values["mode"])
     lockstep = mode.exact

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from rclpy.parameter import Parameter
 
     from ...core.model import Model, State
-    from ...core.scene import Scene
+    from ...core.scenes.scene import Scene
 
 SPEC = {p.name: p for p in AGENT}
 GAINS_SET = frozenset(GAINS)

@@ -91,7 +91,7 @@ class MonitorNode(NodeApp):
     def __init__(self, node: Node, params: dict[str, Any]) -> None:
         from rclpy.executors import SingleThreadedExecutor
 
-        from ...core.scene import load_scene, resolve_scene_path
+        from ...core.scenes.scene import load_scene, resolve_scene_path
 
         self.node, self.params = node, params
         self.log = node.get_logger()

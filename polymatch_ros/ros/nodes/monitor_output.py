@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from ...core.certificate import CertificateKeeper
     from ...core.metrics import EnsembleMetrics
     from ...core.model import Group, Model
-    from ...core.scene import Scene
+    from ...core.scenes.scene import Scene
     from ...core.so import RotationGroup
     from ..wire.intake import DropCounter
 

@@ -135,8 +135,8 @@ class Recorder(NodeApp):
         path = self.params["scene_file"]
         if not path:
             return
-        from ...core.scene import resolve_scene_path
-        from ...core.yamlfile import read_scene_file
+        from ...core.scenes.scene import resolve_scene_path
+        from ...core.scenes.yamlfile import read_scene_file
 
         path = resolve_scene_path(path)
         now = time.time_ns()

@@ -34,9 +34,9 @@ from typing import TYPE_CHECKING, Any, TextIO
 import numpy as np
 
 from ...core.errors import ParameterError
-from ...core.formation import positions
-from ...core.robot_commands import saturate
-from ...core.unicycle import unicycle_step
+from ...core.robots.formation import positions
+from ...core.robots.robot_commands import saturate
+from ...core.robots.unicycle import unicycle_step
 from ..config.params import CMD_TYPES, Param, declare, scene_file
 from ..process.shell import ros_main
 
@@ -184,7 +184,7 @@ class RobotNode:
     """The simulated robot as a node (``run()`` until Ctrl-C or SIGTERM)."""
 
     def __init__(self, node: Node, params: dict[str, Any]) -> None:
-        from ...core.scene import load_scene, resolve_scene_path
+        from ...core.scenes.scene import load_scene, resolve_scene_path
         from ..agents.bridge import (
             CMD_ACCEL,
             CMD_VEL,

@@ -5,7 +5,7 @@ Robot i runs in namespace ``/<ensemble>/robot_<i>`` (topics ``measured_pose``, `
 both speak ``--cmd-vel-type`` on ``cmd_vel`` (TwistStamped unless ``twist`` is asked for).  The
 matching diameter the monitor reports comes from measured poses, so it cannot fall below what
 the noise makes: the run's tolerance is the larger of the scene's and the noise floor
-(``core.robot_commands.noise_floor``).  With ``--robot-log DIR`` each robot also writes its
+(``core.robots.robot_commands.noise_floor``).  With ``--robot-log DIR`` each robot also writes its
 true and measured pose at every step to ``DIR/robot_<i>.txt`` (``robot_sim.POSE_LOG_COLUMNS``).
 
 What the agents' safety filter assumes is what the robots do: a robot applies a command for at
@@ -22,15 +22,15 @@ from dataclasses import replace
 import numpy as np
 
 from ...core.errors import ParameterError
-from ...core.robot_commands import bridge_model, noise_floor
-from ...core.scene import Scene
+from ...core.robots.robot_commands import bridge_model, noise_floor
+from ...core.scenes.scene import Scene
 from .. import wire
 from .children import Child
 from .plan import BridgeOptions, RunPlan
 
 
 def scene_noise_floor(scene: Scene, position_noise: float, angle_noise: float) -> float:
-    """``core.robot_commands.noise_floor`` for the scene's largest vertex radius."""
+    """``core.robots.robot_commands.noise_floor`` for the scene's largest vertex radius."""
     radius = max(float(np.max(np.linalg.norm(g.reference, axis=1))) for g in scene.model.groups)
     return float(noise_floor(position_noise, angle_noise, radius, scene.model.dim))
 

@@ -16,7 +16,7 @@ from ...core.model import State
 from .. import wire
 
 if TYPE_CHECKING:
-    from ...core.scene import Scene
+    from ...core.scenes.scene import Scene
     from ...core.so import RotationGroup
     from ..wire.checkpoint import Checkpoint
 
@@ -28,7 +28,7 @@ def checkpoint_rows(scene: Scene, agents: Sequence[int], found: Checkpoint,
                     computed_in: RotationGroup | None = None) -> AgentRows:
     """The poses of a process's checkpoint (its local state), by global agent index, in the
     scene's representation; ``computed_in``: the agents' own, where it differs (a projection
-    integrator computes with matrices in 2-D, ``core.simulate.prepare``)."""
+    integrator computes with matrices in 2-D, ``core.stepping.simulate.prepare``)."""
     model, grp = scene.model, scene.model.rotations
     own = grp if computed_in is None else computed_in
     out: AgentRows = {}

@@ -15,8 +15,8 @@ from ..wire.modes import Mode
 from .recovery import RestartPolicy
 
 if TYPE_CHECKING:
-    from ...core.scene import Scene
-    from ...core.simulate import Plan
+    from ...core.scenes.scene import Scene
+    from ...core.stepping.simulate import Plan
     from ..network.discovery import DiscoverySpec
 
 @dataclass(frozen=True)

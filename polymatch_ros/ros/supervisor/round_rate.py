@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 from typing import IO
 
 from ...core.errors import PolymatchError
-from ...core.integrators import METHODS
+from ...core.stepping.integrators import METHODS
 from ..wire import Mode, run_records
 from .packing import choose_packing
 from .plan import Packing
@@ -138,8 +138,8 @@ def _bounded(argv: list[str], out: IO[str], seconds: float) -> int:
 
 def main(argv: Sequence[str] | None = None) -> None:
     """The measuring process: SCENE METHOD DT T_END TIMEOUT RECORDS; ends with the run's code."""
-    from ...core.scene import load_scene
-    from ...core.simulate import plan
+    from ...core.scenes.scene import load_scene
+    from ...core.stepping.simulate import plan
     from ..network.discovery import parse_discovery_spec
     from ..process.teardown import end_process
     from . import runner

@@ -13,8 +13,8 @@ import numpy as np
 from ...console import SUMMARY_HEADER, Progress, format_table, summary_rows
 from ...core.metrics import ensemble_metrics
 from ...core.model import GroupState, Model, State
-from ...core.scene import Scene
-from ...core.simulate import convergence_verdict, group_components, prepare, simulate
+from ...core.scenes.scene import Scene
+from ...core.stepping.simulate import convergence_verdict, group_components, prepare, simulate
 from ..wire import RunRecord
 from .plan import RunPlan
 

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from rclpy.node import Node
 
     from ...core.model import Model
-    from ...core.scene import Scene
+    from ...core.scenes.scene import Scene
     from .lifecycle_driver import LifecycleDriver
 
 

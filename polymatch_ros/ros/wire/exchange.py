@@ -16,7 +16,8 @@ topic at all.  A restarted agent process gets its run's id again, so its peers t
 
 Unlike the stage rows (between agents that all compute in one representation), the state is
 read by nodes that may not share the agents' representation: a projection integrator computes
-with matrices in 2-D where the monitor and the runner keep angles (``core.simulate.prepare``).
+with matrices in 2-D where the monitor and the runner keep angles
+(``core.stepping.simulate.prepare``).
 So the rotation goes as the matrix, whatever the sender's representation, and each reader
 converts it to its own (``from_matrices``; in 2-D the angle comes back as atan2 of the matrix
 entries, to an ulp and within (-pi, pi]).  Fields, units and shapes: the ``.msg`` files.

@@ -27,7 +27,7 @@ from .motion import Received, decode_pose_msg
 from .recording import METADATA_NAME, SCENE_ATTACHMENT
 
 if TYPE_CHECKING:
-    from ...core.scene import Scene
+    from ...core.scenes.scene import Scene
 
 POSE_TOPIC = re.compile(r"/agent_(\d+)/pose$")
 #: at most this many states are evaluated for the diameter curves (evenly spaced in steps)
@@ -112,7 +112,7 @@ def _duration(stats: Any) -> float:
 
 def _scene(reader: Any) -> Scene | None:
     """The attached scene (with the run's t_end), or None."""
-    from ...core.scene import load_scene
+    from ...core.scenes.scene import load_scene
 
     text = next((a.data.decode() for a in reader.iter_attachments()
                  if a.name == SCENE_ATTACHMENT), None)

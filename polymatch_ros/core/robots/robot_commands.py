@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ParameterError
-from .model import Coupling, GroupState, Model, State, System
-from .so.base import Array
+from ..errors import ParameterError
+from ..model import Coupling, GroupState, Model, State, System
+from ..so.base import Array
 
 FRAMES = ("world", "body")
 #: m/s and rad/s: a braking robot slower than this, in both parts, is at rest

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import SceneError
 from .checks import describe, matrix_rows, number
-from .errors import SceneError
 from .limits import MAX_LENGTH, MAX_VERTICES, count_text, shape_vertex_count
 
 

@@ -27,10 +27,10 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.integrate import DOP853
 
+from ..centroids import CentroidFlow
+from ..errors import PolymatchError, StepLimitError
+from ..model import GroupState, Model, State, System
 from .adaptive_chart import Chart, RotationRates
-from .centroids import CentroidFlow
-from .errors import PolymatchError, StepLimitError
-from .model import GroupState, Model, State, System
 from .solver import FINISHED, RUNNING, MethodInfo, exact_centroids, with_centroids
 from .stability import test_matrices
 

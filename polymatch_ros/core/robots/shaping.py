@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ParameterError
-from .model import System
+from ..errors import ParameterError
+from ..model import System
 from .robot_commands import (
     Twist,
     model_accelerations,

@@ -26,9 +26,9 @@ import math
 
 import numpy as np
 
-from .checks import Map, describe, matrix_rows, number, vector
-from .errors import SceneError
-from .limits import MAX_LENGTH
+from ..errors import SceneError
+from ..scenes.checks import Map, describe, matrix_rows, number, vector
+from ..scenes.limits import MAX_LENGTH
 
 FORMATION_KEYS = ("offsets", "circle", "groups")
 

@@ -18,11 +18,15 @@ from typing import Any
 
 import numpy as np
 
-from . import graph
+from .. import graph
+from ..errors import SceneError
+from ..model import Model, State, validate_model
+from ..proximity import BYTES_PER_WEIGHT
+from ..robots.formation import check_separation, parse_formation
+from ..robots.safety import SafetySpec, parse_safety
+from ..so import group_for
+from ..stepping.integrators import METHODS
 from .checks import Map, describe, did_you_mean, number, vector
-from .errors import SceneError
-from .formation import check_separation, parse_formation
-from .integrators import METHODS
 from .limits import (
     FLOAT,
     MAX_DIMENSION,
@@ -35,11 +39,7 @@ from .limits import (
     Limits,
     check_rates,
 )
-from .model import Model, State, validate_model
-from .proximity import BYTES_PER_WEIGHT
-from .safety import SafetySpec, parse_safety
 from .scene_groups import GroupContext, build_group
-from .so import group_for
 from .yamlfile import parse_yaml, read_scene_file
 
 #: the fixed step of a scene that names none, and the adaptive tolerance of one that names none
@@ -76,9 +76,10 @@ class Scene:
     seed: int
     path: str | None = None
     notes: list[str] = field(default_factory=list)
-    #: (N, d) formation offsets c_i (``core.formation``): the states carry x_i - c_i; None: none
+    #: (N, d) formation offsets c_i (``core.robots.formation``): the states carry x_i - c_i; None:
+    #: none
     formation: np.ndarray | None = None
-    #: the robots' minimum separation (``core.safety``); None: no safety filter
+    #: the robots' minimum separation (``core.robots.safety``); None: no safety filter
     safety: SafetySpec | None = None
 
     @property
@@ -90,7 +91,7 @@ def shipped_config_dirs() -> list[str]:
     """Where shipped scenes live: the repository's config/, then share/polymatch_ros/config of
     the prefix the package is installed in (PREFIX/lib/pythonX.Y/site-packages/polymatch_ros:
     a colcon install's package prefix or a pip install's environment), then ``sys.prefix``'s."""
-    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    package = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     install_prefix = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(package))))
     dirs = [os.path.join(os.path.dirname(package), "config"),
             os.path.join(install_prefix, "share", "polymatch_ros", "config"),
@@ -118,8 +119,8 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any],
                limits: Limits | None = None) -> Scene:
     """Load and validate a scene from a file path, a shipped scene name, a YAML string or a dict.
 
-    ``limits`` (``core.limits.Limits``) bounds the memory the scene may need; files are
-    also bounded in size, nesting and alias expansion (``core.yamlfile``).
+    ``limits`` (``core.scenes.limits.Limits``) bounds the memory the scene may need; files are
+    also bounded in size, nesting and alias expansion (``core.scenes.yamlfile``).
     """
     path: str | None = None
     if isinstance(source, dict):

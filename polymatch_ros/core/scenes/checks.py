@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import SceneError
+from ..errors import SceneError
 
 _NUMBERS = (int, float, np.integer, np.floating)
 _YAML_TYPES = {bool: "true/false", int: "a number", float: "a number", str: "text",

@@ -45,9 +45,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import Map
-from .errors import SceneError
-from .limits import MAX_LENGTH, MAX_RATE
+from ..errors import SceneError
+from ..scenes.checks import Map
+from ..scenes.limits import MAX_LENGTH, MAX_RATE
 
 SAFETY_KEYS = ("radius", "alpha")
 #: a command moved by less than this (relative to max(1, |u_model|)) is unchanged

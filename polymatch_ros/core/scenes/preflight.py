@@ -12,10 +12,10 @@ explicit choice > scene file > recommendation) and then refuses, with one line n
 
 import warnings
 
-from .errors import ParameterError, SceneError
+from ..errors import ParameterError, SceneError
+from ..stepping.simulate import choose_method
 from .limits import FLOAT, Budget, Limits
 from .scene import Scene, check_step_count
-from .simulate import choose_method
 
 
 def check_run(scene: Scene, method: str | None = None, dt: float | None = None,

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from .model import Coupling, GroupCoupling, GroupState, State, System
-from .so.base import Array
+from ..model import Coupling, GroupCoupling, GroupState, State, System
+from ..so.base import Array
 
 
 class Chart:

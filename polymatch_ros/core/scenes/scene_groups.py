@@ -10,14 +10,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import SceneError
+from ..model import Group, GroupState
+from ..so import RotationGroup
 from . import initial
 from .checks import Map, describe
 from .decompose import RotationNotUniqueWarning, decompose
-from .errors import SceneError
 from .limits import MAX_LENGTH, MIN_SIZE, Budget
-from .model import Group, GroupState
 from .shapes import check_vertex_array, make_shape
-from .so import RotationGroup
 
 GROUP_KEYS = ("name", "shape", "size", "count", "centroids", "rotations", "scales",
               "velocities", "agents", "similar", "graph")

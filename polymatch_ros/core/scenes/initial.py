@@ -9,12 +9,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..errors import SceneError
 from .checks import Map, describe, matrix_rows, number, vector
-from .errors import SceneError
 from .limits import MAX_LENGTH, MIN_SIZE
 
 if TYPE_CHECKING:
-    from .so import RotationGroup
+    from ..so import RotationGroup
 
 
 def centroids(raw: object, path: str, dim: int, count: int,

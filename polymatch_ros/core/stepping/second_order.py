@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .model import Coupling, GroupState, State, System
+from ..model import Coupling, GroupState, State, System
 from .solver import Method, MethodInfo, Stepper, advance_active
 
 #: |z| below which phi_k(z) is summed as a series (expm1-based formulas cancel there)

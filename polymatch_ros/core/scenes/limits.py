@@ -10,7 +10,7 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from .errors import ParameterError, SceneError
+from ..errors import ParameterError, SceneError
 
 MAX_FILE_BYTES = 2 * 2**20        # a scene file; explicit vertices of ~25,000 triangles fit
 MAX_DEPTH = 32                    # YAML nesting (a scene needs 7: groups[0].agents[0]...)

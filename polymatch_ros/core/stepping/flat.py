@@ -23,11 +23,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .model import GroupState, State, System
-from .so import group_for
+from ..model import GroupState, State, System
+from ..so import group_for
 
 if TYPE_CHECKING:
-    from .scene import Scene
+    from ..scenes.scene import Scene
 
 __all__ = ["FlatModel"]
 

@@ -20,7 +20,7 @@ the exact flow of Proposition 2.1 inside every method (the base contract does it
 only F-2 centroids are integrated with the method's own stages.
 """
 
-from .errors import StabilityError
+from ..errors import StabilityError
 from .rk import RKMK, ExplicitRK, ProjectedRK, rk_stability
 from .second_order import ExponentialLie, LieVerlet, phi_functions
 from .solver import Method, MethodInfo

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ShapeError
+from ..errors import ShapeError
 from .shapes import check_distinct_vertices
 
 

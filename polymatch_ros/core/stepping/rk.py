@@ -13,8 +13,8 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from .model import Coupling, GroupState, State, System
-from .so.base import Array
+from ..model import Coupling, GroupState, State, System
+from ..so.base import Array
 from .solver import Method, MethodInfo, Stepper, advance_active, lincomb
 
 

@@ -8,8 +8,8 @@ a method's step h is stable when its amplification there has spectral radius
 
 import numpy as np
 
-from .errors import StabilityError
-from .model import Model
+from ..errors import StabilityError
+from ..model import Model
 from .solver import Method
 
 # These tolerances must agree with one another: the limit search stops at LIMIT_RTOL,

@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from .errors import SceneError
+from ..errors import SceneError
 from .limits import MAX_DEPTH, MAX_FILE_BYTES, MAX_NODES, format_bytes
 
 _BASE: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)

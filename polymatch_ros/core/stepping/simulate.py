@@ -17,18 +17,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import proximity
-from .errors import PolymatchError, StabilityError
+from .. import proximity
+from ..errors import PolymatchError, StabilityError
+from ..metrics import EnsembleMetrics, ensemble_metrics, stationarity
+from ..model import Group, GroupState, Model, State, System
+from ..proximity import Components, ComponentTracker
+from ..so import group_for
 from .integrators import check_stability, get_method, max_stable_dt
-from .metrics import EnsembleMetrics, ensemble_metrics, stationarity
-from .model import Group, GroupState, Model, State, System
-from .proximity import Components, ComponentTracker
-from .so import group_for
 from .solver import RUNNING, Method, drive, step_grid
 
 if TYPE_CHECKING:
+    from ..scenes.scene import Scene
     from .adaptive import AdaptiveLie
-    from .scene import Scene
 
 __all__ = ["EXIT_NOT_CONVERGED", "Plan", "Trajectory", "convergence_verdict", "drive", "explain",
            "group_components", "plan", "prepare", "recommend", "simulate", "step_grid",
@@ -110,7 +110,7 @@ def plan(scene: Scene, method: str | None = None, dt: float | None = None,
         if distributed:
             raise PolymatchError("the adaptive integrator runs centralised only; "
                                  "pick a fixed-step method")
-        from .scene import DEFAULT_TOLERANCE
+        from ..scenes.scene import DEFAULT_TOLERANCE
         tol = tol or DEFAULT_TOLERANCE
         return Plan(AdaptiveLie(tol, max_steps=scene.integrator.max_steps), None, tol, reason)
     meth = get_method(name)

@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from .model import Coupling, GroupState, Request, State, System
-from .so.base import RECYCLED_MIN_BYTES, recycled, row_blocks, scratch
+from ..model import Coupling, GroupState, Request, State, System
+from ..so.base import RECYCLED_MIN_BYTES, recycled, row_blocks, scratch
 
 RUNNING, FINISHED = "running", "finished"
 
