@@ -10,6 +10,7 @@
 """
 
 import os
+import pathlib
 import re
 import signal
 import subprocess
@@ -166,34 +167,18 @@ def _scene_file(path, group, shape, count, dimension, dt, t_end, **extra):
 
 
 @pytest.fixture
-def colcon_install(tmp_path):
-    """The repository's two packages built by colcon into a scratch workspace; its install
+def colcon_install():
+    """The repository's two packages built by colcon (scripts/build-colcon.sh: the set-up's
+    workspace build/colcon, built again here, so only what changed since is rebuilt); its install
     base.  A fixture the test requests before ``ros``: the build starts no ROS process, so it
     runs before the test takes a ROS slot, and the slot is held only while the executables run."""
-    colcon = os.path.join(os.path.dirname(PY), "colcon")
-    if not os.path.exists(colcon):
+    if not os.path.exists(os.path.join(os.path.dirname(PY), "colcon")):
         pytest.skip("colcon is not installed in this environment")
-    ws = tmp_path / "ws"
-    ws.mkdir()
-    venv = os.path.dirname(os.path.dirname(PY))
-    includes = subprocess.run(
-        [PY, "-c", "import sysconfig, numpy; "
-         "print(sysconfig.get_paths()['include'] + ';' + numpy.get_include())"],
-        capture_output=True, text=True, check=True).stdout.strip()
-    env = dict(os.environ, AMENT_PREFIX_PATH=venv,
-               PATH=f"{os.path.dirname(PY)}:{os.environ['PATH']}")
-    build = subprocess.run(
-        ["timeout", "-k", "5", "900", colcon, "build",
-         "--base-paths", REPO, os.path.join(REPO, "polymatch_interfaces"),
-         "--build-base", str(ws / "build"), "--install-base", str(ws / "install"),
-         "--cmake-args", f"-DCMAKE_PREFIX_PATH={venv}", f"-DPython3_EXECUTABLE={PY}",
-         "-DBUILD_TESTING=OFF",
-         f"-DCMAKE_PROJECT_INCLUDE={os.path.join(REPO, 'scripts', 'ros_wheels_python.cmake')}",
-         f"-DPYTHON_INCLUDE_DIRS={includes}"],
-        cwd=ws, env=env, capture_output=True, text=True,
-    )
+    build = subprocess.run(["timeout", "-k", "5", "960", "bash",
+                            os.path.join(REPO, "scripts", "build-colcon.sh")],
+                           capture_output=True, text=True)
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
-    return ws / "install"
+    return pathlib.Path(REPO) / "build" / "colcon" / "install"
 
 
 # ``colcon_install`` before ``ros``: pytest sets up a test's fixtures of one scope in the order
