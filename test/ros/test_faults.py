@@ -236,9 +236,10 @@ def test_bridge_run_survives_every_fault_of_the_matrix(ros, tmp_path):
     restarted (the agent takes its robot's measured pose, and finds its peers through the
     restarted server), the hung one is waited for, not killed, and the robots match to the
     noise floor (exit 0); the summary lists the three deaths and nothing else.  The robots
-    can match by t = 7: ``--hold 30`` keeps the run going past the last fault."""
+    can match by t = 7: ``--hold 12`` keeps the run going past the last fault (at t = 10 to 12,
+    real time), to t = 19 at the earliest."""
     run = _run(ros, "--mode", "bridge", "--rate", "10", "--t-end", "120", "--discovery", "server",
-               "--hold", "30", scene=_four_robots(tmp_path))
+               "--hold", "12", scene=_four_robots(tmp_path))
     _progress_past(ros, run, 2)
     os.kill(_server(run), signal.SIGKILL)
     # progress lines come about every 2 s of the run: the one past 2 may already be past 4, and

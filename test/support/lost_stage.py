@@ -32,6 +32,7 @@ from polymatch_ros.ros.wire.intake import DropCounter, Layout
 
 DT, LOST = 0.05, (0, 1, 2)  # the swallowed message: block 0, step 1, stage 2
 STALL = 8.0  # s: stall_timeout; resends come after 1 s, even on a loaded machine
+NO_RESEND_STALL = 3.0  # s: without resends the round stalls whatever the wait; shorter suffices
 
 
 def swallow_first(publisher, block, step, stage):
@@ -85,8 +86,10 @@ class Side:
 
 def main(argv):
     scene_path, steps = argv[0], int(argv[1])
+    global STALL
     if "--no-resend" in argv:
         lockstep.RESEND_AFTER = float("inf")
+        STALL = NO_RESEND_STALL
     rclpy.init()
     scene = load_scene(scene_path)
     the_plan = plan(scene, "rkmk4", DT, distributed=True)

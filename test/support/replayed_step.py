@@ -26,6 +26,7 @@ from polymatch_ros.core.stepping.simulate import drive, plan, prepare, step_grid
 from polymatch_ros.ros.agents import lockstep
 
 STALL = 8.0  # s: a replay not answered stalls this long, then fails
+NO_ANSWER_STALL = 3.0  # s: a holder that never answers stalls the replay whatever the wait
 
 
 def patience(the_plan):
@@ -60,8 +61,11 @@ def match(sides):
 
 
 def main(argv):
+    global STALL
     scene_path, steps = argv[0], int(argv[1])
     answering = "--no-answer" not in argv
+    if not answering:
+        STALL = NO_ANSWER_STALL
     rclpy.init()
     scene = load_scene(scene_path)
     the_plan = plan(scene, "rkmk4", DT, distributed=True)
