@@ -138,7 +138,7 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros, t
     needs), and the final poses equal the centralised run's to 1e-9.  The monitor, killed
     with them, is restarted; the rounds never wait for it."""
     # t_end 6 (300 steps): the probes that time the faults need a few seconds each, and the
-    # four processes make about 150 rounds/s
+    # four processes' rounds are fast
     save = tmp_path / "final.npz"
     run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--round-timeout", "4",
                "--save", save)
