@@ -361,7 +361,6 @@ def lockstep_rows(cells):
 def saved_vertices(scene, path):
     """(t, [vertices of group g: (n_g, n_a, d)]) of the final poses a run saved (--save)."""
     from polymatch_ros.core.metrics import vertices
-
     from polymatch_ros.core.saved import load_saved
 
     saved = load_saved(path)

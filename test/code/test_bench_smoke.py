@@ -307,11 +307,11 @@ def test_lossy_deviation_of_the_centralised_run_itself_is_zero(tmp_path):
     method = plan(scene, None, None, distributed=True).name
     traj = simulate(replace(scene, t_end=0.2), method, scene.integrator.dt, samples=[0.2],
                     metrics=False)
-    final = traj.final
-    save_final(str(tmp_path / "final.npz"), traj.scene, final, dict.fromkeys(range(scene.model.n_agents), 0.2))
+    final, at = traj.final, dict.fromkeys(range(scene.model.n_agents), 0.2)
+    save_final(str(tmp_path / "final.npz"), traj.scene, final, at)
     assert central_deviation(scene, tmp_path / "final.npz") < 1e-12
     g0 = final.groups[0]
     moved = replace(final, groups=(replace(g0, x=g0.x + np.array([1e-3, 0.0])),
                                    *final.groups[1:]))
-    save_final(str(tmp_path / "moved.npz"), traj.scene, moved, dict.fromkeys(range(scene.model.n_agents), 0.2))
+    save_final(str(tmp_path / "moved.npz"), traj.scene, moved, at)
     assert abs(central_deviation(scene, tmp_path / "moved.npz") - 1e-3) < 1e-9

@@ -14,7 +14,6 @@ import time
 from collections import Counter
 from pathlib import Path
 
-import numpy as np
 import pytest
 from input_cases import BASE, CASES, PARSE_CASES, bomb, nested, scene
 from input_fuzz import Timeout, address_space_limit, contract_violation, fuzz, run_main
