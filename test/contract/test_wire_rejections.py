@@ -525,7 +525,7 @@ def test_a_run_record_with_a_clock_offset_of_no_peer_is_refused():
     assert wire.RunRecord.from_msg(msg) is None
 
 
-# -- the control command (nodes.control.parse_command) ----------------------------------------
+# -- the control command (wire.control.parse_command) -----------------------------------------
 
 EPOCH = (1000, 250_000_000)   # 1000.25 s since the epoch
 

@@ -14,7 +14,7 @@ a process, so that a crash costs one agent.  A host that runs only some of the a
 implementation, which speaks the public per-agent state topics (``agent_<i>/state``), not the
 blocks.  Bridge runs relay one robot a process.
 
-Every agent is its own node at any packing (``nodes.hosted``): a full node (its services and
+Every agent is its own node at any packing (``agents.hosted``): a full node (its services and
 parameters too) while a process hosts up to ``FULL_AGENT_NODES`` agents, a lean one (its pose
 topics) beyond, where the full nodes' endpoints would make a process's start-up take many
 times as long (``python -m benchmarks packing``: the agent-node table).

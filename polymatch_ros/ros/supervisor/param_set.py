@@ -94,7 +94,7 @@ def _discover(node: Node, executor: Executor, namespace: str, deadline: float) -
         if seen and time.monotonic() - since >= SETTLE_SECONDS and set(records) <= set(seen):
             break
     node.destroy_subscription(sub)
-    # a packed process's agents have nodes of their own (``nodes.hosted``), read-only: its
+    # a packed process's agents have nodes of their own (``agents.hosted``), read-only: its
     # runtime parameters are set on the process node, which steps them
     hosted = {f"agent_{a}" for name, rec in records.items() for a in rec.agents
               if name != f"agent_{a}"}
