@@ -18,7 +18,7 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SOURCES = sorted(p for folder in ("polymatch_ros", "benchmarks", "test")
                  for p in (ROOT / folder).rglob("*.py"))
-#: modules whose figures stay in the code until their own rewrite moves them to a report
+#: modules whose comments still quote measured figures
 KEPT = {"polymatch_ros/ros/supervisor/round_rate.py"}
 
 _NUM = r"(?<![\w.])\d[\d,]*(?:\.\d+)?"
