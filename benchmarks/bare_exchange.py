@@ -14,7 +14,9 @@ for discovery exactly as an agent does (its readers matched a writer of every pe
 its writer matched K - 1 readers) and prints one line; as an agent's, its rate counts the
 rounds after the first, which waits for the last peer to start:
 
-    bare typed 3/8: 512.3 rounds/s over 400 rounds; matched after 0.84 s
+    bare typed 3/8: RATE rounds/s over 400 rounds; matched after SECONDS s
+
+(its rates: ``docs/bench/distributed.md``)
 """
 
 import array

@@ -361,11 +361,12 @@ def lockstep_rows(cells):
 def saved_vertices(scene, path):
     """(t, [vertices of group g: (n_g, n_a, d)]) of the final poses a run saved (--save)."""
     from polymatch_ros.core.metrics import vertices
+    from polymatch_ros.core.saved import load_saved
 
-    data = np.load(path)
-    out = [vertices(data[f"group{gi}_centroids"], data[f"group{gi}_rotations"], g.reference)
-           for gi, g in enumerate(scene.model.groups)]
-    return float(data["t"]), out
+    saved = load_saved(path)
+    out = [vertices(sg.centroids[-1], sg.rotations[-1], g.reference)
+           for g, sg in zip(scene.model.groups, saved.groups)]
+    return saved.t, out
 
 
 def central_deviation(scene, path):

@@ -8,7 +8,7 @@ its rounds/s in its run record; a run's rate is their mean. The table gives ever
 rate, the best one, and the packing `polymatch run` picks without -k, with its rate against
 the best: the measurement a default packing has to rest on.
 
-A second table gives what every agent's own node costs (``nodes.hosted``): at each size of
+A second table gives what every agent's own node costs (``agents.hosted``): at each size of
 ``--node-agents`` (default 64, 256, 1024), the default packing at each ``--agent-nodes``
 level (full up to 256 agents), alternating, ``--repeats`` times each: the median rounds/s and
 start-up (the slowest process's seconds from its start until its peers matched: the wall time
@@ -158,7 +158,7 @@ def run(args, log):
                          "with the monitor; a run's rate is the mean over its agent processes")
     report.table(["agents", "default packing", "auto", "rounds/s by --agent-nodes",
                   "start-up s by --agent-nodes", "auto / none rounds/s"], node_rows,
-                 caption="Every agent a node (`nodes.hosted`): the default packing at each "
+                 caption="Every agent a node (`agents.hosted`): the default packing at each "
                          "`--agent-nodes` level, medians of alternating runs; start-up: the "
                          "slowest process's seconds from its start until its peers matched")
     report.failures(failures + node_failures)

@@ -3,7 +3,7 @@
 B random ensembles of the Fig. 1 scene (seeds 0 .. B-1 of ``config/congruent_triangles``)
 are integrated to the scene's tolerance (each until its matching diameter is below it at
 a sample) by ``core.sweep.run_batch``, by default with rkmk8 (DOP853's 8th-order tableau
-as a fixed-step Munthe-Kaas method, ``core.chart_rk``) at the scene's sample interval;
+as a fixed-step Munthe-Kaas method, ``core.sweep.chart_rk``) at the scene's sample interval;
 ``--integrator rkmk4 --dt 0.05`` is the scene's own integrator.  The same ensembles
 are then solved one at a time by scipy's DOP853 on the flattened system of
 ``benchmarks/flat.py`` (``benchmarks/solve.py``), each to the time at which the batch saw it match.

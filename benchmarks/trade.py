@@ -139,13 +139,12 @@ def _final_pose_error(scene, npz):
     """Max vertex error of each agent's saved final pose against the reference at its stamp."""
     import numpy as np
 
-    data = np.load(npz)
-    times = data["group0_times"]
+    from polymatch_ros.core.saved import load_saved
+
+    saved = load_saved(npz).groups[0]
+    times = saved.agent_times
     agent_ref = _reference(scene, np.unique(np.append(times, 0.0)))
-    g = scene.model.groups[0]
-    got = data["group0_centroids"][:, None, :] + np.einsum(
-        "nij,aj->nai", data["group0_rotations"], g.reference
-    )
+    got = saved.vertices()
     err = 0.0
     for i, t in enumerate(times):
         k = int(np.argmin(np.abs(agent_ref["times"] - t)))

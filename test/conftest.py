@@ -28,7 +28,8 @@ import pytest
 
 # One BLAS thread in the test processes and what they start, set before numpy is first imported
 # (the xdist workers inherit it): the suite's arrays are small, and on two busy cores scipy's
-# threaded OpenBLAS spun in solves of 3x3 systems (``expm``) for ~12 ms instead of ~0.07 ms.
+# threaded OpenBLAS spun in solves of 3x3 systems (``expm``) a hundred times longer than one
+# thread takes.
 for _threads in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_threads, "1")
 
@@ -42,10 +43,10 @@ collect_ignore = ["support"]
 
 # Byte-compiled once, before the workers start: an editable install is never compiled by pip,
 # and where PYTHONDONTWRITEBYTECODE is set no process caches what it compiles, so each of the
-# suite's ~1,500 ROS processes compiled the package anew (0.2 s of CPU each on these machines).
+# suite's ROS processes compiled the package anew, each paying for it in CPU.
 COMPILED = ("polymatch_ros", "benchmarks", "test/support")
-# The test modules themselves, as pytest rewrites their asserts, are cached the same way: 6 s of
-# each worker's collection on the second run (pytest writes them only where this is False).
+# The test modules themselves, as pytest rewrites their asserts, are cached the same way: most
+# of each worker's collection on the second run (pytest writes them only where this is False).
 sys.dont_write_bytecode = False
 
 

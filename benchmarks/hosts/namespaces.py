@@ -236,8 +236,8 @@ class Capture:
 
     ``--immediate-mode`` hands every packet to tcpdump as it arrives.  Without it packets wait
     in the kernel's ring until a block fills or a 1 s timeout passes, and a capture stopped
-    sooner writes nothing: a 1.2 s run logged "0 packets captured, 611 packets received by
-    filter".  ``matched()`` reads the kernel's count, drops included.
+    sooner writes nothing: a short run logged "0 packets captured" of the packets the filter
+    had received.  ``matched()`` reads the kernel's count, drops included.
     """
 
     def __init__(self, directory, interfaces, namespace=None, label="root"):

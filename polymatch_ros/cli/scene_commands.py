@@ -13,7 +13,7 @@ import os
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +29,6 @@ from ..console import (
 )
 from ..core.certificate import certify
 from ..core.errors import ParameterError, PolymatchError, SceneError, StabilityError
-from ..core.model import GroupState
 from ..core.scenes.checks import did_you_mean
 from ..core.scenes.limits import Limits
 from ..core.scenes.preflight import check_run
@@ -130,25 +129,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def save_npz(traj: Trajectory, path: str) -> None:
-    """The trajectory, its metrics and the scene's polytopes, as one compressed npz."""
-    scene = traj.scene
-    model = scene.model
-    data: dict[str, Any] = {"times": np.array(traj.times), "origin": scene.origin,
-            "diameter": traj.diameters}
-    for gi, g in enumerate(model.groups):
-        key = f"group{gi}_"
-        data[key + "name"] = np.array(g.name)
-        data[key + "reference"] = g.reference
-        data[key + "edges"] = np.array(g.edges)
-        if g.scales is not None:
-            data[key + "scales"] = g.scales
-        rows = [cast(GroupState, st.groups[gi]) for st in traj.states]  # whole states
-        data[key + "centroids"] = np.array([gs.x + scene.origin for gs in rows])
-        data[key + "rotations"] = np.array([model.rotations.to_matrices(gs.rot) for gs in rows])
-        for name in ("centroid_diameter", "rotation_diameter", "matching_diameter", "energy",
-                     "orthogonality"):
-            data[key + name] = np.array([getattr(m.groups[gi], name) for m in traj.metrics])
-    np.savez_compressed(path, **data)
+    """The trajectory, its metrics and the scene's polytopes, in the one ``--save`` layout
+    (``core.saved``)."""
+    from ..core.saved import save_states
+    save_states(path, traj.scene, traj.states, traj.metrics)
 
 
 def cmd_explain(args: argparse.Namespace) -> int:

@@ -306,7 +306,7 @@ def _time_below(bound: Bound, tolerance: float) -> float | None:
         hi *= 2.0
         if hi > 1e300:
             return None
-    from scipy.optimize import brentq  # 0.8 s to import: a monitor that certifies nothing skips it
+    from scipy.optimize import brentq  # slow to import: a monitor that certifies nothing skips it
 
     step = 1e-12 * hi
     tau = float(brentq(lambda s: float(bound(s)) - tolerance, 0.0, hi, xtol=step, rtol=1e-14))

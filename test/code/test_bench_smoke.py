@@ -301,17 +301,17 @@ def test_lossy_deviation_of_the_centralised_run_itself_is_zero(tmp_path):
     from benchmarks.lossy import central_deviation
     from polymatch_ros.core.scenes.scene import load_scene, resolve_scene_path
     from polymatch_ros.core.stepping.simulate import plan, simulate
+    from polymatch_ros.ros.supervisor.summary import save_final
 
     scene = load_scene(resolve_scene_path("congruent_triangles"), {"time.t_end": 0.2})
     method = plan(scene, None, None, distributed=True).name
     traj = simulate(replace(scene, t_end=0.2), method, scene.integrator.dt, samples=[0.2],
                     metrics=False)
-    model, data = traj.scene.model, {"t": 0.2}
-    for gi, gs in enumerate(traj.final.groups):
-        data[f"group{gi}_centroids"] = gs.x + scene.origin
-        data[f"group{gi}_rotations"] = model.rotations.to_matrices(gs.rot)
-    np.savez(tmp_path / "final.npz", **data)
+    final, at = traj.final, dict.fromkeys(range(scene.model.n_agents), 0.2)
+    save_final(str(tmp_path / "final.npz"), traj.scene, final, at)
     assert central_deviation(scene, tmp_path / "final.npz") < 1e-12
-    data["group0_centroids"] = data["group0_centroids"] + np.array([1e-3, 0.0])
-    np.savez(tmp_path / "moved.npz", **data)
+    g0 = final.groups[0]
+    moved = replace(final, groups=(replace(g0, x=g0.x + np.array([1e-3, 0.0])),
+                                   *final.groups[1:]))
+    save_final(str(tmp_path / "moved.npz"), traj.scene, moved, at)
     assert abs(central_deviation(scene, tmp_path / "moved.npz") - 1e-3) < 1e-9

@@ -1,4 +1,4 @@
-"""The ensemble's commands as an agent applies them (``nodes.control.AgentControl``): a pause,
+"""The ensemble's commands as an agent applies them (``wire.control.AgentControl``): a pause,
 resume or reset is applied once per epoch, however often it is delivered."""
 
 import pytest

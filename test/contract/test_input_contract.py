@@ -14,10 +14,11 @@ import time
 from collections import Counter
 from pathlib import Path
 
-import numpy as np
 import pytest
 from input_cases import BASE, CASES, PARSE_CASES, bomb, nested, scene
 from input_fuzz import Timeout, address_space_limit, contract_violation, fuzz, run_main
+
+from polymatch_ros.core.saved import load_saved
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "config"
@@ -81,7 +82,7 @@ def test_save_without_suffix_reports_the_file_written(tmp_path):
     code, out, err = run_main(["simulate", str(path), "-q", "--save", str(tmp_path / "traj")], 60)
     assert code in (0, 3), err
     assert f"trajectory saved to {tmp_path / 'traj.npz'}" in out
-    assert np.load(tmp_path / "traj.npz")["times"][-1] == pytest.approx(2.0)
+    assert load_saved(tmp_path / "traj.npz").t == pytest.approx(2.0)
 
 
 def test_scene_tolerance_unused_by_auto_pick_warns_one_line(tmp_path):

@@ -23,7 +23,7 @@ from polymatch_ros.core.scenes.scene import load_scene
 
 pytestmark = needs_ros
 
-# one snapshot: `plot --figure` draws it above the diameters (a second one cost 0.3 s to draw)
+# one snapshot: `plot --figure` draws it above the diameters (each more costs a drawing)
 SCENE = triangles_yaml("three_triangles", seed=3, count=3, method="lie_euler", dt=0.1, t_end=0.3,
                        snapshots=[0.2])
 DT = 0.1

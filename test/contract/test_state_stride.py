@@ -1,5 +1,5 @@
 """The lockstep states the monitor reads go out at its pace, at steps every process sends
-(``nodes.state_stride``): so every step it reports is one that all agents reached, exact as
+(``agents.state_stride``): so every step it reports is one that all agents reached, exact as
 the centralised run has it (lockstep = centralised, Theorems 4.1/4.2 then the simulator's).
 
 The oracle is brute force: processes stepping at their own paces on fake clocks, the steps

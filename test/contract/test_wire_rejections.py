@@ -2,7 +2,7 @@
 message accepted with the values put in.
 
 One hand-made ``polymatch_interfaces`` (or ``geometry_msgs``) message per reason, for each
-decoder: lockstep stage rows of one agent and of a block (``codec``), an agent's state and a
+decoder: lockstep stage rows of one agent and of a block (``stage_rows``), an agent's state and a
 block of states (``exchange``), poses and velocities (``motion``: PoseStamped/TwistStamped for
 d <= 3, PoseNd/TwistNd for d >= 4), the run record (``RunRecord.from_msg``) and the control
 command (``parse_command``).  Each is dropped with exactly its reason; the unchanged message of
@@ -67,7 +67,7 @@ def _mats(grp, rot):
     return grp.to_matrices(rot)
 
 
-# -- lockstep stage rows of one agent (codec.decode_stage) ------------------------------------
+# -- lockstep stage rows of one agent (stage_rows.decode_stage) ------------------------------
 
 STAGE = dict(run_id=RUN_ID, sender=AGENT, step=4, stage=1, stop=False, stop_step=-1, t=1.25,
              agents=[AGENT], centroids=[0.5, -1.0, 2.0], velocities=[], rotations=_flat(R3))
@@ -141,7 +141,7 @@ def test_a_projection_stage_is_checked_loosely_but_never_a_reflection_lemma_2_1(
                          tol=wire.PROJECTION_STAGE_TOL) == (None, "rotation not in SO(d)")
 
 
-# -- lockstep stage rows of a block (codec.decode_block) --------------------------------------
+# -- lockstep stage rows of a block (stage_rows.decode_block) ------------------------------
 
 ROWS_X = [0.5, -1.0, 2.0, 1.5, 0.0, -2.0]
 BLOCK_STAGE = {**STAGE, "sender": BLOCK, "agents": [8, 9], "centroids": ROWS_X,
@@ -525,7 +525,7 @@ def test_a_run_record_with_a_clock_offset_of_no_peer_is_refused():
     assert wire.RunRecord.from_msg(msg) is None
 
 
-# -- the control command (nodes.control.parse_command) ----------------------------------------
+# -- the control command (wire.control.parse_command) -----------------------------------------
 
 EPOCH = (1000, 250_000_000)   # 1000.25 s since the epoch
 

@@ -86,8 +86,8 @@ def test_uniform_rotations_refused_from_a_lower_bound_thm_4_2():
 
 
 def test_explain_of_a_large_scene_takes_linear_time(tmp_path, capsys):
-    """200,000 agents: the exact pairwise diameters took about half a minute here (7 s at
-    10^5, quadratic); the checks are O(N log N) now, about a second of CPU."""
+    """200,000 agents: the exact pairwise diameters are quadratic; the checks are O(N log N)
+    now, well within the bound below."""
     path = tmp_path / "large.yaml"
     path.write_text("dimension: 3\nmodel: {order: 1}\ntime: {t_end: 10}\n"
                     "groups:\n  - {shape: tetrahedron, count: 200000}\n")

@@ -919,7 +919,7 @@ def test_extreme_cli_dt_larger_than_t_end_one_warning_line_section_5():
 
 def test_extreme_explain_large_n_in_seconds_and_refused_rightly_thm_4_2(tmp_path):
     """10^5 Haar-random tetrahedra: `polymatch explain` (load, plan, preflight, certificate)
-    answers in seconds of CPU (the exact pairwise diameters took 7 s at 10^5, quadratic), and its
+    answers in seconds of CPU (the exact pairwise diameters, quadratic, did not), and its
     refusal of Thm 4.2 is right: already 200 of the rotations have a pair >= 1 apart."""
     path = tmp_path / "large.yaml"
     path.write_text("dimension: 3\nseed: 2\nmodel: {order: 1}\ntime: {t_end: 10}\n"
@@ -929,7 +929,7 @@ def test_extreme_explain_large_n_in_seconds_and_refused_rightly_thm_4_2(tmp_path
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     assert out.returncode == 0, out.stderr
     # CPU seconds of the explain process (not wall time, which a loaded machine stretches):
-    # about 1 s; the exact pairwise diameters alone took 7 s at 10^5
+    # well below the bound; the exact pairwise diameters alone exceeded it at 10^5
     assert (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime) < 5.0
     assert "not certified: D0 >= " in out.stdout
     sc = load_scene(str(path))

@@ -178,7 +178,7 @@ SPECIAL_ANGLES = [0.0, 1e-12, 1e-8, 1e-4, 1e-3, np.pi - 1e-9, np.pi, np.pi + 1e-
 ANGLES = st.one_of(st.sampled_from(SPECIAL_ANGLES), st.floats(0.0, 1e-3),
                    st.floats(0.0, 4 * np.pi))
 AXES = st.tuples(*[st.floats(-1.0, 1.0)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3)
-# 30 drawn examples (up to 8 angles each, ~8 ms, mostly spent drawing them), after the literal
+# 30 drawn examples (up to 8 angles each, cheap: mostly spent drawing them), after the literal
 # bands below as explicit examples: 95 angles, every special one of ANGLES on every axis, in
 # three vectorised calls per test (100 drawn examples alone covered ~450 random angles)
 CLOSED_FORMS = settings(max_examples=30, deadline=None)
@@ -201,7 +201,7 @@ ANGLE_BANDS = [
 
 def _band_cases(band, every_axis):
     """A band's (axis, angle) pairs: every angle on every axis of BAND_AXES; or, for an oracle
-    that pays per matrix (scipy's expm: a LAPACK getrs each, ~10 ms with multi-threaded
+    that pays per matrix (scipy's expm: a LAPACK getrs each, slow with multi-threaded
     OpenBLAS on a busy machine), the special angles on every axis and the others on one each,
     the axes in turn."""
     pairs = []

@@ -72,7 +72,7 @@ def test_graphs_a_batch_cannot_match_on_are_refused_naming_the_seed(monkeypatch)
     with pytest.raises(SceneError, match=r"^seed 3: graph \(groups\[0\]\): the graph is "
                        "disconnected"):
         _scenes(Cell(agents=10, graph="k_nearest:1"), None)
-    # refused once every draw is disconnected: 20 draws here (the 1000 of GRAPH_DRAWS take 1 s),
+    # refused once every draw is disconnected: 20 draws here (the 1000 of GRAPH_DRAWS take long),
     # and the message counts them
     monkeypatch.setattr(sweep_scenes, "GRAPH_DRAWS", 20)
     with pytest.raises(ParameterError, match="random p = 0.01 gave no connected graph of 8 "

@@ -20,8 +20,8 @@ TRIANGLES = triangles_yaml("four_triangles", seed=5, count=4, method="rkmk4", dt
                            gamma=2.0)
 
 
-# The command-line runs' horizons (s): their whole grid of 46 runs takes ~0.6 s and ~0.3 s,
-# within the budgets they give (over t_end = 4 s the grid outgrew them and took the budget).
+# The command-line runs' horizons (s): their whole grid of 46 runs fits within the budgets they
+# give (over t_end = 4 s the grid outgrew them and took the budget).
 RECOMMEND_T_END = 1.0     # six sample times; the choice's error is ~6e-8 (rkmk4 dt 0.2)
 UNREACHABLE_T_END = 0.4   # the smallest error of the grid is 1.6e-13, far above 1e-16
 
@@ -173,8 +173,8 @@ def test_flat_model_is_the_papers_a1_a2(order):
 
 
 # The budget test's horizon and budget: the whole grid is predicted at 3-4 times the budget, and
-# the reference fits even when the test gets a sixth of a core (smaller settings were refused:
-# at t_end 12 and 2.5 s once in 20 runs beside five busy processes, at 20 and 2 s 6 times in 10)
+# the reference fits even when the test gets a sixth of a core (smaller horizons and budgets
+# were refused now and then beside busy processes)
 BUDGET_T_END = 40.0
 BUDGET = 6.0   # s: far below the full grid, with room for the reference on a loaded machine
 

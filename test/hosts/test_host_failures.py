@@ -125,8 +125,8 @@ def test_realtime_host_killed_then_run_again_rejoins_and_matches(net, tmp_path):
 
 
 LOCKSTEP_SCENE = "mixed_triangles_tetrahedra"     # 12 agents: 4/4/4, one process a host
-# long enough that the kill, at 30% of it on the lead's progress lines, lands mid-run: three
-# processes of 4 agents make about 150 rounds/s (a run of t_end 3 took 1.6 s)
+# long enough that the kill, at 30% of it on the lead's progress lines, lands mid-run (a run
+# of t_end 3 was over too soon)
 LOCKSTEP_T_END = 12.0
 PROGRESS = re.compile(r"^t = +(\S+) /", re.M)
 RESTARTED = re.compile(r"^  agents_4_7 \(pid (\d+)\) killed by SIGKILL at t = \S+; restarted "

@@ -72,15 +72,14 @@ SET_PARAMETER = textwrap.dedent("""\
     from rcl_interfaces.srv import SetParameters
     from rclpy.node import Node
     from rclpy.parameter import Parameter
+    from polymatch_ros.ros.wire.service_call import call_service
     rclpy.init()
     node = Node("param_setter")
-    client = node.create_client(SetParameters, sys.argv[1] + "/set_parameters")
-    assert client.wait_for_service(timeout_sec=20.0), "no parameter service"
     request = SetParameters.Request()
     request.parameters = [Parameter(sys.argv[2], value=eval(sys.argv[3])).to_parameter_msg()]
-    future = client.call_async(request)
-    rclpy.spin_until_future_complete(node, future, timeout_sec=20.0)
-    result = future.result().results[0]
+    answer = call_service(node, SetParameters, sys.argv[1] + "/set_parameters", request, 20.0)
+    assert answer.answered, answer.failure
+    result = answer.response.results[0]
     print("RESULT", result.successful, result.reason, flush=True)
 """)
 

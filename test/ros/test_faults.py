@@ -19,6 +19,7 @@ from ros_harness import PY, cli_argv, needs_ros, placed_vertices, scene_path
 from shm_watch import ShmWatch
 
 from benchmarks.hosts.runs import argv_of, children, descendants, node_name, scene_with
+from polymatch_ros.core.saved import load_saved
 from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.core.stepping.simulate import plan, simulate
 from polymatch_ros.ros.wire import run_records
@@ -118,7 +119,7 @@ def _assert_saved_equal_centralised(save, dt, t_end=None):
     """The final poses the runner saved are at t_end (if given: else where the run stopped) and,
     vertex by vertex (brute force over agents and vertices), within 1e-9 of the centralised
     run's at that time."""
-    t = float(np.load(save)["t"])
+    t = load_saved(save).t
     if t_end is not None:
         assert t == pytest.approx(t_end)
     scene, method = _lockstep_scene(dt, t)
@@ -137,7 +138,7 @@ def test_lockstep_resumes_exactly_after_processes_die_or_hang_theorem_4_2(ros, t
     needs), and the final poses equal the centralised run's to 1e-9.  The monitor, killed
     with them, is restarted; the rounds never wait for it."""
     # t_end 6 (300 steps): the probes that time the faults need a few seconds each, and the
-    # four processes make about 150 rounds/s
+    # four processes' rounds are fast
     save = tmp_path / "final.npz"
     run = _run(ros, "--t-end", "6", "--dt", "0.02", "-k", "2", "--round-timeout", "4",
                "--save", save)
@@ -288,12 +289,13 @@ def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_
     os.kill(_runner(run), signal.SIGTERM)
     rc, out = _finish(ros, run)
     assert rc == 130 and "partial state saved" in out, out[-3000:]
-    data = np.load(save)
-    assert bool(data["partial"]) and 0.5 <= float(data["t"]) < 500
-    times = data["group0_times"]
+    saved = load_saved(save)
+    assert saved.partial and 0.5 <= saved.t < 500
+    data = saved.groups[0]
+    times = data.agent_times
     assert times.shape == (n,) and np.all(times >= 0.5) and np.all(times < 500)
-    assert float(data["t"]) == times.min()              # the earliest agent's time
-    rotations = data["group0_rotations"]
+    assert saved.t == times.min()              # the earliest agent's time
+    rotations = data.rotations[-1]
     assert np.allclose(rotations @ rotations.transpose(0, 2, 1), np.eye(2), atol=1e-12)
     assert np.allclose(np.linalg.det(rotations), 1.0, atol=1e-12)
     if mode == "lockstep":
@@ -311,7 +313,7 @@ def _assert_each_agent_at_its_time_is_the_centralised_run(data, times):
     for i, t in enumerate(times):
         state = at[round(float(t), 9)]
         want = placed_vertices(traj.scene.model, state.groups, scene.origin)[0]  # vertex, agent
-        got = data["group0_centroids"][i] + reference @ data["group0_rotations"][i].T
+        got = data.centroids[-1][i] + reference @ data.rotations[-1][i].T
         assert np.max(np.linalg.norm(got - want[:, i], axis=-1)) <= 1e-9, (i, t)
 
 

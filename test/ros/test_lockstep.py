@@ -15,6 +15,7 @@ from shm_watch import ShmWatch
 
 from polymatch_ros.core.metrics import ensemble_metrics
 from polymatch_ros.core.model import GroupState, State
+from polymatch_ros.core.saved import load_saved
 from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire import run_records
 
@@ -52,13 +53,12 @@ def assert_saved_poses_equal_centralised(scene, integrator, saved, t_end=T_END):
 
 def received_state(scene, path):
     """The final poses saved by the runner as a core State (first-order scenes)."""
-    data, grp = np.load(path), scene.model.rotations
+    saved, grp = load_saved(path), scene.model.rotations
     groups = tuple(
-        GroupState(data[f"group{gi}_centroids"] - scene.origin,
-                   grp.from_matrices(data[f"group{gi}_rotations"]))
-        for gi in range(len(scene.model.groups))
+        GroupState(sg.centroids[-1] - scene.origin, grp.from_matrices(sg.rotations[-1]))
+        for sg in saved.groups
     )
-    return State(float(data["t"]), groups)
+    return State(saved.t, groups)
 
 
 def assert_monitor_reported_final_state(scene, records, saved):

@@ -11,6 +11,7 @@ import pytest
 from exactness import central_vertices, received_vertices
 from ros_harness import PY, needs_ros, scene_path
 
+from polymatch_ros.core.saved import load_saved
 from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire import run_records
 
@@ -35,7 +36,7 @@ def test_lockstep_on_radio_connected_equals_the_centralised_run_while_pairs_ente
     assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
     m = re.search(r"max vertex deviation ([0-9.e+-]+)", text)   # the runner's own comparison
     assert m and float(m.group(1)) <= 1e-9, text
-    centroids = np.load(out)["group0_centroids"]                 # 19 pairs in range at t = 0
+    centroids = load_saved(out).groups[0].centroids[-1]               # 19 pairs in range at t = 0
     r = np.linalg.norm(centroids[:, None] - centroids[None], axis=-1)
     assert int(np.sum(np.triu(r < 5.0, 1))) == 28, r              # all 28 by t = 1
     agents = [r for r in run_records(records.read_text().splitlines()) if r.role == "agent"]
@@ -76,8 +77,8 @@ def test_realtime_agents_couple_only_to_peers_in_range_and_the_split_is_named(ro
     text = ros.output(proc)
     assert rc == 3, text
     assert "group 'g' split into 2 components {0, 1} {2} (radius 3) at t = 6" in text, text
-    data = np.load(out)
-    x, mats = data["group0_centroids"], data["group0_rotations"]
+    data = load_saved(out).groups[0]
+    x, mats = data.centroids[-1], data.rotations[-1]
     theta = np.arctan2(mats[:, 1, 0], mats[:, 0, 0])
     assert np.max(np.abs(x[2] - [10.0, 0.0])) < 1e-12 and abs(theta[2] - 2.0) < 1e-12
     assert abs(theta[1] - theta[0]) < 0.5 and np.linalg.norm(x[1] - x[0]) < 1.0   # 0, 1 met

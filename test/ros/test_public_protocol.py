@@ -17,6 +17,8 @@ import textwrap
 import numpy as np
 from ros_harness import PY, REPO, cli_argv, needs_ros, scene_path
 
+from polymatch_ros.core.saved import load_saved
+
 pytestmark = needs_ros
 
 FOREIGN = os.path.join(REPO, "test", "support", "foreign_agent.py")
@@ -40,8 +42,8 @@ def test_an_agent_written_from_the_msg_files_joins_and_the_ensemble_matches_theo
     said = re.search(r"^foreign agent 7: final t = (\S+), x = (\[.*?\]), dropped (\d+)$",
                      ros.output(foreign), re.M)
     assert said, ros.output(foreign)
-    data = np.load(out)
-    x, rot = data["group0_centroids"], data["group0_rotations"]
+    data = load_saved(out).groups[0]
+    x, rot = data.centroids[-1], data.rotations[-1]
     assert x.shape == (8, 2) and rot.shape == (8, 2, 2)
     # brute force over every pair: centroids together, rotations equal (Theorem 4.2)
     pairs = [(i, j) for i in range(8) for j in range(i + 1, 8)]

@@ -14,6 +14,7 @@ from ros_harness import cli_argv, needs_ros
 
 from polymatch_ros.cli import main
 from polymatch_ros.core.metrics import ensemble_metrics
+from polymatch_ros.core.saved import load_saved
 from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire import run_records
 
@@ -100,7 +101,7 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
         assert profiles[topic] == [("RELIABLE", durability)], topic
     total = sum(len(v[1]) for v in got.values())
     assert f"recorded {total} messages on {len(TYPES)} of {len(TYPES)} topics to {mcap}" in out
-    final = np.load(saved)
+    final = load_saved(saved).groups[0]
     for a in range(3):
         poses = [planar(m) for _, m in got[f"/polymatch/agent_{a}/pose"][1]]
         # every step, once, in order: t = 0, dt, ..., t_end
@@ -109,8 +110,8 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
                                    atol=1e-9)
         x0 = scene.initial.groups[0].x[a] + scene.origin
         np.testing.assert_array_equal(poses[0][1], x0)
-        np.testing.assert_array_equal(poses[-1][1], final["group0_centroids"][a])
-        np.testing.assert_allclose(poses[-1][2], final["group0_rotations"][a], atol=1e-12)
+        np.testing.assert_array_equal(poses[-1][1], final.centroids[-1][a])
+        np.testing.assert_allclose(poses[-1][2], final.rotations[-1][a], atol=1e-12)
     # the monitor's reports (at most report_rate a second): the last is the final step's
     diameters = [m.data for _, m in got["/polymatch/diameter"][1]]
     assert 1 <= len(diameters) <= mon.reports and diameters[-1] == mon.diameter

@@ -1,4 +1,4 @@
-"""Start, stop, pause, reset through std_srvs services (``ros.control``), called by an rclpy
+"""Start, stop, pause, reset through std_srvs services (``wire.control``), called by an rclpy
 client the way ``ros2 service call`` calls them: the ensemble's services (hosted by the
 monitor) and one agent's own.
 

@@ -1,5 +1,5 @@
 """Watching costs next to nothing, and what it shows stays exact: lockstep agents send their
-states on the run's exchange at the monitor's pace (``exchange_rate``, ``nodes.state_stride``),
+states on the run's exchange at the monitor's pace (``exchange_rate``, ``agents.state_stride``),
 at steps that every process sends, and the monitor reports only steps it has from every agent.
 So each report is the centralised run's state at one step of the grid (lockstep equals the
 centralised run to round-off: the paper's matching diameter as the simulator has it), while a

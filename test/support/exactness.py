@@ -5,6 +5,7 @@ from dataclasses import replace
 import numpy as np
 from ros_harness import placed_vertices
 
+from polymatch_ros.core.saved import load_saved
 from polymatch_ros.core.stepping.simulate import simulate
 
 
@@ -15,9 +16,11 @@ def central_vertices(scene, integrator, t):
 
 
 def received_vertices(scene, path):
-    data = np.load(path)
+    """(t, per group its (vertex, agent, d) vertices) of the final poses a run saved, read with
+    the one reader (``core.saved``)."""
+    saved = load_saved(path)
     out = []
-    for gi, g in enumerate(scene.model.groups):
-        x, mats = data[f"group{gi}_centroids"], data[f"group{gi}_rotations"]
+    for g, sg in zip(scene.model.groups, saved.groups):
+        x, mats = sg.centroids[-1], sg.rotations[-1]
         out.append(x + np.einsum("nij,aj->nai", mats, g.reference).transpose(1, 0, 2))
-    return float(data["t"]), out
+    return saved.t, out

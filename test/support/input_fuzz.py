@@ -201,8 +201,8 @@ def run_main(argv, seconds):
 
     A guard thread reads the clocks every ``GUARD_PERIOD`` s and, when a bound ran out, sends
     this thread SIGUSR1, whose handler raises.  Not ``ITIMER_PROF``: the kernel charges it by
-    scheduler ticks, and on a loaded machine it once expired after 0.377 s of the process's
-    measured CPU time for a bound of 0.5 s; the guard's clock is the one callers measure."""
+    scheduler ticks, and on a loaded machine it once expired well before the process's
+    measured CPU time reached its bound; the guard's clock is the one callers measure."""
     out, err = io.StringIO(), io.StringIO()
     expired = []
 

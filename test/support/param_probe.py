@@ -33,6 +33,8 @@ from rcl_interfaces.srv import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 
+from polymatch_ros.ros.wire.service_call import call_service
+
 BOUND = 60.0
 
 
@@ -47,15 +49,10 @@ class Probe:
             self.diagnostics[status.hardware_id] = {kv.key: kv.value for kv in status.values}
 
     def call(self, kind, node, request):
-        client = self.node.create_client(kind, f"{node}/{_SERVICE[kind]}")
-        if not client.wait_for_service(timeout_sec=BOUND):
-            fail(f"no {_SERVICE[kind]} service of {node}")
-        future = client.call_async(request)
-        rclpy.spin_until_future_complete(self.node, future, timeout_sec=BOUND)
-        if not future.done():
-            fail(f"no answer from {node}/{_SERVICE[kind]}")
-        self.node.destroy_client(client)
-        return future.result()
+        answer = call_service(self.node, kind, f"{node}/{_SERVICE[kind]}", request, BOUND)
+        if not answer.answered:
+            fail(answer.failure)
+        return answer.response
 
     def get(self, node, *names):
         if not names:

@@ -29,6 +29,7 @@ from std_srvs.srv import SetBool, Trigger
 from polymatch_interfaces.msg import RunRecord as RunRecordMsg
 from polymatch_ros.ros.process.teardown import end_process, teardown_watchdog
 from polymatch_ros.ros.wire import RunRecord
+from polymatch_ros.ros.wire.service_call import call_service
 
 BOUND = 60.0
 
@@ -65,14 +66,10 @@ class Probe:
 
     def call(self, name, value=None):
         kind = Trigger if value is None else SetBool
-        client = self.node.create_client(kind, name)
-        self.wait(client.service_is_ready, f"service {name}")
         request = kind.Request()
         if value is not None:
             request.data = value == "true"
-        future = client.call_async(request)
-        self.wait(future.done, f"answer of {name}")
-        answer = future.result()
+        answer = self._call(kind, name, request)
         print(f"RESULT {name} {answer.success} {answer.message}", flush=True)
 
     def slowest(self):
@@ -107,18 +104,19 @@ class Probe:
         self.spin(float(seconds))
         print(f"SILENT {self.poses[topic] is None}", flush=True)
 
-    def _lifecycle_call(self, kind, name, request):
-        client = self.node.create_client(kind, name)
-        self.wait(client.service_is_ready, f"service {name}")
-        future = client.call_async(request)
-        self.wait(future.done, f"answer of {name}")
-        return future.result()
+    def _call(self, kind, name, request):
+        """The response of service ``name`` (the package's one bounded call)."""
+        answer = call_service(self.node, kind, name, request, BOUND)
+        if not answer.answered:
+            print(f"TIMEOUT {answer.failure}", flush=True)
+            sys.exit(3)
+        return answer.response
 
     def lifecycle(self, node, label):
         from lifecycle_msgs.msg import Transition
         from lifecycle_msgs.srv import ChangeState, GetState
 
-        state = self._lifecycle_call(GetState, f"{node}/get_state", GetState.Request())
+        state = self._call(GetState, f"{node}/get_state", GetState.Request())
         ids = {"configure": Transition.TRANSITION_CONFIGURE,
                "cleanup": Transition.TRANSITION_CLEANUP,
                "activate": Transition.TRANSITION_ACTIVATE,
@@ -129,13 +127,13 @@ class Probe:
                .get(state.current_state.label)}
         request = ChangeState.Request()
         request.transition.id = ids[label]
-        answer = self._lifecycle_call(ChangeState, f"{node}/change_state", request)
+        answer = self._call(ChangeState, f"{node}/change_state", request)
         print(f"LIFECYCLE {label} {answer.success}", flush=True)
 
     def state(self, node):
         from lifecycle_msgs.srv import GetState
 
-        answer = self._lifecycle_call(GetState, f"{node}/get_state", GetState.Request())
+        answer = self._call(GetState, f"{node}/get_state", GetState.Request())
         print(f"STATE {answer.current_state.label}", flush=True)
 
     def publishers(self, topic, wanted):

@@ -1,4 +1,4 @@
-"""Sweeps: many independent ensembles of one scene kind, integrated together (``core.batch``).
+"""Sweeps: many independent ensembles of one scene kind, integrated together (``sweep.batch``).
 
 ``run_batch(scenes)`` integrates B single-group scenes that differ only in their initial
 states with the scene's fixed-step integrator (or another registered one, or rkmk8 of

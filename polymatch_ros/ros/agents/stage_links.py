@@ -84,7 +84,7 @@ class _Links:
     def unheard(self) -> bool:
         """No other process needs this one's stage rows (one process hosts every agent):
         rounds are then not published at all (at 4096 agents in one process, publishing them
-        to nobody took 30% of a round)."""
+        to nobody took a large share of a round)."""
         return all(self.expected(i) == 0 for i in self.pubs)
 
     def _turn(self) -> int:

@@ -16,7 +16,7 @@ profiles (as ``ros2 bag record`` does).
 The recorder ends on SIGINT or SIGTERM (its normal end, exit 0), after ``duration`` seconds,
 or at an error; it then takes what its readers still hold (at most ``DRAIN_SECONDS``),
 writes the file's summary and closes it before the DDS teardown, which its watchdog bounds
-(``process.ros_main``), so the file is complete whatever the teardown does.
+(``process.shell.ros_main``), so the file is complete whatever the teardown does.
 """
 
 from __future__ import annotations

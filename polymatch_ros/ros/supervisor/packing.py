@@ -3,8 +3,7 @@
 Lockstep (``python -m benchmarks packing`` and ``scaling``, ``docs/bench/``, 2 cores): a round
 costs each process its share of the numerics plus one DDS exchange with every other process,
 and the exchange dominates; one process was the fastest packing at 8, 32, 64, 256 and 1024
-agents (at 1024: 423 rounds/s against 70 in 4 processes of 256), and at 4096 (96 rounds/s
-against 51 in 4 of 1024 and 4 in 16 of 256; ``docs/guide/speed-and-accuracy.md``).
+agents (``docs/bench/packing.md``), and at 4096 (``docs/bench/scaling.md``).
 
 Realtime (``python -m benchmarks realtime_scale``, ``docs/bench/realtime_scale.md``): a tick
 costs each process its agents' numerics, vectorised, plus reading the other processes' states
@@ -15,7 +14,7 @@ a process, so that a crash costs one agent.  A host that runs only some of the a
 implementation, which speaks the public per-agent state topics (``agent_<i>/state``), not the
 blocks.  Bridge runs relay one robot a process.
 
-Every agent is its own node at any packing (``nodes.hosted``): a full node (its services and
+Every agent is its own node at any packing (``agents.hosted``): a full node (its services and
 parameters too) while a process hosts up to ``FULL_AGENT_NODES`` agents, a lean one (its pose
 topics) beyond, where the full nodes' endpoints would make a process's start-up take many
 times as long (``python -m benchmarks packing``: the agent-node table).

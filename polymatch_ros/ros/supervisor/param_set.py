@@ -27,6 +27,7 @@ from ..config.params import RUNTIME, check_value
 from ..config.runtime_params import SPEC
 from ..network.environment import ros_environment
 from ..process.teardown import teardown_watchdog
+from ..wire.service_call import ServiceCall
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor
@@ -93,7 +94,7 @@ def _discover(node: Node, executor: Executor, namespace: str, deadline: float) -
         if seen and time.monotonic() - since >= SETTLE_SECONDS and set(records) <= set(seen):
             break
     node.destroy_subscription(sub)
-    # a packed process's agents have nodes of their own (``nodes.hosted``), read-only: its
+    # a packed process's agents have nodes of their own (``agents.hosted``), read-only: its
     # runtime parameters are set on the process node, which steps them
     hosted = {f"agent_{a}" for name, rec in records.items() for a in rec.agents
               if name != f"agent_{a}"}
@@ -109,25 +110,18 @@ def _not_found(records: dict[str, wire.RunRecord], names: list[str]) -> list[int
 
 def _ask_all(node: Node, executor: Executor, kind: Any, service: str, request: Any,
              names: list[str], deadline: float) -> dict[str, Any]:
-    """{node name: its answer to ``request`` on its ``service`` (None: none came)}."""
+    """{node name: its answer to ``request`` on its ``service`` (None: none came)}, asked of
+    every node at once, each request sent again when its answer is overdue."""
     namespace = node.get_namespace()
-    clients = {n: node.create_client(kind, f"{namespace}/{n}/{service}") for n in names}
-    futures: dict[str, tuple[Any, float]] = {}  # name -> (future, sent)
-    answers: dict[str, Any] = dict.fromkeys(names)
-    while time.monotonic() < deadline and any(a is None for a in answers.values()):
-        executor.spin_once(timeout_sec=0.05)
-        for n, client in clients.items():
-            if answers[n] is not None:
-                continue
-            if n in futures and futures[n][0].done():
-                answers[n] = futures[n][0].result()
-            elif n in futures and time.monotonic() - futures[n][1] > RESEND_SECONDS:
-                client.remove_pending_request(futures.pop(n)[0])  # a lost answer: ask again
-            elif n not in futures and client.service_is_ready():
-                futures[n] = (client.call_async(request), time.monotonic())
-    for client in clients.values():
-        node.destroy_client(client)
-    return answers
+    calls = {n: ServiceCall(node, kind, f"{namespace}/{n}/{service}", request, RESEND_SECONDS)
+             for n in names}
+    try:
+        while time.monotonic() < deadline and not all([c.poll() for c in calls.values()]):
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        for call in calls.values():
+            call.close()
+    return {n: call.response for n, call in calls.items()}
 
 
 def _call_all(node: Node, executor: Executor, names: list[str], name: str, value: float,

@@ -2,7 +2,7 @@
 
 A run interrupted (Ctrl-C, SIGTERM), failed or timed out has no final pose from every agent.
 Its ``--save`` then holds, per agent, the later of its final pose (if it sent one) and its
-process's last checkpoint (``nodes.checkpoint``: the state at the start of its last step);
+process's last checkpoint (``wire.checkpoint``: the state at the start of its last step);
 an agent of which neither exists (its process never stepped) keeps its initial state at
 t = 0.  The file says it is partial, and every agent's time is in it.
 """

@@ -6,7 +6,7 @@ command line after a short back-off, as ``respawn`` does in ROS 2 launch; a proc
 restarted process does depends on the mode:
 
 - lockstep: it resumes from its checkpoint at the start of its last step, and its peers, who
-  waited for it, replay that step's rounds with it (``nodes.checkpoint``): the trajectory is
+  waited for it, replay that step's rounds with it (``wire.checkpoint``): the trajectory is
   the uninterrupted one, so the run still equals the centralised simulation.
 - realtime and bridge: it rejoins the ensemble's clock at its current tick from its initial
   state (``RealtimeAgent._join_clock``), as a peer back from a lost link does; a bridge agent
@@ -29,7 +29,7 @@ from typing import Protocol, TypeVar
 
 POLICIES = ("restart", "stop")
 FAILURE_KEY = "polymatch_failure"
-#: what a process that ended with an error of its own printed (``process.ros_main``)
+#: what a process that ended with an error of its own printed (``process.shell.ros_main``)
 OWN_ERRORS = ("agent: error: ", "monitor: error: ")
 
 

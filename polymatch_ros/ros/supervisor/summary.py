@@ -6,13 +6,14 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from ...console import SUMMARY_HEADER, Progress, format_table, summary_rows
 from ...core.metrics import ensemble_metrics
 from ...core.model import GroupState, Model, State
+from ...core.saved import save_states
 from ...core.scenes.scene import Scene
 from ...core.stepping.simulate import convergence_verdict, group_components, prepare, simulate
 from ..wire import RunRecord
@@ -145,7 +146,7 @@ def _summary(plan: RunPlan, final: State, records: list[RunRecord], wall: float,
     if watcher.ignored:
         print(f"runner: ignored {watcher.ignored} status message(s) not of this run")
     if outputs.save:
-        _save(outputs.save, scene, final, watcher.pose_times())
+        save_final(outputs.save, scene, final, watcher.pose_times())
     if mode.exact and outputs.compare:
         central = prepare(scene, the_plan, distributed=True)
         ref = simulate(
@@ -197,18 +198,16 @@ def _save_partial(plan: RunPlan, outcome: RunOutcome) -> None:
     finals = {} if outcome.watcher is None else outcome.watcher.poses
     computed_in = prepare(plan.scene, plan.numerics, distributed=True).model.rotations
     state, times = last_state(plan.scene, finals, outcome.checkpoints, computed_in)
-    _save(plan.outputs.save, plan.scene, state, times, partial=True)
+    save_final(plan.outputs.save, plan.scene, state, times, partial=True)
 
 
-def _save(path: str, scene: Scene, final: State, times: dict[int, float],
+def save_final(path: str, scene: Scene, final: State, times: dict[int, float],
           partial: bool = False) -> None:
-    data: dict[str, Any] = {"t": final.t, "origin": scene.origin, "partial": partial}
-    for gi, g in enumerate(scene.model.groups):
-        data[f"group{gi}_times"] = np.array([times[a] for a in g.indices])
-    for gi, gs in enumerate(_groups(final)):
-        data[f"group{gi}_centroids"] = gs.x + scene.origin
-        data[f"group{gi}_rotations"] = scene.model.rotations.to_matrices(gs.rot)
-    np.savez(path, **data)
+    """The agents' final (or, ``partial``, last) poses in the one ``--save`` layout
+    (``core.saved``): one sample, each agent's own time."""
+    agent_times = np.array([times[a] for a in range(scene.model.n_agents)])
+    save_states(path, scene, [final], [ensemble_metrics(scene.model, final)], agent_times,
+                partial=partial)
     if partial:
         print(f"partial state saved to {path}: the run ended early; each agent's last state "
               f"(from t = {min(times.values()):g} to {max(times.values()):g}) and its time",

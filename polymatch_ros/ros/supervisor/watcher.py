@@ -82,8 +82,8 @@ class Watcher:
         wire.subscription(node, "control", self._control)  # a stop someone else asked for
         self.services = ControlClient(node)  # start and stop: the ensemble's services
         # The final states on a lean node of their own, taken a few times a second: an rclpy
-        # spin rebuilds its wait set from every reader, and 1024 of them made every 50 ms spin
-        # of the runner's loop cost half a core (py-spy, 1024 agents in 4 processes).  Packed
+        # spin rebuilds its wait set from every reader, and 1024 of them made the spins of the
+        # runner's loop its main cost (py-spy, 1024 agents in 4 processes).  Packed
         # lockstep processes (K = ``blocks_of``) send them a block at a time: with a reader per
         # agent the runner missed final states at 4096 agents.
         self.finals = LeanReaders(node, "_finals")

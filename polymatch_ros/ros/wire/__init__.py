@@ -4,28 +4,7 @@ The run's own messages are the ``polymatch_interfaces`` package's (``.msg`` file
 """
 
 # ruff: noqa: F401
-from .codec import (
-    FIELDS,
-    FLAG_STOP,
-    MAX_ABS,
-    PROJECTION_STAGE_TOL,
-    ROTATION_TOL,
-    STAMP_SLACK,
-    Stage,
-    StageRows,
-    decode_agent_rows,
-    decode_block,
-    decode_stage,
-    encode_block,
-    encode_stage,
-    orthogonality,
-    rot_from_values,
-    rot_size,
-    rot_values,
-    stamp_of,
-    time_key,
-)
-from .ensemble import Row, assemble, assemble_rows, state_of
+from .assembly import Row, assemble, assemble_rows, state_of
 from .exchange import (
     Motion,
     decode_exchange,
@@ -49,6 +28,27 @@ from .motion import (
     twist_to_state,
 )
 from .run_record import RECORD_KEY, RunRecord, drop_summary, echoed_run_records, run_records
+from .stage_rows import (
+    FIELDS,
+    FLAG_STOP,
+    MAX_ABS,
+    PROJECTION_STAGE_TOL,
+    ROTATION_TOL,
+    STAMP_SLACK,
+    Stage,
+    StageRows,
+    decode_agent_rows,
+    decode_block,
+    decode_stage,
+    encode_block,
+    encode_stage,
+    orthogonality,
+    rot_from_values,
+    rot_size,
+    rot_values,
+    stamp_of,
+    time_key,
+)
 from .topics import (
     DEFAULT_ENSEMBLE,
     TOPICS,

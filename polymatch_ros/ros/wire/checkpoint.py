@@ -52,9 +52,9 @@ class CheckpointFile:
     """One process's checkpoint (``path``; '' for none): ``write`` each step, ``read`` once.
 
     Two slots (``path.0``, ``path.1``), written in turn in place (``os.pwrite``: no file is
-    created, renamed or truncated per step, which cost about 2 ms a step on a disk-backed
-    /tmp), each a header (length, CRC-32) and the pickled ``Checkpoint``; ``read`` takes the
-    valid slot of the later step, so a process killed in the middle of a write leaves the
+    created, renamed or truncated per step, which cost a file-system round trip a step on a
+    disk-backed /tmp), each a header (length, CRC-32) and the pickled ``Checkpoint``; ``read``
+    takes the valid slot of the later step, so a process killed in the middle of a write leaves the
     other slot's step.
     """
 

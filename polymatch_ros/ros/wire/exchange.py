@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .codec import (
+from .stage_rows import (
     bad_rotation,
     bad_skew,
     block_members,

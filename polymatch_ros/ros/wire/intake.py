@@ -123,7 +123,7 @@ class DropCounter:
 
     The period is checked here, before the logger is called: rclpy's own
     ``throttle_duration_sec`` first identifies the caller (a stack inspection with file-path
-    lookups) on every call, and under a flood of malformed messages that alone took 44% of
+    lookups) on every call, and under a flood of malformed messages that alone took most of
     a lockstep agent's time (py-spy, ``test_rogue_publisher_changes_nothing_...``).
     """
 

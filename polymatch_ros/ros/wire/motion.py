@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .codec import (
+from .stage_rows import (
     ROTATION_TOL,
     bad_rotation,
     bad_scalars,

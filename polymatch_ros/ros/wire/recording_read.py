@@ -22,7 +22,7 @@ import numpy as np
 from ...core.errors import ParameterError
 from ...core.metrics import ensemble_metrics
 from ...core.model import State
-from .ensemble import Row, state_of
+from .assembly import Row, state_of
 from .motion import Received, decode_pose_msg
 from .recording import METADATA_NAME, SCENE_ATTACHMENT
 

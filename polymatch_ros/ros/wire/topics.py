@@ -133,8 +133,8 @@ def _per_agent_events(agent: int | None, kwargs: dict[str, Any], kind: str) -> N
     rclpy gives every publisher and subscription default event handlers (incompatible QoS
     and type warnings), each a waitable that every spin of the node's executor walks through,
     with a list-membership test per waitable: a process hosting 256 agents (six per-agent
-    topics each) spent 25% of its time there, and the runner, reading 1024 agents' final
-    states, 55% (py-spy, 1024 agents in 4 processes).  A process's own topics keep them."""
+    topics each) spent a large share of its time there, and the runner, reading 1024 agents'
+    final states, more (py-spy, 1024 agents in 4 processes).  A process's own topics keep them."""
     if agent is None or "event_callbacks" in kwargs:
         return
     from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks

@@ -12,7 +12,7 @@ import numpy as np
 if TYPE_CHECKING:
     from ...core.model import GroupState, Model, State
     from ...core.so import RotationGroup
-    from .codec import StageRows
+    from .stage_rows import StageRows
 
 
 @dataclass
