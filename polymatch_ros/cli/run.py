@@ -16,7 +16,7 @@ import os
 from ..console import add_number_options, positive_float, writable_output
 from ..core.errors import ParameterError, PolymatchError
 from ..core.scenes.scene import Scene, resolve_scene_path
-from ..core.stepping.simulate import plan as numerical_plan
+from ..core.stepping.simulate import choose_numerics
 from ..ros.config.params import CMD_TYPES
 from ..ros.supervisor.plan import BridgeOptions, Hosts, Outputs, RunPlan, Timing
 from ..ros.supervisor.recovery import POLICIES, RestartPolicy
@@ -72,7 +72,7 @@ def build_plan(args: argparse.Namespace) -> RunPlan:
     timing = _timing(args, bridge is not None)
     dt = mode.tick_step(timing.rate, timing.time_scale) if mode.ticks else args.dt
     with naming_dt_option(args.dt if mode.exact else None):  # errors first
-        numerics = numerical_plan(scene, args.integrator, dt, distributed=True)
+        numerics = choose_numerics(scene, args.integrator, dt, distributed=True)
     outputs = Outputs(
         save=writable_output(args.save, ".npz") if args.save else None,  # before a long run
         records=args.records,

@@ -80,7 +80,7 @@ def naming_dt_option(dt: float | None) -> Iterator[None]:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """A centralised run of a scene: progress, summary table, verdict; npz and figure."""
-    from ..core.stepping.simulate import explain, plan, simulate
+    from ..core.stepping.simulate import choose_numerics, explain, simulate
     save = writable_output(args.save, ".npz") if args.save else None
     figure = writable_output(args.figure, ".png") if args.figure else None
     check_integrator_option(args.integrator)
@@ -96,7 +96,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
         print(certificate_line(scene))
         with naming_dt_option(args.dt):      # a refusal: its error, exit 2
-            plan(scene, args.integrator, args.dt, args.tolerance)
+            choose_numerics(scene, args.integrator, args.dt, args.tolerance)
         return 0
     progress = Progress(scene.t_end, args.quiet)
     with naming_dt_option(args.dt):
@@ -104,7 +104,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                         keep_states=bool(save or figure), progress=progress,
                         stop_when_converged=args.stop_when_converged)
     progress.done()
-    p = traj.plan
+    p = traj.numerics
     print(f"scene {scene.name}: {scene.model.n_agents} agents, d = {scene.dim}, "
           f"integrator {p.name}"
           + (f" dt = {p.dt:g}" if p.dt else f" tolerance = {p.tolerance:g}"))
@@ -154,7 +154,7 @@ def save_npz(traj: Trajectory, path: str) -> None:
 def cmd_explain(args: argparse.Namespace) -> int:
     """Which model, representation and integrator a scene uses, and why; then, for a run
     that ``simulate`` would refuse, the refusal as an error (exit code 2)."""
-    from ..core.stepping.simulate import explain, plan
+    from ..core.stepping.simulate import choose_numerics, explain
     check_integrator_option(args.integrator)
     scene = load_scene(args.scene, limits=_limits(args))
     check_run(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed,
@@ -163,7 +163,8 @@ def cmd_explain(args: argparse.Namespace) -> int:
                             distributed=args.distributed)))
     print(certificate_line(scene))
     with naming_dt_option(args.dt):
-        plan(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed)
+        choose_numerics(scene, args.integrator, args.dt, args.tolerance,
+                        distributed=args.distributed)
     return 0
 
 
@@ -190,7 +191,7 @@ def cmd_integrators(args: argparse.Namespace) -> int:
 def cmd_scenes(args: argparse.Namespace) -> int:
     """The shipped scenes as a table; ``simulate`` says whether the scene runs as shipped or is
     kept to show a refusal (``polymatch simulate`` exits 2 with the reason)."""
-    from ..core.stepping.simulate import plan
+    from ..core.stepping.simulate import choose_numerics
     rows: list[list[object]] = []
     for d in shipped_config_dirs()[:1]:
         for sub in ("", "extremes"):
@@ -209,7 +210,7 @@ def cmd_scenes(args: argparse.Namespace) -> int:
                     rows.append([name, "?", "?", "?", "invalid", f"invalid: {exc}"])
                     continue
                 try:
-                    plan(s)
+                    choose_numerics(s)
                     runs = "runs"
                 except PolymatchError:
                     runs = "refused"             # kept to show how a refusal reads

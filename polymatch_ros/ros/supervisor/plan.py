@@ -16,7 +16,7 @@ from .recovery import RestartPolicy
 
 if TYPE_CHECKING:
     from ...core.scenes.scene import Scene
-    from ...core.stepping.simulate import Plan
+    from ...core.stepping.simulate import NumericalPlan
     from ..network.discovery import DiscoverySpec
 
 @dataclass(frozen=True)
@@ -98,7 +98,7 @@ class RunPlan:
 
     scene_path: str            # the scene file (a shipped scene resolved)
     scene: Scene               # loaded, --t-end applied; bridge mode: noise-floor tolerance
-    numerics: Plan             # the fixed-step integrator and its dt
+    numerics: NumericalPlan             # the fixed-step integrator and its dt
     mode: Mode
     hosts: Hosts
     timing: Timing

@@ -139,7 +139,7 @@ def _bounded(argv: list[str], out: IO[str], seconds: float) -> int:
 def main(argv: Sequence[str] | None = None) -> None:
     """The measuring process: SCENE METHOD DT T_END TIMEOUT RECORDS; ends with the run's code."""
     from ...core.scenes.scene import load_scene
-    from ...core.stepping.simulate import plan
+    from ...core.stepping.simulate import choose_numerics
     from ..network.discovery import parse_discovery_spec
     from ..process.teardown import end_process
     from . import runner
@@ -155,7 +155,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     code = 1
     try:
         scene = load_scene(args.scene, {"time.t_end": args.t_end})
-        numerics = plan(scene, args.method, args.dt, distributed=True)
+        numerics = choose_numerics(scene, args.method, args.dt, distributed=True)
         n = scene.model.n_agents
         hosts = Hosts(ENSEMBLE, tuple(range(n)), False, True, parse_discovery_spec("localhost"),
                       None)

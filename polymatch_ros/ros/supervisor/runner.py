@@ -19,12 +19,14 @@ import sys
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import FrameType
+from typing import Any
 
 from ...console import Progress
 from ...core.errors import PolymatchError
 from .. import wire
+from ..config.configs import AgentConfig, MonitorConfig, ros_args
 from ..network.discovery import (
     DISCOVERY_VARIABLES,
     DiscoveryEnvironments,
@@ -96,9 +98,6 @@ class RunContext:
         "super_client": monitor and recorder) under the run's discovery; LOCALHOST: ``env``."""
         return self.env if self.envs is None else self.envs.for_role(role, self.env)
 
-    def checkpoint_args(self, name: str) -> list[str]:
-        path = self.checkpoint_path(name)
-        return ["-p", f"checkpoint:={path}"] if path else []
 
 
 def run(plan: RunPlan) -> int:
@@ -207,77 +206,45 @@ def _run_id(plan: RunPlan) -> int:
     return 1 + int.from_bytes(digest[:4], "big") % (2**31 - 2)
 
 
-def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
-    """(--ros-args of the monitor, of every agent process) without the node's own remaps."""
+def _configs(context: RunContext) -> tuple[MonitorConfig, AgentConfig]:
+    """(the monitor's configuration, every agent process's before its own agents)."""
     plan, timing, k = context.plan, context.plan.timing, context.agents_per_process
-    common = [
-        "-r",
-        f"__ns:={wire.namespace(plan.hosts.ensemble)}",
-        "-p",
-        f"scene:={os.path.abspath(plan.scene_path)}",
-        "-p",
-        f"t_end:={plan.scene.t_end!r}",
-    ]
-    agent = common + [
-        "-p",
-        f"mode:={plan.mode}",
-        "-p",
-        f"run_id:={context.run_id}",
-        "-p",
-        f"agents_per_process:={k}",
-        "-p",
-        f"agent_nodes:={context.packing.agent_nodes}",
+    scene, t_end = os.path.abspath(plan.scene_path), plan.scene.t_end
+    recorded = int(plan.outputs.record is not None)
+    agent = AgentConfig(
+        scene=scene, t_end=t_end, mode=plan.mode.value, run_id=context.run_id,
+        agents_per_process=k, agent_nodes=context.packing.agent_nodes,
         # the recorder (--record) reads every pose, the monitor every state of the exchange
-        "-p",
-        f"pose_subscribers:={int(plan.outputs.record is not None)}",
-        "-p",
-        f"exchange_subscribers:={int(plan.hosts.monitor)}",
-        "-p",
-        "autostart:=false",  # the runner drives the lifecycle (``lifecycle_driver``)
-        "-p",
-        f"integrator:={plan.numerics.name}",
-        "-p",
-        f"round_timeout:={timing.round_timeout!r}",
+        pose_subscribers=recorded, exchange_subscribers=int(plan.hosts.monitor),
+        autostart=False,  # the runner drives the lifecycle (``lifecycle_driver``)
+        integrator=plan.numerics.name, round_timeout=timing.round_timeout,
         # start-up of many processes on few cores takes a while: scale the patience
-        "-p",
-        f"discovery_timeout:={30.0 + 2.0 * len(partition(plan.n_agents, k))!r}",
-        "-p",
-        f"peer_timeout:={timing.peer_timeout!r}",
-        "-p",
-        f"peers_restart:={'true' if plan.on_failure.restart else 'false'}",
-        "-p",
+        discovery_timeout=30.0 + 2.0 * len(partition(plan.n_agents, k)),
+        peer_timeout=timing.peer_timeout, peers_restart=plan.on_failure.restart,
         # every agent keeps its latched final pose alive until the lead host has them all: a
         # writer that exits before the runner's reader matched it takes its sample along
-        f"hold_final:={REMOTE_FINAL_POSE_SECONDS!r}",
-    ]
-    agent += _stepping_args(plan)
+        hold_final=REMOTE_FINAL_POSE_SECONDS,
+    )
+    agent = replace(agent, **_stepping(plan))
     if plan.bridge is not None:
-        agent += bridge_run.agent_args(plan.bridge, plan.scene.model.order)
-    monitor = common + ["-p", f"mode:={plan.mode.monitored_as}"]
-    monitor += ["-p", f"peer_timeout:={timing.peer_timeout!r}", "-p", f"run_id:={context.run_id}"]
-    monitor += ["-p", f"agents_per_process:={k}"]  # how the agents' states come
-    # the recorder (--record) hears every report, the first too (``report_readers``)
-    monitor += ["-p", f"report_readers:={int(plan.outputs.record is not None)}"]
-    if plan.realtime:
-        monitor += ["-p", "rate:=10.0"]
+        agent = replace(agent, **bridge_run.agent_fields(plan.bridge, plan.scene.model.order))
+    monitor = MonitorConfig(
+        scene=scene, t_end=t_end, mode=plan.mode.monitored_as.value,
+        peer_timeout=timing.peer_timeout, run_id=context.run_id,
+        agents_per_process=k,  # how the agents' states come
+        # the recorder (--record) hears every report, the first too (``report_readers``)
+        report_readers=recorded,
+    )
     return monitor, agent
 
 
-def _stepping_args(plan: RunPlan) -> list[str]:
-    """The agents' --ros-args of how they step: on the wall clock (realtime), or by dt."""
+def _stepping(plan: RunPlan) -> dict[str, Any]:
+    """How the agents step: on the wall clock (realtime), or by dt."""
     timing = plan.timing
     if plan.realtime:
-        return [
-            "-p",
-            f"rate:={timing.rate!r}",
-            "-p",
-            f"time_scale:={timing.time_scale!r}",
-            "-p",
-            "start:=control",
-            "-p",
-            f"delay:={timing.delay!r}",
-        ]
-    return ["-p", f"dt:={plan.numerics.dt!r}"]
+        return dict(rate=timing.rate, time_scale=timing.time_scale, start="control",
+                    delay=timing.delay)
+    return dict(dt=plan.numerics.dt)
 
 
 def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
@@ -288,42 +255,23 @@ def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
     """
     plan = context.plan
     agent_env, monitor_env = context.role_env("client"), context.role_env("super_client")
-    mon_args, agent_args = _node_args(context)
+    monitor_config, agent_config = _configs(context)
+    namespace = wire.namespace(plan.hosts.ensemble)
     py = [sys.executable, "-m"]
     monitor = None
     if plan.hosts.monitor:
-        monitor = Child(
-            "monitor",
-            py
-            + ["polymatch_ros.ros.nodes.monitor", "--ros-args"]
-            + mon_args
-            + ["-r", "__node:=monitor"],
-            monitor_env,
-            log_dir=plan.outputs.logs,
-        )
+        argv = py + ["polymatch_ros.ros.nodes.monitor", "--ros-args"]
+        argv += ros_args(monitor_config, namespace=namespace, node="monitor")
+        monitor = Child("monitor", argv, monitor_env, log_dir=plan.outputs.logs)
     children = []
     for agents in partition(plan.hosts.agents, context.agents_per_process):
         name = _process_name(agents)
-        sel = (
-            ["-p", f"agent:={agents[0]}"]
-            if len(agents) == 1
-            else ["-p", "agents:=[" + ",".join(map(str, agents)) + "]"]
-        )
-        children.append(
-            Child(
-                name,
-                py
-                + ["polymatch_ros.ros.nodes.agent", "--ros-args"]
-                + agent_args
-                + sel
-                + context.checkpoint_args(name)
-                + (bridge_run.remaps(agents[0]) if plan.bridge is not None else [])
-                + ["-r", f"__node:={name}"],
-                agent_env,
-                agents,
-                plan.outputs.logs,
-            )
-        )
+        hosted = (dict(agent=agents[0]) if len(agents) == 1 else dict(agents=list(agents)))
+        config = replace(agent_config, checkpoint=context.checkpoint_path(name), **hosted)
+        remaps = bridge_run.remaps(agents[0]) if plan.bridge is not None else None
+        argv = py + ["polymatch_ros.ros.nodes.agent", "--ros-args"]
+        argv += ros_args(config, namespace=namespace, node=name, remaps=remaps)
+        children.append(Child(name, argv, agent_env, agents, plan.outputs.logs))
     return monitor, children
 
 
