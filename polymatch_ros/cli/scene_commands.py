@@ -11,8 +11,6 @@ from __future__ import annotations
 import argparse
 import os
 import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any, cast
 
 import numpy as np
@@ -20,62 +18,27 @@ import numpy as np
 from ..console import (
     SUMMARY_HEADER,
     Progress,
+    check_integrator_option,
     format_table,
+    load_scene_options,
     memory_size,
+    naming_dt_option,
     positive_float,
     summary_rows,
     tolerance_arg,
     writable_output,
 )
 from ..core.certificate import certify
-from ..core.errors import ParameterError, PolymatchError, SceneError, StabilityError
+from ..core.errors import PolymatchError
 from ..core.model import GroupState
-from ..core.scenes.checks import did_you_mean
 from ..core.scenes.limits import Limits
 from ..core.scenes.preflight import check_run
-from ..core.scenes.scene import INTEGRATOR_NAMES, Scene, load_scene, shipped_config_dirs
+from ..core.scenes.scene import Scene, load_scene, shipped_config_dirs
 from ..core.stepping.simulate import Trajectory, convergence_verdict
 
 
 def _limits(args: argparse.Namespace) -> Limits | None:
     return Limits(memory=args.memory_limit) if getattr(args, "memory_limit", None) else None
-
-
-def check_integrator_option(name: str | None) -> None:
-    """``--integrator NAME``: one of the known names, or an error that names the option."""
-    if name is not None and name not in INTEGRATOR_NAMES:
-        raise ParameterError(f"--integrator: unknown integrator {name!r}; known: "
-                             f"{', '.join(INTEGRATOR_NAMES)}"
-                             f"{did_you_mean(name, INTEGRATOR_NAMES)}")
-
-
-def load_scene_options(name: str, t_end: float | None, limits: Limits | None = None) -> Scene:
-    """The scene with ``--t-end`` applied; a refusal that only ``--t-end`` causes (a limit of
-    samples or steps it exceeds) names the option and its value."""
-    try:
-        return load_scene(name, {"time.t_end": t_end}, limits=limits)
-    except SceneError as exc:
-        if t_end is None:
-            raise
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                load_scene(name, limits=limits)
-        except PolymatchError:
-            raise exc from None                 # the scene's own problem, as the scene says
-        raise ParameterError(f"--t-end {t_end:g}: {exc}") from None
-
-
-@contextmanager
-def naming_dt_option(dt: float | None) -> Iterator[None]:
-    """A stability refusal of the step ``--dt`` gave names ``--dt``."""
-    try:
-        yield
-    except StabilityError as exc:
-        if dt is None or exc.dt != dt:
-            raise
-        raise StabilityError(f"--dt: {exc}", method=exc.method, dt=exc.dt, limit=exc.limit,
-                             cause=exc.cause) from None
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:

@@ -17,45 +17,18 @@ from __future__ import annotations
 
 import os
 import sys
-from dataclasses import replace
 from typing import Any
 
-import numpy as np
-
 from ...core.errors import ParameterError
-from ...core.robots.robot_commands import bridge_model, noise_floor
-from ...core.scenes.scene import Scene
 from .. import wire
 from ..config.configs import RobotConfig, ros_args
 from .children import Child
 from .plan import BridgeOptions, RunPlan
 
 
-def scene_noise_floor(scene: Scene, position_noise: float, angle_noise: float) -> float:
-    """``core.robots.robot_commands.noise_floor`` for the scene's largest vertex radius."""
-    radius = max(float(np.max(np.linalg.norm(g.reference, axis=1))) for g in scene.model.groups)
-    return float(noise_floor(position_noise, angle_noise, radius, scene.model.dim))
-
-
 def robot_log(directory: str, agent: int) -> str:
     """The pose log file of robot ``agent`` in ``directory``."""
     return os.path.join(os.path.abspath(directory), f"robot_{agent}.txt")
-
-
-def prepare(scene: Scene, bridge: BridgeOptions, only: str | None) -> Scene:
-    """The scene with the noise-floor tolerance; one-line errors for what bridge cannot run
-    (``only``: the --only option, which bridge mode does not take)."""
-    bridge_model(scene.model)  # d <= 3; second order damped
-    for name in ("lag", "position_noise", "angle_noise"):
-        value = getattr(bridge, name)
-        if not np.isfinite(value) or value < 0:
-            raise ParameterError(f"--{name.replace('_', '-')} must be >= 0, got {value:g}")
-    if only is not None:
-        raise ParameterError("--mode bridge runs every robot on this host (no --only)")
-    if bridge.robot_log is not None and not os.path.isdir(bridge.robot_log):
-        raise ParameterError(f"--robot-log: {bridge.robot_log} is not a directory")
-    floor = scene_noise_floor(scene, bridge.position_noise, bridge.angle_noise)
-    return replace(scene, tolerance=max(scene.tolerance, floor))
 
 
 #: the simulated robots' integration and pose rate (Hz)

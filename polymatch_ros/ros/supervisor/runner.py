@@ -38,18 +38,10 @@ from ..network.environment import describe_domain, ros_environment, run_domain_i
 from ..process.teardown import teardown_watchdog
 from ..wire.checkpoint import Checkpoint, CheckpointFile
 from . import bridge_run
-from .children import (  # noqa: F401 (API)
-    REMOTE_FINAL_POSE_SECONDS,
-    Child,
-    Supervision,
-    describe_agents,
-    parse_only,
-    partition,
-    stop_all,
-)
-from .packing import PackingChoice, choose_packing
+from .children import Child, describe_agents, partition, stop_all
 from .plan import RunPlan
 from .recorder_child import report_recording, start_recorder
+from .run_loop import REMOTE_FINAL_POSE_SECONDS, Supervision
 from .shm import SegmentLedger
 from .summary import RunOutcome, report, verdict
 from .watcher import Watcher
@@ -58,13 +50,12 @@ from .watcher import Watcher
 @dataclass(frozen=True)
 class RunContext:
     """A run as it starts on this host: its plan, the ROS environment and domain of its
-    processes, the discovery environments (None for LOCALHOST) and the packing chosen."""
+    processes and the discovery environments (None for LOCALHOST)."""
 
     plan: RunPlan
     env: dict[str, str]                   # every process's environment (LOCALHOST discovery)
     domain: int                           # ROS_DOMAIN_ID
     envs: DiscoveryEnvironments | None    # client/super-client/server overlays, --discovery
-    packing: PackingChoice                # -k as given, or chosen (``choose_packing``)
     shared_domain: bool                   # the user's domain, or discovery beyond loopback
     directory: str                        # the run's private temporary directory
     run_id: int                           # the stage messages' and checkpoints' run id
@@ -72,7 +63,7 @@ class RunContext:
 
     @property
     def agents_per_process(self) -> int:
-        return self.packing.agents_per_process
+        return self.plan.packing.agents_per_process
 
     @property
     def exchange_blocks(self) -> int | None:
@@ -115,12 +106,8 @@ def run(plan: RunPlan) -> int:
         env = ros_environment(domain)
         spec = plan.hosts.discovery
         envs = None if spec.kind == "localhost" else discovery_environments(spec, directory)
-        packing = choose_packing(
-            plan.packing, len(plan.hosts.agents), envs is None and _localhost(env)
-        )
         ledger = SegmentLedger()
-        context = RunContext(plan, env, domain, envs, packing, shared, directory,
-                             _run_id(plan), ledger)
+        context = RunContext(plan, env, domain, envs, shared, directory, _run_id(plan), ledger)
         _adopt(env if envs is None else envs.for_role("super_client", env))
         server = _start_server(context, directory)
         try:
@@ -145,7 +132,7 @@ def _node_names(context: RunContext, runner: str) -> list[str]:
     names += ["recorder"] if plan.outputs.record is not None else []
     for agents in partition(plan.hosts.agents, context.agents_per_process):
         names.append(_process_name(agents))
-        if len(agents) > 1 and context.packing.agent_nodes != "none":  # ``nodes.hosted``
+        if len(agents) > 1 and context.plan.packing.agent_nodes != "none":  # ``nodes.hosted``
             names += [f"agent_{a}" for a in agents]
     return names
 
@@ -153,10 +140,6 @@ def _node_names(context: RunContext, runner: str) -> list[str]:
 def _process_name(agents: Sequence[int]) -> str:
     """The node name of the process that hosts ``agents``."""
     return f"agent_{agents[0]}" if len(agents) == 1 else f"agents_{agents[0]}_{agents[-1]}"
-
-
-def _localhost(env: dict[str, str]) -> bool:
-    return env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
 
 
 def _adopt(env: dict[str, str]) -> None:
@@ -213,7 +196,7 @@ def _configs(context: RunContext) -> tuple[MonitorConfig, AgentConfig]:
     recorded = int(plan.outputs.record is not None)
     agent = AgentConfig(
         scene=scene, t_end=t_end, mode=plan.mode.value, run_id=context.run_id,
-        agents_per_process=k, agent_nodes=context.packing.agent_nodes,
+        agents_per_process=k, agent_nodes=context.plan.packing.agent_nodes,
         # the recorder (--record) reads every pose, the monitor every state of the exchange
         pose_subscribers=recorded, exchange_subscribers=int(plan.hosts.monitor),
         autostart=False,  # the runner drives the lifecycle (``lifecycle_driver``)
@@ -288,9 +271,9 @@ def _announce(context: RunContext) -> None:
     processes = len(partition(plan.hosts.agents, k))
     packed = (f"{processes} processes" if k == 1 else
               f"{processes} process{'es' if processes > 1 else ''} of up to {k}, agent nodes "
-              f"{context.packing.agent_nodes}")
+              f"{context.plan.packing.agent_nodes}")
     print(
-        f"polymatch run: {which} in {packed} ({context.packing.reason}), "
+        f"polymatch run: {which} in {packed} ({context.plan.packing.reason}), "
         f"{plan.mode}, integrator {plan.numerics.name}, dt {plan.numerics.dt:g}, "
         f"ROS_DOMAIN_ID={context.domain}, discovery {discovery}, "
         f"ensemble {wire.namespace(plan.hosts.ensemble)}",
