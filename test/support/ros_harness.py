@@ -170,11 +170,12 @@ NODE_CONFIGS = {"nodes.agent": AgentConfig, "nodes.monitor": MonitorConfig,
                 "nodes.robot": RobotConfig}
 
 
-def node_argv(module, scene, node=None, **params):
+def node_argv(module, scene, node=None, namespace=None, **params):
     """The command line of node ``module`` on ``scene`` with ``params`` (as given: a bad value
     reaches the node, which refuses it), rendered as the runner renders it (``ros_args``)."""
     config = NODE_CONFIGS[module](scene=scene_path(scene), **params)
-    return [PY, "-m", f"polymatch_ros.ros.{module}", "--ros-args"] + ros_args(config, node=node)
+    return [PY, "-m", f"polymatch_ros.ros.{module}", "--ros-args"] + ros_args(
+        config, namespace=namespace, node=node)
 
 
 # How many tests run ROS worlds at once, across the pytest workers.  Their processes are

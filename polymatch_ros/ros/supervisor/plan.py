@@ -222,6 +222,7 @@ def build_run_plan(options: RunOptions) -> RunPlan:
     if mode.drives_robots:
         bridge = _bridge_options(options)
         scene = bridge_scene(scene, bridge, options.only)  # the noise-floor tolerance
+    _check_node_options(options)  # what the agents would refuse, refused before they start
     timing = _timing(options, bridge is not None)
     dt = mode.tick_step(timing.rate, timing.time_scale) if mode.ticks else options.dt
     with naming_dt_option(options.dt if mode.exact else None):  # errors first
@@ -234,7 +235,6 @@ def build_run_plan(options: RunOptions) -> RunPlan:
         logs=_log_directory(options.logs) if options.logs else None,
     )
     hosts = _hosts(options, scene.model.n_agents)
-    _check_node_options(options)  # what the agents would refuse, refused before they start
     packing = choose_packing(
         PackingAsked(1 if bridge is not None else options.agents_per_process,  # a robot each
                      hosts.monitor, outputs.record is not None, mode, options.agent_nodes,
