@@ -1,4 +1,5 @@
-"""What people read: progress lines, tables, command-line number types (no numerics here)."""
+"""What people read: progress lines, tables, command-line number types, and the one-line errors
+that name the option behind them (no numerics here)."""
 
 from __future__ import annotations
 
