@@ -181,7 +181,7 @@ def measure(scene, scene_path, case, t_end, window, env, workdir):
     times below the floor; ``failure`` says why there are none (``error``: the runner's)."""
     import numpy as np
 
-    from polymatch_ros.ros.supervisor.bridge_run import scene_noise_floor
+    from polymatch_ros.ros.supervisor.plan import scene_noise_floor
 
     sigma, n = case[0], scene.model.n_agents
     logs_dir, agents, error = _bridge_run(env, scene_path, case, t_end, workdir)
@@ -195,7 +195,7 @@ def measure(scene, scene_path, case, t_end, window, env, workdir):
         return got
     end = min(start + t_end, min(data[-1, 0] for data in logs.values()))
     times = np.arange(start, end, 1.0 / 30.0)
-    level = max(got["floor"], scene.tolerance)  # the run's tolerance (bridge_run.prepare)
+    level = max(got["floor"], scene.tolerance)  # the run's tolerance (plan.bridge_scene)
     in_window = times >= end - window
     for kind in ("measured", "true"):
         values = diameters(scene.model, logs, times, measured=kind == "measured")

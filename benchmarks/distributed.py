@@ -88,21 +88,11 @@ def _bare(n, rounds, env, timeout, message="untyped"):
 
 
 def _agents(n, path, env, timeout, run_id):
+    from polymatch_ros.ros.config.configs import AgentConfig, ros_args
+
     argvs = [
-        [
-            sys.executable,
-            "-m",
-            "polymatch_ros.ros.nodes.agent",
-            "--ros-args",
-            "-p",
-            f"scene:={path}",
-            "-p",
-            f"agent:={i}",
-            "-p",
-            f"run_id:={run_id}",
-            "-r",
-            f"__node:=agent_{i}",
-        ]
+        [sys.executable, "-m", "polymatch_ros.ros.nodes.agent", "--ros-args"]
+        + ros_args(AgentConfig(scene=path, agent=i, run_id=run_id), node=f"agent_{i}")
         for i in range(n)
     ]
     return _parse_agents("\n".join(_parallel(argvs, env, timeout)).splitlines())

@@ -186,10 +186,10 @@ def _central_time(scene, t_end):
     """The centralised run's time to tolerance with the realtime step h = time scale / rate."""
     from dataclasses import replace
 
-    from polymatch_ros.core.stepping.simulate import plan, simulate
+    from polymatch_ros.core.stepping.simulate import choose_numerics, simulate
 
     dt = TIME_SCALE / RATE
-    method = plan(scene, None, dt, distributed=True).name
+    method = choose_numerics(scene, None, dt, distributed=True).name
     traj = simulate(replace(scene, t_end=t_end), method, dt, keep_states=False,
                     stop_when_converged=True)
     return traj.converged_at
@@ -375,10 +375,10 @@ def central_deviation(scene, path):
     from dataclasses import replace
 
     from polymatch_ros.core.metrics import vertices
-    from polymatch_ros.core.stepping.simulate import plan, simulate
+    from polymatch_ros.core.stepping.simulate import choose_numerics, simulate
 
     t, got = saved_vertices(scene, path)
-    method = plan(scene, None, None, distributed=True).name
+    method = choose_numerics(scene, None, None, distributed=True).name
     sc = replace(scene, t_end=t)
     traj = simulate(sc, method, sc.integrator.dt, samples=[t], metrics=False)
     model = traj.scene.model            # the representation the simulation ran in

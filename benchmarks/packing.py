@@ -66,10 +66,9 @@ def _rate(path, env, timeout, k, extra=()):
 
 def _default_k(n):
     """Agents per process of `polymatch run` in lockstep without -k (``choose_packing``)."""
-    from polymatch_ros.ros.supervisor.packing import choose_packing
-    from polymatch_ros.ros.supervisor.plan import Packing
+    from polymatch_ros.ros.supervisor.packing import PackingAsked, choose_packing
 
-    return choose_packing(Packing(None, monitor=True), n, localhost=True).agents_per_process
+    return choose_packing(PackingAsked(None, monitor=True), n, localhost=True).agents_per_process
 
 
 #: --agent-nodes levels measured; full only up to this size (its start-up grows with the

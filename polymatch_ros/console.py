@@ -1,4 +1,5 @@
-"""What people read: progress lines, tables, command-line number types (no numerics here)."""
+"""What people read: progress lines, tables, command-line number types, and the one-line errors
+that name the option behind them (no numerics here)."""
 
 from __future__ import annotations
 
@@ -6,11 +7,15 @@ import argparse
 import math
 import os
 import sys
-from collections.abc import Callable, Iterable, Sequence
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, TextIO
 
-from .core.errors import ParameterError
-from .core.scenes.limits import MIN_RELATIVE_TOLERANCE, parse_size
+from .core.errors import ParameterError, PolymatchError, SceneError, StabilityError
+from .core.scenes.checks import did_you_mean
+from .core.scenes.limits import MIN_RELATIVE_TOLERANCE, Limits, parse_size
+from .core.scenes.scene import INTEGRATOR_NAMES, Scene, load_scene
 
 if TYPE_CHECKING:
     from .core.metrics import EnsembleMetrics
@@ -131,3 +136,40 @@ def summary_rows(scene: Scene, metrics: EnsembleMetrics) -> list[list[Any]]:
 
 SUMMARY_HEADER = ["group", "N", "centroid diam", "rotation diam", "matching diam", "energy",
                   "orth. defect"]
+
+
+def check_integrator_option(name: str | None) -> None:
+    """``--integrator NAME``: one of the known names, or an error that names the option."""
+    if name is not None and name not in INTEGRATOR_NAMES:
+        raise ParameterError(f"--integrator: unknown integrator {name!r}; known: "
+                             f"{', '.join(INTEGRATOR_NAMES)}"
+                             f"{did_you_mean(name, INTEGRATOR_NAMES)}")
+
+
+def load_scene_options(name: str, t_end: float | None, limits: Limits | None = None) -> Scene:
+    """The scene with ``--t-end`` applied; a refusal that only ``--t-end`` causes (a limit of
+    samples or steps it exceeds) names the option and its value."""
+    try:
+        return load_scene(name, {"time.t_end": t_end}, limits=limits)
+    except SceneError as exc:
+        if t_end is None:
+            raise
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                load_scene(name, limits=limits)
+        except PolymatchError:
+            raise exc from None                 # the scene's own problem, as the scene says
+        raise ParameterError(f"--t-end {t_end:g}: {exc}") from None
+
+
+@contextmanager
+def naming_dt_option(dt: float | None) -> Iterator[None]:
+    """A stability refusal of the step ``--dt`` gave names ``--dt``."""
+    try:
+        yield
+    except StabilityError as exc:
+        if dt is None or exc.dt != dt:
+            raise
+        raise StabilityError(f"--dt: {exc}", method=exc.method, dt=exc.dt, limit=exc.limit,
+                             cause=exc.cause) from None

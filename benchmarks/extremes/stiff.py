@@ -94,8 +94,8 @@ def stiff_mass_auto(v):
         traj = _sim(sc, samples=[0.0], keep_states=False)
     except PolymatchError as exc:
         return Outcome(f"refused: '{exc}'", "\n" not in str(exc))
-    return Outcome(f"auto picks {traj.plan.name} and finishes ({traj.steps} steps)",
-                   traj.plan.name == "etd2" and abs(traj.final.t - 1.0) < 1e-12)
+    return Outcome(f"auto picks {traj.numerics.name} and finishes ({traj.steps} steps)",
+                   traj.numerics.name == "etd2" and abs(traj.final.t - 1.0) < 1e-12)
 
 
 # -- gamma = 0 (Prop. 2.2 i) --------------------------------------------------------------------

@@ -1,6 +1,6 @@
 """``polymatch agent|monitor|robot --help``: a node's parameters, from its parameter table.
 
-The table (``ros.config.params.AGENT``, ``MONITOR``; ``ros.nodes.robot.ROBOT``) is the one the
+The table (``ros.config.params.AGENT``, ``MONITOR``, ``ROBOT``) is the one the
 node declares its ROS parameters from, so the help cannot drift from what the node accepts.
 Printing it imports no rclpy: no ROS process, no DDS participant.
 """
@@ -21,7 +21,7 @@ NODE_TABLES: dict[str, tuple[str, str, str]] = {
               "one agent of a scene's ensemble (or several, packed in one process)"),
     "monitor": ("polymatch_ros.ros.config.params", "MONITOR",
                 "the ensemble's monitor: diameters, convergence, certificate, stop service"),
-    "robot": ("polymatch_ros.ros.nodes.robot", "ROBOT",
+    "robot": ("polymatch_ros.ros.config.params", "ROBOT",
               "a simulated robot that a bridged agent drives"),
 }
 

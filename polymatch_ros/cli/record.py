@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from ..console import format_table, positive_float, writable_output
@@ -32,20 +33,20 @@ def cmd_record(args: argparse.Namespace) -> int:
     for topic in args.topics:
         if not topic.startswith("/") or len(topic) < 2 or "," in topic:
             raise ParameterError(f"topic must be an absolute name (start with /), got {topic!r}")
-    output = os.path.abspath(writable_output(args.output, ".mcap"))
-    argv = ["polymatch record", "--ros-args", "-r", f"__node:=record_{os.getpid()}",
-            "-p", f"output:={output}", "-p", f"topics:=[{','.join(args.topics)}]"]
-    if args.duration is not None:
-        argv += ["-p", f"duration:={args.duration!r}"]
+    from ..ros.config.configs import RecorderConfig, ros_args
+
+    config = RecorderConfig(output=os.path.abspath(writable_output(args.output, ".mcap")),
+                            duration=args.duration or 0.0)
     if args.scene is not None:
         from ..core.scenes.scene import load_scene, resolve_scene_path
 
         scene_file = resolve_scene_path(args.scene)
         load_scene(scene_file)  # a bad scene is an error now, not an unreadable recording
-        argv += ["-p", f"scene_file:={os.path.abspath(scene_file)}"]
+        config = replace(config, scene_file=os.path.abspath(scene_file))
     from ..ros.nodes.recorder import main
 
-    return main(argv)
+    return main(["polymatch record", "--ros-args"] + ros_args(
+        config, node=f"record_{os.getpid()}", lists={"topics": args.topics}))
 
 
 def time_list(text: str) -> list[float]:

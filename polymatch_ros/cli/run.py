@@ -1,55 +1,67 @@
-"""`polymatch run SCENE`: its command line, and the ``RunPlan`` built and checked from it once.
+"""`polymatch run SCENE`: its command line, parsed into the options record (``RunOptions``) the
+run's plan is built from (``supervisor.plan.build_run_plan``).
 
-Every option is checked here, before any process starts (one line, exit 2): the scene and the
-integrator, --save writable, --agents-per-process, the ensemble's namespace, --only, the
-discovery spec, the ROS_DOMAIN_ID (the user's, which a run across hosts needs set; --isolated:
-a private one), and the bridge mode's robots.  The runner (``polymatch_ros.ros.supervisor.runner``)
-then takes the plan as it is.  ROS modules are imported when the command runs, not when the
-parser is built.
+Every option is checked there, before any process starts (one line, exit 2): the scene and the
+integrator, each option that sets a node's parameter against the parameter's row, --save
+writable, --agents-per-process, the ensemble's namespace, --only, the discovery spec, the
+ROS_DOMAIN_ID (the user's, which a run across hosts needs set; --isolated: a private one), and
+the bridge mode's robots.  The runner (``polymatch_ros.ros.supervisor.runner``) then takes the
+plan as it is.  ROS modules are imported when the command runs, not when the parser is built.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
+from dataclasses import fields
 
-from ..console import add_number_options, positive_float, writable_output
-from ..core.errors import ParameterError, PolymatchError
-from ..core.scenes.scene import Scene, resolve_scene_path
-from ..core.stepping.simulate import plan as numerical_plan
-from ..ros.config.params import CMD_TYPES
-from ..ros.supervisor.plan import BridgeOptions, Hosts, Outputs, RunPlan, Timing
-from ..ros.supervisor.recovery import POLICIES, RestartPolicy
-from ..ros.wire.modes import MODES, Mode
-from .scene_commands import check_integrator_option, load_scene_options, naming_dt_option
+from ..console import add_number_options, positive_float
+from ..ros.config.params import AGENT_NODES, CMD_TYPES
+from ..ros.supervisor.plan import RunOptions, build_run_plan, node_parameter
+from ..ros.supervisor.recovery import POLICIES
+from ..ros.wire.modes import MODES
+
+
+def _default(name: str) -> object:
+    """The default of option ``name`` (a ``RunOptions`` field): an option that sets a node's
+    parameter has the parameter's (``plan.NODE_OPTIONS``, ``plan.option_default``)."""
+    return next(f.default for f in fields(RunOptions) if f.name == name)
+
 
 # (flag, type, default, help) of the options that set how the agents step and wait
 RUN_OPTIONS = (
-    ("--rate", positive_float, 50.0, "realtime: steps per second (default 50)"),
-    ("--time-scale", positive_float, 1.0, "realtime: simulated seconds per wall-clock second"),
-    ("--peer-timeout", positive_float, 1.0, "realtime: drop silent peers after S s"),
-    ("--delay", float, 0.0, "realtime: injected transport delay (s), experiments"),
-    ("--round-timeout", positive_float, 10.0,
+    ("--rate", positive_float, _default("rate"),
+     f"realtime: steps per second (default {_default('rate'):g})"),
+    ("--time-scale", positive_float, _default("time_scale"),
+     "realtime: simulated seconds per wall-clock second"),
+    ("--peer-timeout", positive_float, _default("peer_timeout"),
+     "realtime: drop silent peers after S s"),
+    ("--delay", float, _default("delay"), "realtime: injected transport delay (s), experiments"),
+    ("--round-timeout", positive_float, _default("round_timeout"),
      "lockstep: after S s a round fails if a missing peer has left"),
 )
 
 # (flag, type, default, help) of the simulated robots and the agents' command limits
 ROBOT_OPTIONS = (
-    ("--lag", float, 0.1, "robots' actuator time constant (s, default 0.1)"),
-    ("--position-noise", float, 0.001, "std of the measured positions (m, default 0.001)"),
-    ("--angle-noise", float, 0.001, "std of the measured orientations (rad, default 0.001)"),
-    ("--max-linear-speed", positive_float, 1e6, "commanded speed limit (m/s)"),
-    ("--max-angular-speed", positive_float, 1e6, "commanded angular speed limit (rad/s)"),
-    ("--max-linear-accel", positive_float, 1e6,
+    ("--lag", float, _default("lag"),
+     f"robots' actuator time constant (s, default {_default('lag'):g})"),
+    ("--position-noise", float, _default("position_noise"),
+     f"std of the measured positions (m, default {_default('position_noise'):g})"),
+    ("--angle-noise", float, _default("angle_noise"),
+     f"std of the measured orientations (rad, default {_default('angle_noise'):g})"),
+    ("--max-linear-speed", positive_float, _default("max_linear_speed"),
+     "commanded speed limit (m/s)"),
+    ("--max-angular-speed", positive_float, _default("max_angular_speed"),
+     "commanded angular speed limit (rad/s)"),
+    ("--max-linear-accel", positive_float, _default("max_linear_accel"),
      "second order: commanded acceleration limit (m/s^2)"),
-    ("--max-angular-accel", positive_float, 1e6,
+    ("--max-angular-accel", positive_float, _default("max_angular_accel"),
      "second order: commanded angular acceleration limit (rad/s^2)"),
 )
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Build the plan (every check first), run it, end this process with the run's code."""
-    run_plan = build_plan(args)
+    run_plan = build_run_plan(run_options(args))
     from ..ros.process.teardown import end_process
     from ..ros.supervisor.runner import run
 
@@ -58,121 +70,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     return code
 
 
-def build_plan(args: argparse.Namespace) -> RunPlan:
-    """The checked ``RunPlan`` of the parsed ``polymatch run`` arguments; one-line errors."""
-    check_integrator_option(args.integrator)
-    scene_path = resolve_scene_path(args.scene)
-    scene = load_scene_options(scene_path, args.t_end)
-    bridge, mode = None, Mode(args.mode)
-    if mode.drives_robots:
-        from ..ros.supervisor import bridge_run
-
-        bridge = _bridge_options(args)
-        scene = bridge_run.prepare(scene, bridge, args.only)  # the noise-floor tolerance
-    timing = _timing(args, bridge is not None)
-    dt = mode.tick_step(timing.rate, timing.time_scale) if mode.ticks else args.dt
-    with naming_dt_option(args.dt if mode.exact else None):  # errors first
-        numerics = numerical_plan(scene, args.integrator, dt, distributed=True)
-    outputs = Outputs(
-        save=writable_output(args.save, ".npz") if args.save else None,  # before a long run
-        records=args.records,
-        quiet=args.quiet,
-        verbose=args.verbose,
-        compare=args.compare,
-        record=writable_output(args.record, ".mcap") if args.record else None,
-        logs=_log_directory(args.logs) if args.logs else None,
-    )
-    hosts = _hosts(args, scene, bridge is not None)
-    on_failure = RestartPolicy(restart=args.on_failure == "restart")
-    return RunPlan(scene_path, scene, numerics, mode, hosts, timing, outputs, bridge,
-                   on_failure)
-
-
-def _log_directory(path: str) -> str:
-    """``--logs DIR``, made if it is not there; one line if it cannot be written."""
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError as exc:
-        raise ParameterError(f"--logs: cannot make {path!r}: {exc.strerror}") from None
-    if not os.access(path, os.W_OK | os.X_OK):
-        raise ParameterError(f"--logs: {path!r} is not writable")
-    return os.path.abspath(path)
-
-
-def _timing(args: argparse.Namespace, bridge: bool) -> Timing:
-    return Timing(
-        timeout=args.timeout,
-        hold=args.hold,
-        rate=args.rate,
-        time_scale=1.0 if bridge else args.time_scale,  # robots move in real time
-        peer_timeout=args.peer_timeout,
-        delay=args.delay,
-        round_timeout=args.round_timeout,
-    )
-
-
-def _bridge_options(args: argparse.Namespace) -> BridgeOptions:
-    return BridgeOptions(
-        lag=args.lag,
-        position_noise=args.position_noise,
-        angle_noise=args.angle_noise,
-        max_linear_speed=args.max_linear_speed,
-        max_angular_speed=args.max_angular_speed,
-        max_linear_accel=args.max_linear_accel,
-        max_angular_accel=args.max_angular_accel,
-        robot_log=args.robot_log,
-        drive=args.drive,
-        cmd_vel_type=args.cmd_vel_type,
-    )
-
-
-def _hosts(args: argparse.Namespace, scene: Scene, bridge: bool) -> Hosts:
-    """This host's share of the ensemble: -k, the namespace, --only, discovery."""
-    from ..ros.network.discovery import parse_discovery_spec
-    from ..ros.supervisor.children import parse_only
-
-    requested = 1 if bridge else args.agents_per_process  # bridge: one robot, one agent
-    if requested is not None and requested < 1:
-        raise PolymatchError("--agents-per-process must be >= 1")
-    check_ensemble(args.ensemble)
-    n = scene.model.n_agents
-    agents = tuple(range(n)) if args.only is None else tuple(parse_only(args.only, n))
-    spec = parse_discovery_spec(args.discovery)
-    if len(agents) < n and not os.environ.get("ROS_DOMAIN_ID"):
-        raise ParameterError(
-            "--only: set the same ROS_DOMAIN_ID on every host (e.g. export ROS_DOMAIN_ID=17)"
-        )
-    if len(agents) < n and args.isolated:
-        raise ParameterError("--isolated: a run across hosts (--only) needs the same "
-                             "ROS_DOMAIN_ID on every host, not a private one")
-    if not args.isolated:
-        from ..ros.network.environment import user_domain_id
-
-        try:
-            user_domain_id()
-        except ValueError as exc:
-            raise ParameterError(str(exc)) from None
-    lead = args.monitor or len(agents) == n
-    if args.run_id is not None and not 1 <= args.run_id < 2**63:
-        raise ParameterError(f"--run-id: {args.run_id} is not in 1 .. 2^63 - 1")
-    return Hosts(args.ensemble, agents, args.monitor, lead, spec, requested, args.agent_nodes,
-                 args.isolated, args.run_id)
-
-
-def check_ensemble(name: str) -> None:
-    """PolymatchError (one line) unless ``/<name>`` is a valid ROS namespace."""
-    from rclpy.exceptions import InvalidNamespaceException
-    from rclpy.validate_namespace import validate_namespace
-
-    from ..ros import wire
-
-    try:
-        validate_namespace(wire.namespace(name))
-    except InvalidNamespaceException:
-        raise PolymatchError(
-            f"--ensemble: {name!r} is not a valid ROS namespace "
-            f"(letters, digits, underscores; not starting with a digit)"
-        ) from None
+def run_options(args: argparse.Namespace) -> RunOptions:
+    """The parsed ``polymatch run`` arguments as the options record the plan is built from."""
+    return RunOptions(**{f.name: getattr(args, f.name) for f in fields(RunOptions)})
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -181,7 +81,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "run", help="run the distributed ROS 2 ensemble of a scene (a node per agent)"
     )
     p.add_argument("scene", help="scene file or shipped scene name")
-    p.add_argument("--mode", choices=MODES, default=Mode.LOCKSTEP.value,
+    p.add_argument("--mode", choices=MODES, default=_default("mode"),
                    help="bridge: simulated robots driven by bridged agents")
     p.add_argument("--integrator", "-i", metavar="NAME",
                    help="fixed-step integrator (default: the scene's)")
@@ -200,8 +100,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--agent-nodes",
-        choices=("auto", "full", "lean", "none"),
-        default="auto",
+        choices=("auto", *AGENT_NODES),
+        default=_default("agent_nodes"),
         help="what a process hosting several agents gives each: a node with its pose topics, "
         "services and parameters (full), with its pose topics (lean), none; auto: full "
         "up to 32 agents a process, lean beyond (full nodes slow a large process's start-up)",
@@ -210,7 +110,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--hold",
         type=float,
-        default=1.0,
+        default=_default("hold"),
         help="stop once the diameter stayed under the tolerance this long (simulated s)",
     )
     _add_ensemble_options(p)
@@ -231,14 +131,15 @@ def _add_bridge_options(p: argparse.ArgumentParser) -> None:
     """The options of the simulated robots (bridge mode)."""
     g = p.add_argument_group("bridge mode (simulated robots)")
     add_number_options(g, ROBOT_OPTIONS)
-    g.add_argument("--cmd-vel-type", choices=CMD_TYPES, default=CMD_TYPES[0],
+    g.add_argument("--cmd-vel-type", choices=CMD_TYPES, default=_default("cmd_vel_type"),
                    help="first order: the robots' cmd_vel message, twist_stamped "
                    "(geometry_msgs/TwistStamped, as Jazzy's diff_drive_controller takes; default) "
                    "or twist (geometry_msgs/Twist)")
     g.add_argument("--robot-log", metavar="DIR",
                    help="each robot writes its true and measured pose at every step to "
                    "DIR/robot_<i>.txt")
-    g.add_argument("--drive", choices=("holonomic", "unicycle"), default="holonomic",
+    g.add_argument("--drive", choices=node_parameter("drive").choices,
+                   default=_default("drive"),
                    help="the simulated robots' base: unicycle = differential drive, driven by "
                    "the point ahead of its axle (first order, 2-D)")
 
@@ -255,12 +156,12 @@ def _add_host_options(p: argparse.ArgumentParser) -> None:
         "--run-id",
         type=int,
         metavar="ID",
-        help="the run id every message of the run carries (1 .. 2^63 - 1), for agents started "
+        help="the run id every message of the run carries (1 .. 2^31 - 1), for agents started "
         "by other programs or hosts (default: chosen, the same on every host of an --only run)",
     )
     p.add_argument(
         "--discovery",
-        default="localhost",
+        default=_default("discovery"),
         metavar="SPEC",
         help="DDS discovery: localhost (default), subnet, server[:HOST:PORT] (bare: a server "
         "of this run on 127.0.0.1), peers:ADDR,...",
@@ -272,18 +173,18 @@ def _add_ensemble_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--timeout",
         type=positive_float,
-        default=600.0,
+        default=_default("timeout"),
         help="wall-clock limit for the whole run (s)",
     )
     p.add_argument(
         "--on-failure",
         choices=POLICIES,
-        default="restart",
+        default=_default("on_failure"),
         help="a process that dies: restart it (default; lockstep resumes exactly, realtime "
         "rejoins; 3 deaths within 30 s end the run) or stop the run",
     )
     p.add_argument(
-        "--ensemble", default="polymatch", help="ensemble namespace (default polymatch)"
+        "--ensemble", default=_default("ensemble"), help="ensemble namespace (default polymatch)"
     )
     p.add_argument(
         "--isolated",

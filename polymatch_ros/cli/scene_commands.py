@@ -11,8 +11,6 @@ from __future__ import annotations
 import argparse
 import os
 import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -20,19 +18,21 @@ import numpy as np
 from ..console import (
     SUMMARY_HEADER,
     Progress,
+    check_integrator_option,
     format_table,
+    load_scene_options,
     memory_size,
+    naming_dt_option,
     positive_float,
     summary_rows,
     tolerance_arg,
     writable_output,
 )
 from ..core.certificate import certify
-from ..core.errors import ParameterError, PolymatchError, SceneError, StabilityError
-from ..core.scenes.checks import did_you_mean
+from ..core.errors import PolymatchError
 from ..core.scenes.limits import Limits
 from ..core.scenes.preflight import check_run
-from ..core.scenes.scene import INTEGRATOR_NAMES, Scene, load_scene, shipped_config_dirs
+from ..core.scenes.scene import Scene, load_scene, shipped_config_dirs
 from ..core.stepping.simulate import Trajectory, convergence_verdict
 
 
@@ -40,46 +40,9 @@ def _limits(args: argparse.Namespace) -> Limits | None:
     return Limits(memory=args.memory_limit) if getattr(args, "memory_limit", None) else None
 
 
-def check_integrator_option(name: str | None) -> None:
-    """``--integrator NAME``: one of the known names, or an error that names the option."""
-    if name is not None and name not in INTEGRATOR_NAMES:
-        raise ParameterError(f"--integrator: unknown integrator {name!r}; known: "
-                             f"{', '.join(INTEGRATOR_NAMES)}"
-                             f"{did_you_mean(name, INTEGRATOR_NAMES)}")
-
-
-def load_scene_options(name: str, t_end: float | None, limits: Limits | None = None) -> Scene:
-    """The scene with ``--t-end`` applied; a refusal that only ``--t-end`` causes (a limit of
-    samples or steps it exceeds) names the option and its value."""
-    try:
-        return load_scene(name, {"time.t_end": t_end}, limits=limits)
-    except SceneError as exc:
-        if t_end is None:
-            raise
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                load_scene(name, limits=limits)
-        except PolymatchError:
-            raise exc from None                 # the scene's own problem, as the scene says
-        raise ParameterError(f"--t-end {t_end:g}: {exc}") from None
-
-
-@contextmanager
-def naming_dt_option(dt: float | None) -> Iterator[None]:
-    """A stability refusal of the step ``--dt`` gave names ``--dt``."""
-    try:
-        yield
-    except StabilityError as exc:
-        if dt is None or exc.dt != dt:
-            raise
-        raise StabilityError(f"--dt: {exc}", method=exc.method, dt=exc.dt, limit=exc.limit,
-                             cause=exc.cause) from None
-
-
 def cmd_simulate(args: argparse.Namespace) -> int:
     """A centralised run of a scene: progress, summary table, verdict; npz and figure."""
-    from ..core.stepping.simulate import explain, plan, simulate
+    from ..core.stepping.simulate import choose_numerics, explain, simulate
     save = writable_output(args.save, ".npz") if args.save else None
     figure = writable_output(args.figure, ".png") if args.figure else None
     check_integrator_option(args.integrator)
@@ -95,7 +58,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         print("\n".join(explain(scene, args.integrator, args.dt, args.tolerance)))
         print(certificate_line(scene))
         with naming_dt_option(args.dt):      # a refusal: its error, exit 2
-            plan(scene, args.integrator, args.dt, args.tolerance)
+            choose_numerics(scene, args.integrator, args.dt, args.tolerance)
         return 0
     progress = Progress(scene.t_end, args.quiet)
     with naming_dt_option(args.dt):
@@ -103,7 +66,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                         keep_states=bool(save or figure), progress=progress,
                         stop_when_converged=args.stop_when_converged)
     progress.done()
-    p = traj.plan
+    p = traj.numerics
     print(f"scene {scene.name}: {scene.model.n_agents} agents, d = {scene.dim}, "
           f"integrator {p.name}"
           + (f" dt = {p.dt:g}" if p.dt else f" tolerance = {p.tolerance:g}"))
@@ -138,7 +101,7 @@ def save_npz(traj: Trajectory, path: str) -> None:
 def cmd_explain(args: argparse.Namespace) -> int:
     """Which model, representation and integrator a scene uses, and why; then, for a run
     that ``simulate`` would refuse, the refusal as an error (exit code 2)."""
-    from ..core.stepping.simulate import explain, plan
+    from ..core.stepping.simulate import choose_numerics, explain
     check_integrator_option(args.integrator)
     scene = load_scene(args.scene, limits=_limits(args))
     check_run(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed,
@@ -147,7 +110,8 @@ def cmd_explain(args: argparse.Namespace) -> int:
                             distributed=args.distributed)))
     print(certificate_line(scene))
     with naming_dt_option(args.dt):
-        plan(scene, args.integrator, args.dt, args.tolerance, distributed=args.distributed)
+        choose_numerics(scene, args.integrator, args.dt, args.tolerance,
+                        distributed=args.distributed)
     return 0
 
 
@@ -174,7 +138,7 @@ def cmd_integrators(args: argparse.Namespace) -> int:
 def cmd_scenes(args: argparse.Namespace) -> int:
     """The shipped scenes as a table; ``simulate`` says whether the scene runs as shipped or is
     kept to show a refusal (``polymatch simulate`` exits 2 with the reason)."""
-    from ..core.stepping.simulate import plan
+    from ..core.stepping.simulate import choose_numerics
     rows: list[list[object]] = []
     for d in shipped_config_dirs()[:1]:
         for sub in ("", "extremes"):
@@ -193,7 +157,7 @@ def cmd_scenes(args: argparse.Namespace) -> int:
                     rows.append([name, "?", "?", "?", "invalid", f"invalid: {exc}"])
                     continue
                 try:
-                    plan(s)
+                    choose_numerics(s)
                     runs = "runs"
                 except PolymatchError:
                     runs = "refused"             # kept to show how a refusal reads

@@ -120,8 +120,8 @@ def _measured_setting(result: TradeResult, scene: Scene) -> tuple[str, float]:
         pick = min(fixed, key=lambda r: r.error or 0.0) if fixed else None
     if pick is not None:
         return pick.setting.solver, pick.setting.value
-    from ..core.stepping.simulate import plan
-    p = plan(scene, distributed=True)
+    from ..core.stepping.simulate import choose_numerics
+    p = choose_numerics(scene, distributed=True)
     assert p.dt is not None  # a distributed plan takes fixed steps
     return p.name, p.dt
 

@@ -24,10 +24,11 @@ from .scenes.decompose import decompose
 from .scenes.scene import Scene, load_scene
 from .stepping.integrators import METHODS, check_stability, get_method, max_stable_dt
 from .stepping.simulate import (
+    NumericalPlan,
     Trajectory,
+    choose_numerics,
     drive,
     explain,
-    plan,
     recommend,
     simulate,
     with_representation,
@@ -44,9 +45,10 @@ def __getattr__(name):
 
 __all__ = [
     "AdaptiveLie", "Coupling", "EnsembleMetrics", "GroupMetrics", "GroupState", "METHODS",
+    "NumericalPlan", "choose_numerics",
     "Model", "ParameterError", "PolymatchError", "Scene", "SceneError", "ShapeError",
     "StabilityError", "State", "StepLimitError", "System", "Trajectory", "check_stability",
     "decompose", "drive", "ensemble_metrics", "explain", "get_method", "load_scene",
-    "lohe_torque", "max_stable_dt", "plan", "point_set_diameter", "recommend", "simulate",
+    "lohe_torque", "max_stable_dt", "point_set_diameter", "recommend", "simulate",
     "with_representation",
 ]

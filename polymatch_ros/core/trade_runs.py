@@ -1,10 +1,9 @@
 """One timed run of one setting of the trade (``core.trade``): its vertices at the sample times.
 
-Our integrators run the centralised simulator's own loop (``simulate.plan``, ``prepare``, the
-method's ``solver``), timed around the stepping alone, with the deadline checked after every
-step; scipy's DOP853 integrates the flattened model (``core.stepping.flat``) with the deadline
-checked at
-every evaluation.  A run past the deadline raises ``OverBudget``.
+Our integrators run the centralised simulator's own loop (``simulate.choose_numerics``,
+``prepare``, the method's ``solver``), timed around the stepping alone, with the deadline
+checked after every step; scipy's DOP853 integrates the flattened model (``core.stepping.flat``)
+with the deadline checked at every evaluation.  A run past the deadline raises ``OverBudget``.
 """
 
 from __future__ import annotations
@@ -19,7 +18,7 @@ from .errors import PolymatchError
 from .metrics import vertices
 from .model import State, System
 from .stepping.flat import FlatModel
-from .stepping.simulate import plan, prepare
+from .stepping.simulate import choose_numerics, prepare
 from .stepping.solver import RUNNING
 
 if TYPE_CHECKING:
@@ -64,7 +63,7 @@ class Runs:
 
     def ours(self, method: str, dt: float | None, tol: float | None) -> Output:
         """A registered method at dt, or the adaptive one at tol (StabilityError: refused)."""
-        p = plan(self.scene, method, dt, tol)
+        p = choose_numerics(self.scene, method, dt, tol)
         scene = prepare(self.scene, p, distributed=self.distributed and dt is not None)
         state = State(0.0, tuple(replace(gs) for gs in scene.initial.all_groups()))
         states = [state]

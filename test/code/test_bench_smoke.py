@@ -300,11 +300,11 @@ def test_lossy_deviation_of_the_centralised_run_itself_is_zero(tmp_path):
 
     from benchmarks.lossy import central_deviation
     from polymatch_ros.core.scenes.scene import load_scene, resolve_scene_path
-    from polymatch_ros.core.stepping.simulate import plan, simulate
+    from polymatch_ros.core.stepping.simulate import choose_numerics, simulate
     from polymatch_ros.ros.supervisor.summary import save_final
 
     scene = load_scene(resolve_scene_path("congruent_triangles"), {"time.t_end": 0.2})
-    method = plan(scene, None, None, distributed=True).name
+    method = choose_numerics(scene, None, None, distributed=True).name
     traj = simulate(replace(scene, t_end=0.2), method, scene.integrator.dt, samples=[0.2],
                     metrics=False)
     final, at = traj.final, dict.fromkeys(range(scene.model.n_agents), 0.2)

@@ -13,6 +13,7 @@ from ros_harness import REPO, scene_path
 from polymatch_ros.core.robots.robot_commands import ZERO, bridge_model
 from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.agents.bridge import BridgeAgent
+from polymatch_ros.ros.config.configs import AgentConfig, config_from
 from polymatch_ros.ros.config.params import AGENT, check
 from polymatch_ros.ros.config.runtime_params import validate
 
@@ -24,7 +25,8 @@ def test_second_order_hold_brakes_a_moving_robot_then_sends_one_zero():
     grp, sent = model.rotations, []
     agent = object.__new__(BridgeAgent)  # the hold logic alone, without a node
     agent.model, agent.grp, agent.zero_sent, agent.holding = model, grp, False, ""
-    agent.params = check(AGENT, {"scene": "x", "mode": "bridge", "pose_type": "odometry"})
+    agent.config = config_from(AgentConfig, check(AGENT, {"scene": "x", "mode": "bridge",
+                                                          "pose_type": "odometry"}))
     agent.cmd_pub = SimpleNamespace(publish=sent.append)
     agent._message = lambda command: command
     agent.log = SimpleNamespace(warning=lambda text: None)
@@ -87,8 +89,9 @@ def test_cmd_vel_twist_stamped_by_default_twist_on_request(cmd_type, message_typ
     from polymatch_ros.cli import build_parser
     from polymatch_ros.core.robots.robot_commands import Twist
     from polymatch_ros.ros.agents.bridge import command_class
-    from polymatch_ros.ros.nodes.robot import ROBOT, RobotNode
-    from polymatch_ros.ros.supervisor.bridge_run import agent_args
+    from polymatch_ros.ros.config.params import ROBOT
+    from polymatch_ros.ros.nodes.robot import RobotNode
+    from polymatch_ros.ros.supervisor.bridge_run import agent_fields
 
     defaults = {spec: next(p.default for p in params if p.name == "cmd_type")
                 for spec, params in (("agent", AGENT), ("robot", ROBOT))}
@@ -98,14 +101,16 @@ def test_cmd_vel_twist_stamped_by_default_twist_on_request(cmd_type, message_typ
     assert args.cmd_vel_type == cmd_type
     options = SimpleNamespace(max_linear_speed=1.0, max_angular_speed=1.0, cmd_vel_type=cmd_type,
                               drive="holonomic", lag=0.05)
-    assert f"cmd_type:={cmd_type}" in agent_args(options, order=1)
+    fields = agent_fields(options, order=1)
+    assert fields["cmd_type"] == cmd_type
     # the safety filter's latency: the robots' lag plus one robot step (30 Hz)
-    assert f"safety_latency:={0.05 + 1 / 30.0!r}" in agent_args(options, order=1)
+    assert fields["safety_latency"] == 0.05 + 1 / 30.0
 
     sent = Twist(np.array([0.25, -0.5, 0.0]), np.array([0.0, 0.0, 0.75]), False)
     clock = SimpleNamespace(now=lambda: SimpleNamespace(to_msg=lambda: Time(sec=7)))
     bridge = SimpleNamespace(  # what BridgeAgent._message reads of its node
-        cmd_class=command_class(1, cmd_type), params={"frame_id": "map", "command_frame": "world"},
+        cmd_class=command_class(1, cmd_type),
+        config=SimpleNamespace(frame_id="map", command_frame="world"),
         node=SimpleNamespace(get_clock=lambda: clock))
     msg = BridgeAgent._message(bridge, sent)
     cls = type(msg)

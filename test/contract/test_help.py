@@ -9,8 +9,7 @@ import sys
 import pytest
 
 from polymatch_ros.cli import build_parser
-from polymatch_ros.ros.config.params import AGENT, MONITOR
-from polymatch_ros.ros.nodes.robot import ROBOT
+from polymatch_ros.ros.config.params import AGENT, MONITOR, ROBOT
 
 
 def _subparsers(parser):

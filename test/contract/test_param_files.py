@@ -9,15 +9,15 @@ import pytest
 import yaml
 from ros_harness import CONFIG
 
-from polymatch_ros.ros.config.params import (
-    AGENT,
-    MONITOR,
-    check,
-    check_value,
-    resolve_agent,
-    resolve_monitor,
+from polymatch_ros.ros.config.configs import (
+    AgentConfig,
+    MonitorConfig,
+    RobotConfig,
+    config_from,
+    config_values,
 )
-from polymatch_ros.ros.nodes.robot import ROBOT, resolve_robot
+from polymatch_ros.ros.config.params import AGENT, MONITOR, ROBOT, check, check_value
+from polymatch_ros.ros.config.resolve import resolve_agent, resolve_monitor, resolve_robot
 
 PARAMS = pathlib.Path(CONFIG) / "params"
 FILES = {"agent.yaml": AGENT, "bridge_agent.yaml": AGENT, "monitor.yaml": MONITOR,
@@ -26,8 +26,11 @@ FILES = {"agent.yaml": AGENT, "bridge_agent.yaml": AGENT, "monitor.yaml": MONITO
 ROS_TYPES = {bool: (bool,), int: (int,), float: (float,), str: (str,)}
 # what a node takes from its scene unless given: never in a file for every scene
 FROM_THE_SCENE = {"integrator", "dt", "t_end", "kappa", "gamma", "mass"}
-RESOLVE = {"agent.yaml": resolve_agent, "bridge_agent.yaml": resolve_agent,
-           "monitor.yaml": resolve_monitor, "robot.yaml": resolve_robot}
+RESOLVE = {"agent.yaml": lambda c: resolve_agent(c).config,
+           "bridge_agent.yaml": lambda c: resolve_agent(c).config,
+           "monitor.yaml": lambda c: resolve_monitor(c)[0], "robot.yaml": resolve_robot}
+CONFIG_OF = {"agent.yaml": AgentConfig, "bridge_agent.yaml": AgentConfig,
+             "monitor.yaml": MonitorConfig, "robot.yaml": RobotConfig}
 
 
 def _values(name):
@@ -57,7 +60,7 @@ def test_a_param_file_resolves_on_a_shipped_scene_and_its_values_are_in_use(name
     """What the node uses, from its file and the per-node scene and agent: every value of the
     file, and the scene's for the rest."""
     given = dict(_values(name), scene="congruent_triangles")
-    used = RESOLVE[name](check(FILES[name], given))
+    used = config_values(RESOLVE[name](config_from(CONFIG_OF[name], check(FILES[name], given))))
     assert {k: used[k] for k in _values(name)} == _values(name)
     if name != "robot.yaml":
         assert used["t_end"] == 30.0  # config/congruent_triangles.yaml: time.t_end

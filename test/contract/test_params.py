@@ -15,15 +15,15 @@ from ros_harness import CONFIG, needs_ros, scene_path
 
 from polymatch_ros.core.errors import ParameterError, PolymatchError
 from polymatch_ros.core.scenes.scene import load_scene
-from polymatch_ros.ros.config.params import (
-    AGENT,
-    MONITOR,
-    check,
-    check_gains,
-    resolve_agent,
-    resolve_monitor,
+from polymatch_ros.ros.config.configs import (
+    AgentConfig,
+    MonitorConfig,
+    RobotConfig,
+    config_from,
+    config_values,
 )
-from polymatch_ros.ros.nodes.robot import ROBOT, resolve_robot
+from polymatch_ros.ros.config.params import AGENT, MONITOR, ROBOT, check, check_gains
+from polymatch_ros.ros.config.resolve import resolve_agent, resolve_monitor, resolve_robot
 
 AGENT_NAMES = [
     "scene", "agent", "agents", "agents_per_process", "agent_nodes", "mode", "autostart",
@@ -233,8 +233,12 @@ SCENE_FILES = {
 }
 
 
+def _agent_config(**given):
+    return resolve_agent(config_from(AgentConfig, check(AGENT, given))).config
+
+
 def _agent_values(**given):
-    return resolve_agent(check(AGENT, given))
+    return config_values(_agent_config(**given))
 
 
 def _declared(values):
@@ -331,14 +335,18 @@ def test_a_parameter_the_mode_or_model_cannot_take_is_one_line(scene, given, wor
 
 
 def test_monitor_and_robot_parameters_are_the_values_they_use():
-    monitor = resolve_monitor(check(MONITOR, {"scene": "congruent_triangles"}))
-    assert (monitor["scene"], monitor["t_end"]) == (scene_path("congruent_triangles"), 30.0)
-    monitor = resolve_monitor(check(MONITOR, {"scene": "congruent_triangles", "t_end": 4.0}))
-    assert monitor["t_end"] == 4.0
-    robot = resolve_robot(check(ROBOT, {"scene": "congruent_triangles", "agent": 3}))
-    assert (robot["seed"], robot["pose_log"]) == (1003, None)  # no file: not declared
-    robot = resolve_robot(check(ROBOT, {"scene": "congruent_triangles", "agent": 3, "seed": 0}))
-    assert robot["seed"] == 0  # a seed like any other
+    def monitor(**given):
+        return resolve_monitor(config_from(MonitorConfig, check(MONITOR, given)))[0]
+
+    def robot(**given):
+        return resolve_robot(config_from(RobotConfig, check(ROBOT, given)))
+
+    got = monitor(scene="congruent_triangles")
+    assert (got.scene, got.t_end) == (scene_path("congruent_triangles"), 30.0)
+    assert monitor(scene="congruent_triangles", t_end=4.0).t_end == 4.0
+    got = robot(scene="congruent_triangles", agent=3)
+    assert (got.seed, got.pose_log) == (1003, None)  # no file: not declared
+    assert robot(scene="congruent_triangles", agent=3, seed=0).seed == 0  # a seed like any other
 
 
 def test_the_gains_are_checked_against_the_model_of_eqs_a1_a2():
@@ -365,7 +373,7 @@ def test_a_runtime_gain_is_checked_against_the_model_then_applied_at_the_next_ti
     scene = load_scene(scene_path("congruent_triangles"))
     agent.node = SimpleNamespace(has_parameter=lambda name: True)
     agent.scene, agent.model, agent.state = scene, scene.model, SimpleNamespace(t=1.0)
-    agent.params, agent.pending = _agent_values(scene="congruent_triangles", mode="realtime"), {}
+    agent.config, agent.pending = _agent_config(scene="congruent_triangles", mode="realtime"), {}
     agent.log = SimpleNamespace(warning=lambda text: None, info=lambda text: None)
     agent.rebuild_system = lambda: None
     refused = agent._on_set([SimpleNamespace(name="gamma", value=0.0)])
@@ -373,4 +381,4 @@ def test_a_runtime_gain_is_checked_against_the_model_then_applied_at_the_next_ti
     assert agent.pending == {} and not agent.apply_runtime()
     assert agent._on_set([SimpleNamespace(name="gamma", value=0.5)]).successful
     assert agent.model.gamma == 1.0 and agent.apply_runtime()
-    assert (agent.model.gamma, agent.params["gamma"], agent.model.kappa) == (0.5, 0.5, 1.0)
+    assert (agent.model.gamma, agent.config.gamma, agent.model.kappa) == (0.5, 0.5, 1.0)

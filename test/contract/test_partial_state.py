@@ -14,12 +14,13 @@ def test_a_partial_state_from_a_projection_methods_checkpoint_is_in_the_scenes_r
     in the scene's representation (an agent without a checkpoint: its initial one)."""
     from polymatch_ros.core.model import GroupState, State
     from polymatch_ros.core.scenes.scene import load_scene
-    from polymatch_ros.core.stepping.simulate import plan, prepare
+    from polymatch_ros.core.stepping.simulate import choose_numerics, prepare
     from polymatch_ros.ros.supervisor.partial import last_state
     from polymatch_ros.ros.wire.checkpoint import Checkpoint
 
     scene = load_scene(scene_path(SCENE))
-    computed = prepare(scene, plan(scene, "rk4_proj", 0.05, distributed=True), distributed=True)
+    numerics = choose_numerics(scene, "rk4_proj", 0.05, distributed=True)
+    computed = prepare(scene, numerics, distributed=True)
     grp = computed.model.rotations
     assert (scene.model.rotations.name, grp.name) == ("angle", "matrix")
     angles = np.array([0.25, -2.75])

@@ -16,13 +16,13 @@ from polymatch_ros.ros.supervisor.packing import (
     LOCALHOST_PARTICIPANTS,
     LOCKSTEP_AGENTS_PER_PROCESS,
     REALTIME_AGENTS_PER_PROCESS,
+    PackingAsked,
     choose_packing,
 )
-from polymatch_ros.ros.supervisor.plan import Packing
 
 
 def _k(n, k=None, monitor=True, mode="realtime", localhost=True):
-    packing = Packing(requested=k, monitor=monitor, mode=mode)
+    packing = PackingAsked(requested=k, monitor=monitor, mode=mode)
     return choose_packing(packing, n, localhost=localhost).agents_per_process
 
 
@@ -31,13 +31,13 @@ def _k(n, k=None, monitor=True, mode="realtime", localhost=True):
 def test_realtime_packs_by_the_measured_rule(n, processes):
     k = _k(n)
     assert k == min(n, REALTIME_AGENTS_PER_PROCESS) and -(-n // k) == processes
-    assert "docs/bench/realtime_scale.md" in choose_packing(Packing(None, True, mode="realtime"),
-                                                           n, True).reason
+    asked = PackingAsked(None, True, mode="realtime")
+    assert "docs/bench/realtime_scale.md" in choose_packing(asked, n, True).reason
 
 
 def test_realtime_on_a_host_of_some_agents_keeps_a_process_per_agent():
     """--only: the other agents may speak only the public per-agent state topics."""
-    packing = Packing(requested=None, monitor=True, mode="realtime", whole=False)
+    packing = PackingAsked(requested=None, monitor=True, mode="realtime", whole=False)
     choice = choose_packing(packing, 8, True)
     assert choice.agents_per_process == 1 and "--only" in choice.reason
 
@@ -74,9 +74,9 @@ def test_lockstep_stays_within_the_limit_beyond_the_measured_sizes():
 
 
 def test_the_choice_says_why():
-    packing = Packing(requested=None, monitor=True, mode="lockstep")
+    packing = PackingAsked(requested=None, monitor=True, mode="lockstep")
     assert "docs/bench/packing.md" in choose_packing(packing, 64, True).reason
-    assert choose_packing(Packing(4, True), 64, True).reason == "-k 4 as asked"
+    assert choose_packing(PackingAsked(4, True), 64, True).reason == "-k 4 as asked"
 
 
 def test_explicit_k_beyond_the_limit_is_a_one_line_error():
@@ -96,5 +96,5 @@ def test_no_limit_without_localhost_discovery():
     (8, 1, "full", "none"),  # a process of one agent is that agent's node
 ])
 def test_every_agent_gets_a_node_full_while_a_process_is_small_lean_beyond(n, k, asked, level):
-    packing = Packing(requested=k, monitor=True, mode="lockstep", agent_nodes=asked)
+    packing = PackingAsked(requested=k, monitor=True, mode="lockstep", agent_nodes=asked)
     assert choose_packing(packing, n, True).agent_nodes == level

@@ -177,12 +177,13 @@ def test_robot_applies_a_command_one_timeout_then_brakes_within_the_step():
     follows the command for 0.05 s and then decays to zero with the lag, in closed form
     u (1 - e^{-0.05/lag}) e^{-0.15/lag}; the position moves by each part's velocity times its
     duration (the robot's explicit update), written out here."""
+    from polymatch_ros.ros.config.configs import RobotConfig
     from polymatch_ros.ros.nodes.robot import RobotNode
 
     lag, u = 0.1, np.array([0.8, -0.4, 0.0])
     node = RobotNode.__new__(RobotNode)
     node.robot = SimulatedRobot([0.0, 0.0], np.eye(2), True, lag, math.inf, math.inf)
-    node.params = {"cmd_timeout": 0.05, "command_frame": "world", "drive": "holonomic"}
+    node.config = RobotConfig(cmd_timeout=0.05, command_frame="world", drive="holonomic")
     node.second_order = False
     node.command = (u, np.zeros(3), 10.0)         # heard at 10.0 s (monotonic)
     node._advance(0.2, 10.2)

@@ -259,7 +259,7 @@ def test_extreme_stiff_mass_m_1e_8_etd2_runs_matches_first_order_limit_A_2():
 def test_extreme_stiff_mass_m_1e_8_auto_picks_etd2_prop_2_1():
     scene = load_scene(EXTREMES / "stiff_mass.yaml")
     traj = simulate(scene, samples=[0.0])
-    assert traj.plan.name == "etd2"
+    assert traj.numerics.name == "etd2"
     assert traj.converged and traj.diameters[-1] < 1e-6
 
 
@@ -268,7 +268,7 @@ def test_extreme_stiff_mass_m_1e_8_auto_with_tolerance_finishes_or_refuses_promp
     integrator = replace(scene.integrator, method="auto", tolerance=1e-6, max_steps=300)
     scene = replace(scene, integrator=integrator)
     traj = simulate(scene, samples=[0.0], keep_states=False)
-    assert traj.plan.name == "etd2"
+    assert traj.numerics.name == "etd2"
     assert traj.final.t == pytest.approx(1.0)
 
 
@@ -813,7 +813,7 @@ def test_extreme_dt_larger_than_t_end_warns_takes_one_step_section_5(order, meth
     with pytest.warns(UserWarning,
                       match=r"dt = 5 is larger than t_end = 0.3: taking one step of t_end"):
         traj = simulate(scene, method, 5.0)
-    assert traj.steps == 1 and traj.plan.dt == 0.3
+    assert traj.steps == 1 and traj.numerics.dt == 0.3
     assert traj.final.t == pytest.approx(0.3) and all_finite(traj)
     with warnings.catch_warnings():
         # dt = t_end: no warning, same state

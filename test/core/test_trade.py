@@ -103,7 +103,7 @@ def test_recommended_setting_reaches_the_target_error_against_scipy_on_paper_a2(
     times = np.linspace(0.0, scene.t_end, 6)                # every 0.2: on every step
     assert data["samples"] == len(times)                    # the table's errors are taken there
     traj = simulate(scene, samples=times, metrics=False)
-    assert traj.plan.name == choice["solver"]
+    assert traj.numerics.name == choice["solver"]
     assert np.allclose(traj.times, times, atol=1e-12)
     diff = vertices_of(traj.scene, traj.states) - oracle_vertices(scene, times)
     error = float(np.sqrt(np.max(np.sum(diff ** 2, axis=-1))))

@@ -14,6 +14,7 @@ from ros_harness import PY, REPO, needs_ros, scene_path
 from scipy.spatial.transform import Rotation
 
 from polymatch_ros.core.scenes.scene import load_scene
+from polymatch_ros.ros.config.configs import AgentConfig, RobotConfig, ros_args
 
 PARAMS_FILE = os.path.join(REPO, "config", "params", "bridge_agent.yaml")
 
@@ -120,10 +121,9 @@ def _wait(predicate, timeout):
 
 
 def _robot(ros, scene, agent, **params):
-    argv = [PY, "-m", "polymatch_ros.ros.nodes.robot", "--ros-args",
-            "-r", f"__ns:=/polymatch/robot_{agent}", "-r", "__node:=robot",
-            "-p", f"scene:={scene}", "-p", f"agent:={agent}"]
-    argv += [a for k, v in params.items() for a in ("-p", f"{k}:={v!r}")]
+    argv = [PY, "-m", "polymatch_ros.ros.nodes.robot", "--ros-args"] + ros_args(
+        RobotConfig(scene=scene, agent=agent, **params), namespace=f"/polymatch/robot_{agent}",
+        node="robot")
     return ros.start(argv, timeout=100, name=f"robot {agent}")
 
 
@@ -135,10 +135,10 @@ def test_runtime_gain_pause_service_killed_and_restarted_robot(ros, tmp_path):
     robots = [_robot(ros, scene, a, position_noise=0.0005) for a in range(2)]
     agents = []
     for a in range(2):
-        argv = [PY, "-m", "polymatch_ros.ros.nodes.agent", "--ros-args",
-                "--params-file", PARAMS_FILE, "-p", f"scene:={scene}", "-p", f"agent:={a}",
-                "-p", "start:=now", "-r", f"measured_pose:=robot_{a}/measured_pose",
-                "-r", f"cmd_vel:=robot_{a}/cmd_vel", "-r", f"__node:=agent_{a}"]
+        argv = [PY, "-m", "polymatch_ros.ros.nodes.agent", "--ros-args"] + ros_args(
+            AgentConfig(scene=scene, agent=a, start="now"), node=f"agent_{a}",
+            remaps={t: f"robot_{a}/{t}" for t in ("measured_pose", "cmd_vel")},
+            params_file=PARAMS_FILE)
         agents.append(ros.start(argv, timeout=100, name=f"agent {a}"))
     echo = ros.start([PY, "-m", "polymatch_ros.cli", "echo", "/polymatch/robot_0/cmd_vel",
                       "--timeout", "80"], timeout=90)

@@ -21,7 +21,7 @@ from shm_watch import ShmWatch
 from benchmarks.hosts.runs import argv_of, children, descendants, node_name, scene_with
 from polymatch_ros.core.saved import load_saved
 from polymatch_ros.core.scenes.scene import load_scene
-from polymatch_ros.core.stepping.simulate import plan, simulate
+from polymatch_ros.core.stepping.simulate import choose_numerics, simulate
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros
@@ -112,7 +112,7 @@ def _zombie(pid):
 def _lockstep_scene(dt, t_end):
     """SCENE at the run's step and end time, and the method its distributed run uses."""
     scene = load_scene(scene_path(SCENE), {"integrator.dt": dt, "time.t_end": t_end})
-    return scene, plan(scene, None, None, distributed=True).name
+    return scene, choose_numerics(scene, None, None, distributed=True).name
 
 
 def _assert_saved_equal_centralised(save, dt, t_end=None):

@@ -15,7 +15,7 @@ from ros_harness import cli_argv, needs_ros, placed_vertices
 from scipy.spatial.distance import pdist
 
 from polymatch_ros.core import load_scene
-from polymatch_ros.core.stepping.simulate import plan
+from polymatch_ros.core.stepping.simulate import choose_numerics
 
 pytestmark = needs_ros
 
@@ -47,7 +47,7 @@ def test_monitor_reports_exact_steps_from_states_sent_at_its_pace(ros, tmp_path)
     reports = {float(t): float(d) for t, d in REPORT.findall(ros.output(diag))}
     assert len(reports) >= 2, ros.output(diag)[-2000:]
     scene = load_scene(str(path))
-    method = plan(scene, None, None, distributed=True).name
+    method = choose_numerics(scene, None, None, distributed=True).name
     for t, diameter in sorted(reports.items()):
         k = round(t / DT)  # a step of the grid t = k dt ...
         assert 0 <= k <= STEPS and abs(t - k * DT) < 1e-9, t

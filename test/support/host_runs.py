@@ -11,7 +11,7 @@ from proc_group import REPO
 from benchmarks.hosts import runs as netns_run
 from benchmarks.hosts.runs import host_argv, lockstep_split
 from polymatch_ros.core.scenes.scene import load_scene
-from polymatch_ros.core.stepping.simulate import plan
+from polymatch_ros.core.stepping.simulate import choose_numerics
 from polymatch_ros.ros.wire import echoed_run_records
 
 DEVIATION = re.compile(r"max vertex deviation (\S+)")
@@ -57,7 +57,7 @@ def check_lockstep_on_hosts(scene_file, texts, out, n):
     scene = load_scene(scene_file)
     t, got = received_vertices(scene, out)
     assert t > 0.0
-    want = central_vertices(scene, plan(scene, None, None, distributed=True).name, t)
+    want = central_vertices(scene, choose_numerics(scene, None, None, distributed=True).name, t)
     dev = max(float(abs(a - b).max()) for a, b in zip(got, want))
     assert dev <= 1e-9, f"max vertex deviation {dev:.3e}"
 

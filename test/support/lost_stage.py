@@ -24,7 +24,13 @@ from rclpy.node import Node
 
 from polymatch_ros.core.model import System
 from polymatch_ros.core.scenes.scene import load_scene
-from polymatch_ros.core.stepping.simulate import drive, plan, prepare, simulate, step_grid
+from polymatch_ros.core.stepping.simulate import (
+    choose_numerics,
+    drive,
+    prepare,
+    simulate,
+    step_grid,
+)
 from polymatch_ros.ros import wire
 from polymatch_ros.ros.agents import lockstep
 from polymatch_ros.ros.agents.agent_base import local_state
@@ -62,7 +68,7 @@ class Side:
             self.node, self.layout, run_id, wire.ROTATION_TOL,
             DropCounter(self.node.get_logger()), scene.t_end,
             patience or lockstep.Patience(STALL))
-        self.scene, self.plan, self.error = scene, the_plan, None
+        self.scene, self.numerics, self.error = scene, the_plan, None
 
     def run(self, steps):
         prev = 0.0
@@ -71,7 +77,7 @@ class Side:
                 def answer(request, stage, k=k):
                     return self.exchange.round(k, stage, request, False, 2.0)[0]
 
-                self.state = drive(self.plan.method, self.system, self.state, t_next - prev,
+                self.state = drive(self.numerics.method, self.system, self.state, t_next - prev,
                                    answer)
                 self.state.t = prev = t_next
         except Exception as exc:  # reported, not raised: the other side must end too
@@ -92,7 +98,7 @@ def main(argv):
         STALL = NO_RESEND_STALL
     rclpy.init()
     scene = load_scene(scene_path)
-    the_plan = plan(scene, "rkmk4", DT, distributed=True)
+    the_plan = choose_numerics(scene, "rkmk4", DT, distributed=True)
     scene = prepare(scene, the_plan, distributed=True)
     sides = [Side(scene, the_plan, list(range(4)), 7), Side(scene, the_plan, list(range(4, 8)), 7)]
     lost = swallow_first(sides[0].exchange.pubs[LOST[0]], *LOST)

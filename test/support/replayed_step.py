@@ -22,7 +22,7 @@ import rclpy
 from lost_stage import DT, Side, report
 
 from polymatch_ros.core.scenes.scene import load_scene
-from polymatch_ros.core.stepping.simulate import drive, plan, prepare, step_grid
+from polymatch_ros.core.stepping.simulate import choose_numerics, drive, prepare, step_grid
 from polymatch_ros.ros.agents import lockstep
 
 STALL = 8.0  # s: a replay not answered stalls this long, then fails
@@ -46,7 +46,8 @@ def run_steps(side, first, last, kept=None):
             def answer(request, stage, k=k):
                 return side.exchange.round(k, stage, request, False, 2.0)[0]
 
-            side.state = drive(side.plan.method, side.system, side.state, grid[k] - prev, answer)
+            side.state = drive(side.numerics.method, side.system, side.state, grid[k] - prev,
+                               answer)
             side.state.t = prev = float(grid[k])
     except Exception as exc:  # reported, not raised: the holder must end too
         side.error = f"{type(exc).__name__}: {exc}"
@@ -68,7 +69,7 @@ def main(argv):
         STALL = NO_ANSWER_STALL
     rclpy.init()
     scene = load_scene(scene_path)
-    the_plan = plan(scene, "rkmk4", DT, distributed=True)
+    the_plan = choose_numerics(scene, "rkmk4", DT, distributed=True)
     scene = prepare(scene, the_plan, distributed=True)
     sides = [Side(scene, the_plan, list(range(4)), 7, patience(the_plan)),
              Side(scene, the_plan, list(range(4, 8)), 7, patience(the_plan))]

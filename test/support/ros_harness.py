@@ -23,6 +23,8 @@ import slot_use
 from proc_group import children as _children
 from shm_watch import ShmWatch
 
+from polymatch_ros.ros.config.configs import AgentConfig, MonitorConfig, RobotConfig, ros_args
+
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CONFIG = os.path.join(REPO, "config")
 PY = sys.executable
@@ -84,18 +86,12 @@ class Ros:
         return proc
 
     def agent(self, scene, agent, timeout=120, **params):
-        argv = node_argv("nodes.agent", scene, agent=agent, **params) + [
-            "-r",
-            f"__node:=agent_{agent}",
-        ]
+        argv = node_argv("nodes.agent", scene, node=f"agent_{agent}", agent=agent, **params)
         return self.start(argv, timeout, f"agent {agent}")
 
     def monitor(self, scene, timeout=120, **params):
-        return self.start(
-            node_argv("nodes.monitor", scene, **params) + ["-r", "__node:=monitor"],
-            timeout,
-            "monitor",
-        )
+        return self.start(node_argv("nodes.monitor", scene, node="monitor", **params), timeout,
+                          "monitor")
 
     @staticmethod
     def output(proc):
@@ -169,22 +165,17 @@ def placed_vertices(model, groups, origin):
     return out
 
 
-def node_argv(module, scene, **params):
-    argv = [
-        PY,
-        "-m",
-        f"polymatch_ros.ros.{module}",
-        "--ros-args",
-        "-p",
-        f"scene:={scene_path(scene)}",
-    ]
-    for key, value in params.items():
-        if isinstance(value, (list, tuple)):
-            value = "[" + ",".join(map(str, value)) + "]"
-        elif isinstance(value, float):
-            value = repr(value)
-        argv += ["-p", f"{key}:={value}"]
-    return argv
+#: each node module's configuration (``polymatch_ros.ros.config.configs``)
+NODE_CONFIGS = {"nodes.agent": AgentConfig, "nodes.monitor": MonitorConfig,
+                "nodes.robot": RobotConfig}
+
+
+def node_argv(module, scene, node=None, namespace=None, **params):
+    """The command line of node ``module`` on ``scene`` with ``params`` (as given: a bad value
+    reaches the node, which refuses it), rendered as the runner renders it (``ros_args``)."""
+    config = NODE_CONFIGS[module](scene=scene_path(scene), **params)
+    return [PY, "-m", f"polymatch_ros.ros.{module}", "--ros-args"] + ros_args(
+        config, namespace=namespace, node=node)
 
 
 # How many tests run ROS worlds at once, across the pytest workers.  Their processes are

@@ -1,7 +1,8 @@
 """Before a run: refuse options that would be ignored and runs that would not fit.
 
-``check_run`` resolves the integrator as ``simulate.plan`` does (``simulate.choose_method``:
-explicit choice > scene file > recommendation) and then refuses, with one line naming the option:
+``check_run`` resolves the integrator as ``simulate.choose_numerics`` does
+(``simulate.choose_method``: explicit choice > scene file > recommendation) and then refuses,
+with one line naming the option:
 
 - ``--dt`` for the adaptive integrator, ``--tolerance`` for a fixed-step one (a scene's own
   ``integrator.dt``/``tolerance`` that ``method: auto`` does not use gives a warning);

@@ -30,15 +30,15 @@ if TYPE_CHECKING:
     from ..scenes.scene import Scene
     from .adaptive import AdaptiveLie
 
-__all__ = ["EXIT_NOT_CONVERGED", "Plan", "Trajectory", "convergence_verdict", "drive", "explain",
-           "group_components", "plan", "prepare", "recommend", "simulate", "step_grid",
-           "with_representation"]
+__all__ = ["EXIT_NOT_CONVERGED", "NumericalPlan", "Trajectory", "choose_numerics",
+           "convergence_verdict", "drive", "explain", "group_components", "prepare", "recommend",
+           "simulate", "step_grid", "with_representation"]
 
 EXIT_NOT_CONVERGED = 3
 
 
 @dataclass
-class Plan:
+class NumericalPlan:
     """The integrator a run will use, and why."""
 
     method: Method | AdaptiveLie
@@ -100,9 +100,11 @@ def choose_method(scene: Scene, method: str | None = None, tolerance: float | No
     return name, f"auto picked it: {reason}"
 
 
-def plan(scene: Scene, method: str | None = None, dt: float | None = None,
-         tolerance: float | None = None, distributed: bool = False, check: bool = True) -> Plan:
-    """Resolve the integrator (``choose_method``); check stability."""
+def choose_numerics(scene: Scene, method: str | None = None, dt: float | None = None,
+                    tolerance: float | None = None, distributed: bool = False,
+                    check: bool = True) -> NumericalPlan:
+    """The run's numerical plan: the integrator (``choose_method``) and its step; stability
+    checked."""
     name, reason = choose_method(scene, method, tolerance, distributed)
     tol = tolerance if tolerance is not None else scene.integrator.tolerance
     if name == "adaptive":
@@ -112,7 +114,8 @@ def plan(scene: Scene, method: str | None = None, dt: float | None = None,
                                  "pick a fixed-step method")
         from ..scenes.scene import DEFAULT_TOLERANCE
         tol = tol or DEFAULT_TOLERANCE
-        return Plan(AdaptiveLie(tol, max_steps=scene.integrator.max_steps), None, tol, reason)
+        return NumericalPlan(AdaptiveLie(tol, max_steps=scene.integrator.max_steps), None, tol,
+                             reason)
     meth = get_method(name)
     step = dt if dt is not None else scene.integrator.step
     if not step > 0 or not math.isfinite(step):
@@ -123,10 +126,10 @@ def plan(scene: Scene, method: str | None = None, dt: float | None = None,
         step = scene.t_end
     if check:
         check_stability(meth, scene.model, step)
-    return Plan(meth, step, None, reason)
+    return NumericalPlan(meth, step, None, reason)
 
 
-def prepare(scene: Scene, plan_: Plan, distributed: bool = False) -> Scene:
+def prepare(scene: Scene, numerics: NumericalPlan, distributed: bool = False) -> Scene:
     """Scene in the representation the method needs (projection baselines work on matrices).
 
     ``distributed`` on a communication graph: the centroids are integrated with the stages
@@ -137,7 +140,7 @@ def prepare(scene: Scene, plan_: Plan, distributed: bool = False) -> Scene:
     m = scene.model
     if distributed and m.centroids_exact and any(g.graph is not None for g in m.groups):
         scene = replace(scene, model=replace(m, centroids="integrated"))
-    if plan_.method.info.family == "projection" and scene.model.rotations.name == "angle":
+    if numerics.method.info.family == "projection" and scene.model.rotations.name == "angle":
         return with_representation(scene, "matrix")
     return scene
 
@@ -145,7 +148,7 @@ def prepare(scene: Scene, plan_: Plan, distributed: bool = False) -> Scene:
 @dataclass
 class Trajectory:
     scene: Scene
-    plan: Plan
+    numerics: NumericalPlan
     times: list[float] = field(default_factory=list)
     metrics: list[EnsembleMetrics] = field(default_factory=list)
     states: list[State] = field(default_factory=list)
@@ -215,17 +218,17 @@ def simulate(scene: Scene, method: str | None = None, dt: float | None = None,
     ``progress(t, diameter)`` is called at samples.  One loop drives every method's run
     (``solver.FixedStepSolver`` or ``adaptive.AdaptiveSolver``).
     """
-    plan_ = plan(scene, method, dt, tolerance, check=check_stability)
-    scene = prepare(scene, plan_)
+    numerics = choose_numerics(scene, method, dt, tolerance, check=check_stability)
+    scene = prepare(scene, numerics)
     system = System(scene.model)
     times = np.asarray(scene.samples if samples is None else samples, dtype=float)
-    traj = Trajectory(scene, plan_)
+    traj = Trajectory(scene, numerics)
     state = State(0.0, tuple(replace(gs) for gs in scene.initial.all_groups()))
     t0 = time.perf_counter()
     recorder = _Recorder(traj, metrics, keep_states, progress, stop_when_converged)
     stop = recorder.record(state)
     if not stop:
-        run = plan_.method.solver(system, state, scene.t_end, times, plan_.dt)
+        run = numerics.method.solver(system, state, scene.t_end, times, numerics.dt)
         while not stop and run.status == RUNNING:
             for st in run.step():
                 stop = recorder.record(st)
@@ -263,7 +266,7 @@ def explain(scene: Scene, method: str | None = None, dt: float | None = None,
                 "so3": f"3x3 matrices, structure-of-arrays, {rep.retraction} map in closed form",
                 "matrix": f"{m.dim}x{m.dim} matrices, Cayley map, no per-matrix solves"}[rep.name]
     lines.append(f"rotations: {rep_text}")
-    p = plan(scene, method, dt, tolerance, distributed=distributed, check=False)
+    p = choose_numerics(scene, method, dt, tolerance, distributed=distributed, check=False)
     info = p.method.info
     if isinstance(p.method, Method) and p.dt is not None:
         try:

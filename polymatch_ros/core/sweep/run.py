@@ -39,7 +39,7 @@ from ..model import State
 from ..scenes.scene import Scene
 from ..so.base import Array, RotationGroup
 from ..stepping.integrators import check_stability
-from ..stepping.simulate import Plan, plan, prepare
+from ..stepping.simulate import NumericalPlan, choose_numerics, prepare
 from ..stepping.solver import RUNNING
 from . import chart_rk
 from .batch import (
@@ -127,26 +127,26 @@ def batch_graphs(scenes: Sequence) -> BatchGraphs | None:
     return BatchGraphs.of([s.model.groups[0].graph for s in scenes])
 
 
-def batch_plan(scene: Scene, method: str | None = None, dt: float | None = None) -> Plan:
-    """The batch's fixed-step integrator: ``simulate.plan``'s, or one of BATCH_METHODS.
+def batch_plan(scene: Scene, method: str | None = None, dt: float | None = None) -> NumericalPlan:
+    """The batch's fixed-step integrator: ``simulate.choose_numerics``'s, or one of BATCH_METHODS.
 
     A BATCH_METHODS method steps by the scene's smallest sample interval unless ``dt`` is
     given (its steps end on the samples, where ensembles are tested and leave).  ``scene``
     is the stiffest ensemble's (its graph's Laplacian has the largest spectral radius).
     """
     if method not in BATCH_METHODS:
-        plan_ = plan(scene, method, dt)
-        if plan_.dt is None:
+        numerics = choose_numerics(scene, method, dt)
+        if numerics.dt is None:
             raise ParameterError("a sweep takes fixed-step integrators (the adaptive one would "
                                  "share one step size between independent ensembles)")
-        return plan_
+        return numerics
     step = dt if dt is not None else sample_interval(scene)
     if not (step > 0 and math.isfinite(step)):
         raise ParameterError(f"dt must be a positive number, got {step}")
     step = min(step, scene.t_end)
     meth = getattr(chart_rk, BATCH_METHODS[method])
     check_stability(meth, scene.model, step)
-    return Plan(meth, step, None, "chosen explicitly")
+    return NumericalPlan(meth, step, None, "chosen explicitly")
 
 
 def sample_interval(scene: Scene) -> float:
@@ -166,8 +166,8 @@ def run_batch(scenes: Sequence, method: str | None = None, dt: float | None = No
     """
     check_batch(scenes)
     graphs = batch_graphs(scenes)
-    plan_ = batch_plan(scenes[0 if graphs is None else graphs.stiffest()], method, dt)
-    scenes = [prepare(s, plan_) for s in scenes]
+    numerics = batch_plan(scenes[0 if graphs is None else graphs.stiffest()], method, dt)
+    scenes = [prepare(s, numerics) for s in scenes]
     model, grp = scenes[0].model, scenes[0].model.rotations
     b, n, tol = len(scenes), model.n_agents, scenes[0].tolerance
     system = BatchSystem(model, b, graphs)
@@ -175,7 +175,7 @@ def run_batch(scenes: Sequence, method: str | None = None, dt: float | None = No
     rec = _Record(scenes[0], b, graphs)
     t0 = time.perf_counter()
     live = np.arange(b)
-    run = plan_.method.solver(system, state, scenes[0].t_end, scenes[0].samples, plan_.dt)
+    run = numerics.method.solver(system, state, scenes[0].t_end, scenes[0].samples, numerics.dt)
     observe = observe or (lambda st, live: None)
     observe(state, live)
     live = rec.sample(state, live, tol)
@@ -195,7 +195,7 @@ def run_batch(scenes: Sequence, method: str | None = None, dt: float | None = No
             live = kept
     if len(live):
         rec.finish(system, run.state, live)
-    return rec.result(plan_, run.nsteps, run.nfev, time.perf_counter() - t0)
+    return rec.result(numerics, run.nsteps, run.nfev, time.perf_counter() - t0)
 
 
 class _Record:
@@ -271,9 +271,9 @@ class _Record:
         self.measures[:, live] = [eq.stationarity, eq.order_parameter, eq.asymmetry,
                                   met.rotation]
 
-    def result(self, plan_: Plan, steps: int, nfev: int, wall: float) -> BatchResult:
+    def result(self, numerics: NumericalPlan, steps: int, nfev: int, wall: float) -> BatchResult:
         still, order, asym, rotation = self.measures
-        assert self.initial_rotation is not None and plan_.dt is not None, "sampled, fixed step"
+        assert self.initial_rotation is not None and numerics.dt is not None, "sampled, fixed step"
         kind = "complete" if self.graphs is None else self.graphs.graphs[0].kind
         ring = ring_measures(self.final_rot) if kind == "ring" else None
         twisted = None if ring is None else ring_twisted(ring)
@@ -282,7 +282,7 @@ class _Record:
                            self.final_matching, still, order, asym,
                            classify(self.converged_at, still, order, asym, self.kappa_rate,
                                     rotation, twisted),
-                           kind, ring, plan_.name, plan_.dt, steps, nfev, wall, rotation)
+                           kind, ring, numerics.name, numerics.dt, steps, nfev, wall, rotation)
 
 
 def ensembles_entries(grp: RotationGroup, rot: Array, n: int) -> np.ndarray:

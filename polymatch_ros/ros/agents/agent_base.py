@@ -20,8 +20,9 @@ import numpy as np
 
 from ...core.errors import ParameterError, PolymatchError
 from ...core.model import GroupState, State, System
-from ...core.stepping.simulate import plan, prepare
+from ...core.stepping.simulate import prepare
 from .. import wire
+from ..config.configs import AgentConfig
 from ..config.params import RUNTIME
 from ..process.shell import NodeApp
 from ..wire.checkpoint import CheckpointFile
@@ -35,6 +36,7 @@ if TYPE_CHECKING:
     from rclpy.publisher import Publisher
 
     from ...core.scenes.scene import Scene
+    from ..config.resolve import ResolvedAgent
 
 
 def local_state(scene: Scene, layout: Layout) -> State:
@@ -56,17 +58,18 @@ def local_state(scene: Scene, layout: Layout) -> State:
 class AgentBase(NodeApp):
     """Scene, state and publishing of the agents one process hosts; ``run()`` -> exit code.
 
-    Subclasses set ``mode`` and define ``step_size()`` and ``loop()``.
+    Subclasses set ``mode`` and define ``loop()``.
     """
 
     mode: wire.Mode  # each mode's class names its mode
+    config: AgentConfig  # the process's parameters, resolved (``resolve.resolve_agent``)
 
     def __init__(
-        self, node: Node, params: dict[str, Any], executor: Executor | None = None
+        self, node: Node, resolved: ResolvedAgent, executor: Executor | None = None
     ) -> None:
         from rclpy.executors import SingleThreadedExecutor
 
-        self.node, self.params = node, params
+        self.node, self.config = node, resolved.config
         self.created = time.monotonic()
         self.matched_after: float | None = None
         self.log = node.get_logger()
@@ -74,40 +77,36 @@ class AgentBase(NodeApp):
             executor = SingleThreadedExecutor()
             executor.add_node(node)
         self.executor = executor
-        self._configure(params)
+        self._configure(resolved)
         self._make_publishers()
 
-    def _configure(self, p: dict[str, Any]) -> None:
-        from ...core.scenes.scene import load_scene, resolve_scene_path
-
-        scene = load_scene(resolve_scene_path(p["scene"]), {"time.t_end": p["t_end"]})
-        local = p["agents"]
+    def _configure(self, resolved: ResolvedAgent) -> None:
+        """The scene and numerical plan ``resolve_agent`` loaded, laid out for this process."""
+        scene, config = resolved.scene, resolved.config
+        local = config.hosted
         bad = [a for a in local if not 0 <= a < scene.model.n_agents]
         if bad:
             raise ParameterError(
                 f"parameter 'agents': agent {bad[0]} is not in the scene "
                 f"(0..{scene.model.n_agents - 1})"
             )
-        self.plan = plan(scene, p["integrator"], self.step_size(p), distributed=True)
-        self.scene = scene = prepare(scene, self.plan, distributed=True)
+        self.numerics = resolved.numerics
+        self.scene = scene = prepare(scene, self.numerics, distributed=True)
         self.model = scene.model
         self.grp = self.model.rotations
-        self.layout = Layout(self.model, local, p["agents_per_process"])
+        self.layout = Layout(self.model, local, config.agents_per_process)
         self.system = System(self.model, self.layout.rows)
         self.state = local_state(scene, self.layout)
         self.drops = DropCounter(self.log)
         # the state at each step's start: a restarted process resumes from it, and the runner
         # saves it when the run ends early (``checkpoint``)
-        self.checkpoint = CheckpointFile(p["checkpoint"] or "", p["run_id"])
+        self.checkpoint = CheckpointFile(config.checkpoint or "", config.run_id)
         self.control = AgentControl(self.mode, self.on_pause)
         self.rounds = self.steps = self.late_ticks = 0
         self.round_time = 0.0  # wall seconds of the timed rounds (all but ``untimed_rounds``)
         self.untimed_rounds = 0  # lockstep: the first round, which waits for every peer's start
         self.first_round_at: float | None = None  # wall-clock time the first round completed
         self.finished = False
-
-    def step_size(self, p: dict[str, Any]) -> float | None:
-        raise NotImplementedError
 
     def _make_publishers(self) -> None:
         node, dim, local = self.node, self.model.dim, self.layout.local
@@ -141,11 +140,11 @@ class AgentBase(NodeApp):
 
     def _host_agents(self) -> HostedAgents | None:
         """A node of its own for each agent of a process hosting several (``hosted``)."""
-        local, level = self.layout.local, self.params["agent_nodes"]
+        local, level = self.layout.local, self.config.agent_nodes
         if len(local) < 2 or level == "none":
             return None
         runtime = RUNTIME if self.mode.ticks else ()
-        return HostedAgents(self.node, local, self.params, self.control, runtime,
+        return HostedAgents(self.node, local, self.config, self.control, runtime,
                             full=level == "full")
 
     # -- control: the ensemble's commands (control topic) and this process's services -------
@@ -203,8 +202,8 @@ class AgentBase(NodeApp):
     def _publish_exchange(self, pubs: dict[int, Publisher]) -> None:
         """Every local agent's state with the run's id (``wire.exchange``) on ``pubs``."""
         state_msg = wire.message_type("state")
-        st, run_id, grp = self.state, self.params["run_id"], self.grp
-        frame = self.params["frame_id"]
+        st, run_id, grp = self.state, self.config.run_id, self.grp
+        frame = self.config.frame_id
         for gi in self.layout.local_groups:
             gs, g = st.groups[gi], self.model.groups[gi]
             assert gs is not None  # the state holds every local group
@@ -254,15 +253,15 @@ class AgentBase(NodeApp):
         for b, members in blocks.items():
             rows = self.block_rows[b]
             msg = wire.encode_exchange_block(
-                block_msg(), grp, self.params["run_id"], b, st.t, members, x[rows],
+                block_msg(), grp, self.config.run_id, b, st.t, members, x[rows],
                 grp.take(rot, rows), None if v is None else v[rows],
-                None if w is None else grp.algebra_take(w, rows), self.params["frame_id"])
+                None if w is None else grp.algebra_take(w, rows), self.config.frame_id)
             pubs[b].publish(msg)
 
     def _publish_rows(
         self, pose_pubs: dict[int, Publisher], twist_pubs: dict[int, Publisher]
     ) -> None:
-        st, frame = self.state, self.params["frame_id"]
+        st, frame = self.state, self.config.frame_id
         for gi in self.layout.local_groups:
             gs, g = st.groups[gi], self.model.groups[gi]
             assert gs is not None  # the state holds every local group
@@ -308,7 +307,7 @@ class AgentBase(NodeApp):
             stage_subscriptions=self.stage_subscriptions(),
             n_agents=self.model.n_agents,
             node=self.node.get_fully_qualified_name(),
-            run_id=int(self.params["run_id"]),
+            run_id=int(self.config.run_id),
             first_round_at=self.first_round_at,
             max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         )
@@ -375,9 +374,9 @@ class AgentBase(NodeApp):
                            missing: Callable[[], list[int]] | None = None) -> None:
         """Wait until ``peers_matched()``, pose_subscribers readers on every pose topic and
         exchange_subscribers on every exchange topic."""
-        deadline = time.monotonic() + self.params["discovery_timeout"]
-        wants = ((self.pose_pubs, self.params["pose_subscribers"]),
-                 (self.exchange_pubs, self.params["exchange_subscribers"]))
+        deadline = time.monotonic() + self.config.discovery_timeout
+        wants = ((self.pose_pubs, self.config.pose_subscribers),
+                 (self.exchange_pubs, self.config.exchange_subscribers))
         while True:
             peers_ok = peers_matched is None or peers_matched()
             if peers_ok and all(
@@ -389,7 +388,7 @@ class AgentBase(NodeApp):
                 gone = missing() if missing is not None else []
                 what = f"agent(s) {', '.join(map(str, gone))}" if gone else "all subscribers"
                 raise PolymatchError(
-                    f"discovery timed out after {self.params['discovery_timeout']:g} s "
+                    f"discovery timed out after {self.config.discovery_timeout:g} s "
                     f"waiting for {what}"
                 )
             self.spin_once(0.05)
@@ -415,7 +414,7 @@ class AgentBase(NodeApp):
         until the host with it says 'received', at most ``hold_final`` s, calling ``meanwhile``
         between spins.  Its runner may match our final-pose writers only after we published: a
         writer that ended by then is gone with its sample."""
-        deadline = time.monotonic() + self.params["hold_final"]
+        deadline = time.monotonic() + self.config.hold_final
         while not self.control.final_received and time.monotonic() < deadline:
             self.spin_once(0.05)
             if meanwhile is not None:

@@ -57,6 +57,7 @@ from ...core.robots.robot_commands import (
 from ...core.robots.safety import PeerSight
 from ...core.robots.shaping import shaper_for
 from .. import wire
+from ..config.configs import config_values
 from ..config.runtime_params import RuntimeParams
 from .agent_base import AgentBase
 from .realtime import PeerTable, RealtimeAgent
@@ -67,6 +68,7 @@ if TYPE_CHECKING:
     from rclpy.qos import QoSProfile
 
     from ...core.robots.robot_commands import Twist
+    from ..config.resolve import ResolvedAgent
     from .realtime import Ensemble
 
 #: relative names: remap them to a robot's topics (``-r cmd_vel:=/robot3/cmd_vel``)
@@ -126,9 +128,9 @@ class BridgeAgent(RuntimeParams, AgentBase):
     mode = wire.Mode.BRIDGE
 
     def __init__(
-        self, node: Node, params: dict[str, Any], executor: Executor | None = None
+        self, node: Node, resolved: ResolvedAgent, executor: Executor | None = None
     ) -> None:
-        super().__init__(node, params, executor)
+        super().__init__(node, resolved, executor)
         self.peers = PeerTable.of_agent(self)
         # SimpleNamespace(x, rot, heard) of the last good measured pose
         self.measured: SimpleNamespace | None = None
@@ -137,21 +139,22 @@ class BridgeAgent(RuntimeParams, AgentBase):
         self.commands = 0
         self.epoch = time.time()  # t = 0 of the ensemble's clock (``loop``)
         pose_qos, cmd_qos = robot_qos()
-        self.cmd_class = command_class(self.model.order, params["cmd_type"])
+        self.cmd_class = command_class(self.model.order, self.config.cmd_type)
         topic = CMD_ACCEL if self.model.order == 2 else CMD_VEL
         self.cmd_pub = node.create_publisher(self.cmd_class, topic, cmd_qos)
         node.create_subscription(
-            pose_class(params["pose_type"]), MEASURED_POSE, self._measured_cb, pose_qos
+            pose_class(self.config.pose_type), MEASURED_POSE, self._measured_cb, pose_qos
         )
         self.watch_parameters()
 
-    def _configure(self, p: dict[str, Any]) -> None:
-        if p["agents"] and len(p["agents"]) > 1:
+    def _configure(self, resolved: ResolvedAgent) -> None:
+        config = resolved.config
+        if len(config.hosted) > 1:
             raise ParameterError("mode bridge: one agent per process (one robot each)")
-        super()._configure(p)
+        super()._configure(resolved)
         self.rebuild_system()  # refuses d >= 4 and undamped second order before any topic
-        self.shaper = shaper_for(self.scene, self.layout.local[0], p)
-        if self.model.order == 2 and p["pose_type"] != "odometry":
+        self.shaper = shaper_for(self.scene, self.layout.local[0], config_values(config))
+        if self.model.order == 2 and config.pose_type != "odometry":
             raise ParameterError(
                 "mode bridge: a second-order scene needs the robot's velocity: "
                 "pose_type:=odometry (nav_msgs/Odometry)"
@@ -159,9 +162,6 @@ class BridgeAgent(RuntimeParams, AgentBase):
 
     def rebuild_system(self) -> None:
         self.system = bridge_system(self.model, self.layout.rows)
-
-    def step_size(self, p: dict[str, Any]) -> float:
-        return 1.0 / p["rate"]
 
     # -- the robot's side ------------------------------------------------------------------------
     def _measured_cb(self, msg: Any) -> None:
@@ -204,7 +204,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
     def fresh_pose(self) -> SimpleNamespace | None:
         """The measured pose if it is younger than pose_timeout, else None."""
         m = self.measured
-        if m is None or time.monotonic() - m.heard > self.params["pose_timeout"]:
+        if m is None or time.monotonic() - m.heard > self.config.pose_timeout:
             return None
         return m
 
@@ -231,10 +231,10 @@ class BridgeAgent(RuntimeParams, AgentBase):
             return False
         if self.holding != reason:
             self.log.warning(f"robot braking: {reason}")
-        p = self.params
+        c = self.config
         self.cmd_pub.publish(self._message(brake_command(
-            self.model, own.v, skew, self.grp.to_matrices(own.rot)[0], p["command_frame"],
-            p["max_linear_accel"], p["max_angular_accel"],
+            self.model, own.v, skew, self.grp.to_matrices(own.rot)[0], c.command_frame,
+            c.max_linear_accel, c.max_angular_accel,
         )))
         self.zero_sent, self.holding = False, reason
         return True
@@ -244,7 +244,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
         if hasattr(msg, "header"):
             msg.header.stamp = self.node.get_clock().now().to_msg()
             msg.header.frame_id = (
-                self.params["frame_id"] if self.params["command_frame"] == "world" else ""
+                self.config.frame_id if self.config.command_frame == "world" else ""
             )
         return fill_twist(msg, twist)
 
@@ -254,7 +254,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
         own = self.fresh_pose()
         if own is None:
             self._hold("no measured pose yet" if self.commands == 0 and self.measured is None
-                       else f"measured pose older than {self.params['pose_timeout']:g} s")
+                       else f"measured pose older than {self.config.pose_timeout:g} s")
             return
         gi, row = self.layout.owner[self.layout.local[0]]
         self.state = self._state_at(t, own)
@@ -281,7 +281,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
         rot = self.grp.to_matrices(own.rot)[0]
         sight = self._peer_sight() if self.shaper.safety is not None else None
         return self.shaper.command(self.system, gi, row, ensemble, own, rot, self.state.t,
-                                   self.params, sight, time.monotonic() - own.heard)
+                                   config_values(self.config), sight, time.monotonic() - own.heard)
 
     def _peer_sight(self) -> PeerSight:
         """Every peer ever heard, silent ones too (a robot dropped from the sums is still in
@@ -349,10 +349,10 @@ class BridgeAgent(RuntimeParams, AgentBase):
                 self.steps += 1
                 self.rounds += 1
             self._maybe_diagnostics()
-            next_tick += 1.0 / self.params["rate"]
+            next_tick += 1.0 / self.config.rate
             while time.monotonic() < next_tick and not self.stop_requested:
                 self.spin_once(min(0.05, max(0.0, next_tick - time.monotonic())))
-            if time.monotonic() - next_tick > 1.0 / self.params["rate"]:
+            if time.monotonic() - next_tick > 1.0 / self.config.rate:
                 self.late_ticks += 1
                 next_tick = time.monotonic()
         self._hold("the run ended")

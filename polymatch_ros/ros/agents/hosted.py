@@ -28,9 +28,10 @@ the process's executor would slow every round.
 from __future__ import annotations
 
 import threading
-from collections.abc import Collection, Iterable, Mapping
-from typing import TYPE_CHECKING, Any
+from collections.abc import Collection, Iterable
+from typing import TYPE_CHECKING
 
+from ..config.configs import AgentConfig
 from ..config.params import AGENT, read_only_descriptor
 from ..wire.control import AgentControl, offer_agent_services
 
@@ -64,7 +65,7 @@ class HostedAgents:
     """The node of each agent of a packed process (full or lean), and the executor that serves
     the full ones."""
 
-    def __init__(self, host: Node, agents: Iterable[int], params: Mapping[str, Any],
+    def __init__(self, host: Node, agents: Iterable[int], config: AgentConfig,
                  control: AgentControl, runtime: Collection[str] = (),
                  full: bool = True) -> None:
         from rclpy.executors import SingleThreadedExecutor
@@ -79,7 +80,7 @@ class HostedAgents:
         for agent, node in self.nodes.items():
             self.executor.add_node(node)
             if full:
-                _mirror_parameters(node, agent, params, runtime, host.get_fully_qualified_name())
+                _mirror_parameters(node, agent, config, runtime, host.get_fully_qualified_name())
                 self.services += offer_agent_services(node, control, host.get_logger(), scope)
         self.thread = threading.Thread(target=self._serve, name="hosted_agents", daemon=True)
         if full:  # a lean node has nothing to serve
@@ -103,13 +104,13 @@ class HostedAgents:
         self.nodes = {}
 
 
-def _mirror_parameters(node: Node, agent: int, params: Mapping[str, Any],
+def _mirror_parameters(node: Node, agent: int, config: AgentConfig,
                        runtime: Collection[str], host: str) -> None:
     """The process's fixed parameters on an agent's node, read-only; ``agent`` its own."""
     from rcl_interfaces.msg import ParameterDescriptor
 
     for p in AGENT:
-        value = agent if p.name == "agent" else params.get(p.name)
+        value = agent if p.name == "agent" else getattr(config, p.name)
         if value is None or p.name in runtime:
             continue
         node.declare_parameter(p.name, value, read_only_descriptor(p))

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from rclpy.node import Node
 
     from ...core.model import Request
+    from ..config.resolve import ResolvedAgent
     from ..wire.intake import DropCounter, Layout
 
 #: a round: (step, stage)
@@ -287,31 +288,29 @@ class LockstepAgent(AgentBase):
     mode = wire.Mode.LOCKSTEP
 
     def __init__(
-        self, node: Node, params: dict[str, Any], executor: Executor | None = None
+        self, node: Node, resolved: ResolvedAgent, executor: Executor | None = None
     ) -> None:
-        super().__init__(node, params, executor)
-        projection = self.plan.method.info.family == "projection"
+        super().__init__(node, resolved, executor)
+        config = self.config
+        projection = self.numerics.method.info.family == "projection"
         rot_tol = wire.PROJECTION_STAGE_TOL if projection else wire.ROTATION_TOL
-        restarts = params["peers_restart"]
+        restarts = config.peers_restart
         # a restarted peer resumes at the start of a step: keep a step and two rounds for it
-        keep = self.plan.method.info.rounds + 2 if restarts else 2
-        patience = Patience(params["stall_timeout"], restarts, keep)
+        keep = self.numerics.method.info.rounds + 2 if restarts else 2
+        patience = Patience(config.stall_timeout, restarts, keep)
         self.exchange = LockstepExchange(
-            node, self.layout, params["run_id"], rot_tol, self.drops, self.scene.t_end, patience
+            node, self.layout, config.run_id, rot_tol, self.drops, self.scene.t_end, patience
         )
         self.exchange.paused = self._serve_control
         self.resumed_at: int | None = None  # the step this process resumed at, if restarted
         # the steps whose states go out on the run's exchange (the monitor's), at its pace
-        self.state_stride = StateStride(params["exchange_rate"])
+        self.state_stride = StateStride(config.exchange_rate)
 
     def _serve_control(self) -> bool:
         """Inside a long round wait: take control messages and service calls; paused?"""
         for _ in range(4):  # what is ready: control messages, service calls, parameters
             self.spin_once(0.0)
         return self.paused
-
-    def step_size(self, p: dict[str, Any]) -> float | None:
-        return p["dt"]
 
     def time_split(self) -> dict[str, float]:
         ex, timed = self.exchange, self.rounds - self.untimed_rounds
@@ -349,14 +348,14 @@ class LockstepAgent(AgentBase):
             self._maybe_diagnostics(force=True)
         else:
             self.publish_state()
-        method, dt = self.plan.method, self.plan.dt
+        method, dt = self.numerics.method, self.numerics.dt
         assert isinstance(method, Method) and dt is not None  # distributed plans: fixed step
         grid = step_grid(self.scene.t_end, dt)
-        timeout = self.params["round_timeout"]
+        timeout = self.config.round_timeout
         # matching is not simultaneous: a peer that matched us may still be matching others and
         # start later, and its lag reaches us through every peer that waits for it in the next
         # rounds: the first two steps (of a resumed process too) also allow discovery time
-        first_wait = timeout + self.params["discovery_timeout"]
+        first_wait = timeout + self.config.discovery_timeout
         start = last_spin = time.monotonic()
         prev = float(grid[first - 1]) if first else 0.0
         for k in range(first, len(grid)):

@@ -24,6 +24,7 @@ from __future__ import annotations
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterable
+from dataclasses import replace
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
@@ -45,6 +46,7 @@ if TYPE_CHECKING:
     from rclpy.node import Node
 
     from ...core.model import Request, State
+    from ..config.resolve import ResolvedAgent
     from ..wire.intake import DropCounter, Layout
 
 #: per group the arrays the core asks for (``wire.assemble``), None for groups not needed
@@ -99,12 +101,12 @@ class PeerTable:
         """The table of a realtime or bridge agent (``AgentBase``), from its parameters; a bridge
         agent (centroids measured, never advanced by the flow) hears them only for its safety
         filter (``core.robots.shaping``)."""
-        p = agent.params
+        config = agent.config
         shaper = getattr(agent, "shaper", None)
         velocities = (agent.model.centroids_exact if not agent.mode.drives_robots
                       else shaper is not None and shaper.safety is not None)
-        return cls(agent.node, agent.layout, p["run_id"], p["peer_timeout"], agent.drops,
-                   p["delay"], agent.scene.t_end, clock, velocities=velocities)
+        return cls(agent.node, agent.layout, config.run_id, config.peer_timeout, agent.drops,
+                   config.delay, agent.scene.t_end, clock, velocities=velocities)
 
     def _entry(self, agent: int) -> SimpleNamespace:
         return self.latest.setdefault(
@@ -267,10 +269,10 @@ class RealtimeAgent(RuntimeParams, AgentBase):
     mode = wire.Mode.REALTIME
 
     def __init__(
-        self, node: Node, params: dict[str, Any], executor: Executor | None = None
+        self, node: Node, resolved: ResolvedAgent, executor: Executor | None = None
     ) -> None:
-        super().__init__(node, params, executor)
-        self.clock = ClockOffsets(params["time_scale"], params["clock_offset_warn"])
+        super().__init__(node, resolved, executor)
+        self.clock = ClockOffsets(self.config.time_scale, self.config.clock_offset_warn)
         self.peers = PeerTable.of_agent(self, self.clock)
         # process CPU time (s) when the ticks began and ended
         self.cpu_span: tuple[float, float | None] | None = None
@@ -298,8 +300,9 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             out["peers_in_range"] = self.peers.in_range_count
         return out
 
-    def step_size(self, p: dict[str, Any]) -> float:
-        return p["time_scale"] / p["rate"]
+    def step_size(self) -> float:
+        """Simulated seconds a tick (``rate`` may change while running)."""
+        return self.config.time_scale / self.config.rate
 
     def time_split(self) -> dict[str, float]:
         """CPU milliseconds per tick of the whole process (the middleware's threads too), over
@@ -312,7 +315,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
     def _start_epoch(self: AgentBase) -> float:
         """Wall-clock time of t = 0 ('start'): now, the runner's 'start', or 'start_time';
         from then on the start_time parameter holds it."""
-        start = self.params["start"]
+        start = self.config.start
         last = 0.0
         while start == "control" and self.start_epoch is None and not self.stop_requested:
             self.spin_once(0.05)
@@ -320,8 +323,9 @@ class RealtimeAgent(RuntimeParams, AgentBase):
                 self.publish_state()
                 self._maybe_diagnostics(force=True)  # the runner counts agents that are up
                 last = time.monotonic()
-        epoch = {"at": self.params["start_time"], "control": self.start_epoch}.get(start)
-        self.params["start_time"] = epoch = time.time() if epoch is None else epoch
+        epoch = {"at": self.config.start_time, "control": self.start_epoch}.get(start or "now")
+        epoch = time.time() if epoch is None else epoch
+        self.config = replace(self.config, start_time=epoch)
         declare_resolved(self.node, SPEC["start_time"], epoch)
         return epoch
 
@@ -344,7 +348,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         self.clock.start(start)
         while time.time() < start and not self.stop_requested:  # the ensemble starts together
             self.spin_once(min(0.05, max(0.0, start - time.time())))
-        method, h, period = self.plan.method, self.plan.dt, 1.0 / self.params["rate"]
+        method, h, period = self.numerics.method, self.numerics.dt, 1.0 / self.config.rate
         assert isinstance(method, Method) and h is not None  # distributed plans: fixed step
         next_tick = self._join_clock(start, period, h)
         t0 = time.monotonic()
@@ -353,7 +357,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             next_tick += period
             self._wait_tick(next_tick, period)
             if self.apply_runtime():  # kappa, gamma, rate set while running
-                h, period = self.step_size(self.params), 1.0 / self.params["rate"]
+                h, period = self.step_size(), 1.0 / self.config.rate
             t = self.state.t
             step = min(h, self.scene.t_end - t)  # the last tick ends the run at t_end exactly
             if self._held(t + step):
@@ -414,10 +418,10 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         wall-clock schedule when it hears no peer within the peer timeout.
         """
         behind = max(0.0, time.time() - start)
-        if behind <= self.params["peer_timeout"]:
+        if behind <= self.config.peer_timeout:
             self.state.t = 0.0
             return time.monotonic() - behind
-        heard_by = time.monotonic() + self.params["peer_timeout"]
+        heard_by = time.monotonic() + self.config.peer_timeout
         while (
             self.peers.newest_time() is None
             and time.monotonic() < heard_by

@@ -1,7 +1,9 @@
-"""ROS parameters of the agent and the monitor: declared with descriptors and ranges, checked,
-and each holding the value the node uses.
+"""The parameter tables of the nodes (agent, monitor, robot, recorder): a row per parameter,
+its type, default, range and description; declared with descriptors and ranges, checked, and
+each holding the value the node uses.  ``configs`` makes a typed configuration of each table.
 
-A node declares its parameters in two steps (``declare``): first provisionally, to read what
+A node declares its parameters in two steps (``configs.read_config``): first provisionally,
+to read what
 was given (``-p``, ``--params-file``); then, once it has resolved what was not given (the
 scene's gains, step, integrator and end time; the agents it hosts; ...), each with that
 effective value and its final descriptor (type, range, read-only unless changeable while
@@ -17,8 +19,7 @@ publisher or subscription, and the tests call it directly.  A bad value is a
 from __future__ import annotations
 
 import math
-import os
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -297,6 +298,45 @@ MONITOR = (
 )
 
 
+ROBOT = (
+    Param("scene", str, "scene file (YAML) or shipped scene name: the initial pose; required; "
+          "shown as the file read"),
+    Param("agent", 0, "the agent whose initial pose the robot starts at", (0, 1_000_000)),
+    Param("rate", 50.0, "integration and pose publishing rate (Hz)", (0.1, 10000.0)),
+    Param("lag", 0.1, "actuator time constant (s): v' = (v_cmd - v) / lag (second order: of the "
+          "acceleration; 0: it follows the command at once)", (0.0, 1e3)),
+    Param("max_linear_speed", 1e6, "actuator linear speed limit (m/s)", (0.0, 1e6)),
+    Param("max_angular_speed", 1e6, "actuator angular speed limit (rad/s)", (0.0, 1e6)),
+    Param("position_noise", 0.0, "standard deviation of the measured position (m)", (0.0, 1e3)),
+    Param("angle_noise", 0.0, "standard deviation of the measured orientation (rad)", (0.0, 1.0)),
+    Param("seed", int, "noise seed: 1000 + agent unless given", (0, 2**31 - 1)),
+    Param("cmd_timeout", 0.5, "stop when no command came for this long (s)", (0.001, 1e6)),
+    Param("pose_type", "pose", "measured_pose is pose (PoseStamped) | odometry (second order)",
+          choices=("pose", "odometry")),
+    Param("cmd_type", "twist_stamped", "cmd_vel is twist_stamped (TwistStamped) | twist (Twist) "
+          "(first order)", choices=CMD_TYPES),
+    Param("command_frame", "world", "cmd_vel / cmd_accel components in the world | body frame",
+          choices=("world", "body")),
+    Param("frame_id", "world", "frame_id of the measured pose"),
+    Param("drive", "holonomic", "holonomic | unicycle (a differential-drive base: it follows "
+          "only linear.x and angular.z of a body-frame cmd_vel)",
+          choices=("holonomic", "unicycle")),
+    Param("pose_log", str, "file for one line per step: time, true and measured pose "
+          "(declared when given)"),
+)
+
+
+RECORDER = (
+    Param("output", "", "the MCAP file to write (replaced if it exists); required"),
+    Param("duration", 0.0, "stop after this many seconds (0 = at SIGINT or SIGTERM)",
+          (0.0, 1e9)),
+    Param("scene_file", "", "a scene file to attach (what `polymatch plot` draws); '' = none"),
+    Param("t_end", 0.0, "the run's end time, kept with the scene (0 = the scene's)",
+          (0.0, 1e12)),
+    Param("mode", "", "the run's mode, kept with the scene ('' = not a run)"),
+)
+
+
 def _kind(kind: type) -> str:
     return {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}.get(
         kind, "a list of integers")
@@ -434,96 +474,3 @@ def declare_resolved(node: Node, p: Param, value: Any) -> None:
     if not node.has_parameter(p.name):
         node.declare_parameter(p.name, value, _descriptor(p))
 
-
-Resolver = Callable[[dict[str, Any]], dict[str, Any]]
-
-
-def declare(
-    node: Node, spec: Sequence[Param], runtime: Collection[str] = (),
-    resolve: Resolver | None = None,
-) -> dict[str, Any]:
-    """Declare ``spec`` on ``node`` and return the values the node uses: the given ones
-    (checked), the fixed defaults, and what ``resolve`` makes of the rest (None: the parameter
-    does not apply and is not declared); the names in ``runtime`` may be set while the node
-    runs (``runtime_params``)."""
-    values = check(spec, given_values(node, spec))
-    if resolve is not None:
-        values = resolve(values)
-    pin(node, spec, values, runtime)
-    return values
-
-
-def scene_file(name: str) -> str:
-    """The scene file a 'scene' parameter names (a path, or a shipped scene's name)."""
-    from ...core.scenes.scene import resolve_scene_path
-
-    return os.path.abspath(resolve_scene_path(name))
-
-
-def resolve_monitor(values: dict[str, Any]) -> dict[str, Any]:
-    """The monitor's values: the scene file read and its end time unless given."""
-    from ...core.scenes.scene import load_scene
-
-    path = scene_file(values["scene"])
-    scene = load_scene(path, {"time.t_end": values["t_end"]})
-    return dict(values, scene=path, t_end=scene.t_end)
-
-
-def resolve_agent(values: dict[str, Any]) -> dict[str, Any]:
-    """The agent's values: the scene file read, its end time, gains, integrator and step unless
-    given, the agents this process hosts, how it starts; ParameterError for a parameter given
-    that the mode does not take, or for gains the model cannot run with."""
-    from ...core.scenes.scene import load_scene
-    from ...core.stepping.simulate import plan
-
-    v, mode = dict(values), mode_of(values["mode"])
-    lockstep = mode.exact
-    _refuse_outside_mode(v, mode)
-    path = scene_file(v["scene"])
-    scene = load_scene(path, {"time.t_end": v["t_end"]})
-    model = check_gains(scene.model, mode, {} if lockstep else v)
-    v.update(scene=path, t_end=scene.t_end, kappa=model.kappa, gamma=model.gamma,
-             mass=model.mass if model.order == 2 else None)
-    v.update(_hosted(v["agent"], v["agents"]))
-    step = v["dt"] if lockstep else mode.tick_step(v["rate"], v["time_scale"])
-    the_plan = plan(replace(scene, model=model), v["integrator"], step, distributed=True)
-    v.update(integrator=the_plan.name, dt=the_plan.dt if lockstep else None)
-    v.update(_start(v["start"], v["start_time"]) if not lockstep else dict(start=None))
-    return v
-
-
-def _refuse_outside_mode(v: Mapping[str, Any], mode: Mode) -> None:
-    """ParameterError for a given parameter that ``mode`` does not take."""
-    if mode.exact:
-        names = [k for k in (*GAINS, "start", "start_time") if v[k] is not None]
-        why = ("realtime and bridge only (lockstep runs the scene's model, to equal the "
-               "centralised simulation, and starts once every peer is matched)")
-    else:
-        names = ["dt"] if v["dt"] is not None else []
-        why = "lockstep only (" + ("a realtime agent steps time_scale/rate simulated seconds a "
-                                   "tick" if not mode.drives_robots else "a bridge agent takes no "
-                                   "step: its robot moves") + ")"
-    if names:
-        plural = "s" if len(names) > 1 else ""
-        raise ParameterError(f"parameter{plural} {', '.join(map(repr, names))}: {why}")
-
-
-def _hosted(agent: int | None, agents: list[int] | None) -> dict[str, Any]:
-    """'agent' and 'agents' of a process: given either, or both when they agree."""
-    if not agents:
-        agents = [0 if agent is None else agent]
-    elif agent is not None and agent != agents[0]:
-        raise ParameterError(f"parameters 'agent', 'agents': agent {agent} is not the first of "
-                             f"agents {agents}")
-    return {"agent": agents[0], "agents": list(agents)}
-
-
-def _start(start: str | None, at: float | None) -> dict[str, Any]:
-    """'start' and 'start_time': at the given time, else now unless given otherwise."""
-    start = start or ("at" if at is not None else "now")
-    if start == "at" and at is None:
-        raise ParameterError("parameter 'start': at needs 'start_time' (the epoch of t = 0)")
-    if start != "at" and at is not None:
-        raise ParameterError(f"parameter 'start_time': a time of t = 0 with start {start}; "
-                             "give start:=at (or leave 'start' out)")
-    return {"start": start, "start_time": at}

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ParameterError
 from ..wire.modes import Mode
+from .configs import AgentConfig, config_values
 from .params import AGENT, GAINS, RUNTIME, check_gains, check_value
 
 if TYPE_CHECKING:
@@ -30,10 +31,11 @@ SPEC = {p.name: p for p in AGENT}
 GAINS_SET = frozenset(GAINS)
 
 
-def gains(model: Model, params: dict[str, Any]) -> Model:
+def gains(model: Model, config: AgentConfig) -> Model:
     """``model`` with the kappa, gamma and mass parameters of (A-1)/(A-2) (the parameters hold
     the scene's values unless given; a first-order model has no mass parameter)."""
-    return replace(model, **{k: params[k] for k in GAINS if params.get(k) is not None})
+    given = {k: getattr(config, k) for k in GAINS}
+    return replace(model, **{k: v for k, v in given.items() if v is not None})
 
 
 def validate(changes: Iterable[Parameter]) -> tuple[dict[str, Any] | None, str | None]:
@@ -51,14 +53,14 @@ def validate(changes: Iterable[Parameter]) -> tuple[dict[str, Any] | None, str |
 
 class RuntimeParams:
     """Mixin of realtime and bridge agents: ``watch_parameters()`` once, ``apply_runtime()``
-    each tick (True when something changed; ``self.params`` then holds the new values)."""
+    each tick (True when something changed; ``self.config`` then holds the new values)."""
 
     # what the agent (``agent_base.AgentBase``) it is mixed into provides
     node: Node
     log: RcutilsLogger
     scene: Scene
     model: Model
-    params: dict[str, Any]
+    config: AgentConfig
     mode: Mode
     state: State
     pending: dict[str, Any]
@@ -66,7 +68,7 @@ class RuntimeParams:
     def watch_parameters(self) -> None:
         """Take kappa and gamma from the parameters, then accept changes while running."""
         self.pending = {}
-        self.model = gains(self.scene.model, self.params)
+        self.model = gains(self.scene.model, self.config)
         self.rebuild_system()
         self.node.add_on_set_parameters_callback(self._on_set)
 
@@ -78,8 +80,8 @@ class RuntimeParams:
         accepted, reason = validate(changes)
         if accepted is not None and GAINS_SET & set(accepted):
             try:
-                check_gains(self.scene.model, self.mode, {**self.params, **self.pending,
-                                                          **accepted})
+                check_gains(self.scene.model, self.mode,
+                            {**config_values(self.config), **self.pending, **accepted})
             except ParameterError as exc:
                 accepted, reason = None, str(exc)
         if accepted is None:
@@ -94,9 +96,9 @@ class RuntimeParams:
             return False
         changed, self.pending = self.pending, {}
         old = {k: self._in_use(k) for k in changed}
-        self.params.update(changed)
+        self.config = replace(self.config, **changed)
         if GAINS_SET & set(changed):
-            self.model = gains(self.scene.model, self.params)
+            self.model = gains(self.scene.model, self.config)
             self.rebuild_system()
         described = ", ".join(f"{k} {old[k]:g} -> {self._in_use(k):g}" for k in changed)
         self.log.info(f"parameters applied at t = {self.state.t:.4g}: {described}")
@@ -104,7 +106,7 @@ class RuntimeParams:
 
     def _in_use(self, name: str) -> Any:
         """The value in use: the model's gains, else the parameter."""
-        return getattr(self.model, name) if name in GAINS else self.params[name]
+        return getattr(self.model if name in GAINS else self.config, name)
 
     def rebuild_system(self) -> None:
         raise NotImplementedError
@@ -114,5 +116,6 @@ class RuntimeParams:
         extra = {"kappa": float(self.model.kappa), "gamma": float(self.model.gamma)}
         if self.model.order == 2:
             extra["mass"] = float(self.model.mass)
-        extra.update({k: self.params[k] for k in RUNTIME if k not in extra and k not in GAINS})
+        extra.update({k: getattr(self.config, k) for k in RUNTIME
+                      if k not in extra and k not in GAINS})
         return "", extra

@@ -15,7 +15,9 @@ import sys
 from typing import TYPE_CHECKING
 
 from .. import wire
-from ..config.params import AGENT, RUNTIME, check, given_values, pin, resolve_agent
+from ..config.configs import AgentConfig, given_config, pin_config
+from ..config.params import RUNTIME
+from ..config.resolve import resolve_agent
 from ..process.shell import ros_main
 
 if TYPE_CHECKING:
@@ -42,15 +44,17 @@ def make_agent(argv: list[str] | None = None) -> ManagedAgent:
     """The managed agent of the mode the parameters ask for (checked before any topic is
     created); its lifecycle node configures and activates itself unless ``autostart`` is off.
 
-    Its parameters hold what it uses (``params.resolve_agent``: the scene's gains, integrator,
-    step and end time unless given); in realtime and bridge modes ``RUNTIME`` may be set."""
+    Its parameters hold what it uses (``resolve.resolve_agent``: the scene's gains, integrator,
+    step and end time unless given; the scene is loaded there, once); in realtime and bridge
+    modes ``RUNTIME`` may be set."""
     from ..agents.managed import ManagedAgent, lifecycle_node
 
     node = lifecycle_node("agent", wire.namespace(wire.DEFAULT_ENSEMBLE))
-    params = resolve_agent(check(AGENT, given_values(node, AGENT)))
-    pin(node, AGENT, params, RUNTIME if wire.mode_of(params["mode"]).ticks else ())
-    cls = agent_class(params["mode"])
-    return ManagedAgent(node, lambda n, ex: cls(n, params, ex), params["autostart"])
+    resolved = resolve_agent(given_config(node, AgentConfig))
+    config = resolved.config
+    pin_config(node, config, RUNTIME if wire.mode_of(config.mode).ticks else ())
+    cls = agent_class(config.mode)
+    return ManagedAgent(node, lambda n, ex: cls(n, resolved, ex), config.autostart)
 
 
 def main(args: list[str] | None = None) -> int:

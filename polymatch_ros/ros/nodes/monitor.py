@@ -61,7 +61,8 @@ from ...core.metrics import ensemble_metrics
 from ...core.model import GroupState, State
 from ...core.proximity import ComponentTracker
 from .. import wire
-from ..config.params import MONITOR, declare, resolve_monitor
+from ..config.configs import MonitorConfig, given_config, pin_config
+from ..config.resolve import resolve_monitor
 from ..process.shell import NodeApp, ros_main
 from ..wire.control import EnsembleControl
 from ..wire.intake import DropCounter, LeanReaders, received_at
@@ -74,6 +75,7 @@ if TYPE_CHECKING:
 
     from ...core.metrics import EnsembleMetrics
     from ...core.model import Model
+    from ...core.scenes.scene import Scene
     from ..wire.intake import MessageInfo
 
 #: how long the monitor waits for its report topics' readers (``report_readers``); the
@@ -88,22 +90,18 @@ REPORT_CPU_SHARE = 0.05
 
 
 class MonitorNode(NodeApp):
-    def __init__(self, node: Node, params: dict[str, Any]) -> None:
+    def __init__(self, node: Node, config: MonitorConfig, scene: Scene) -> None:
         from rclpy.executors import SingleThreadedExecutor
 
-        from ...core.scenes.scene import load_scene, resolve_scene_path
-
-        self.node, self.params = node, params
+        self.node, self.config = node, config
         self.log = node.get_logger()
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(node)
-        self.scene = load_scene(
-            resolve_scene_path(params["scene"]), {"time.t_end": params["t_end"] or None}
-        )
+        self.scene = scene  # loaded once, by ``resolve_monitor``
         self.model = self.scene.model
         self.grp = self.model.rotations
         self.n = self.model.n_agents
-        self.lockstep = wire.mode_of(params["mode"]).exact
+        self.lockstep = wire.mode_of(config.mode).exact
         self.drops = DropCounter(self.log)
         self.repeats = 0  # poses heard again at a stamp already heard: not a drop
         self.latest: dict[int, tuple[int, wire.Row, float]] = {}  # agent -> (t key, Row, heard)
@@ -125,7 +123,7 @@ class MonitorNode(NodeApp):
             # report, which would hold the report loop (and /clock) while the rounds run
             import scipy.optimize  # noqa: F401
         self._wire_up()
-        rate = params["report_rate"] if self.lockstep else params["rate"]
+        rate = config.report_rate if self.lockstep else config.rate
         self.report_period = 1.0 / rate
         self.report_due: Callable[[], None] = (
             self._report_completed if self.lockstep else self._report_latest
@@ -150,19 +148,19 @@ class MonitorNode(NodeApp):
         self.diag_pub = wire.publisher(node, "diagnostics")
         self.status_pub = wire.publisher(node, "status")
         self.cert_pub = wire.publisher(node, "certificate")
-        self.marker_pub = wire.publisher(node, "markers") if self.params["markers"] else None
+        self.marker_pub = wire.publisher(node, "markers") if self.config.markers else None
         self._wait_for_report_readers()
         self.readers = LeanReaders(node, "_poses")
-        k = self.params["agents_per_process"]
+        k = self.config.agents_per_process
         if k > 1:  # packed processes: a message per block and step (tick)
             for b in range(-(-self.n // k)):
                 self.readers.subscribe("state_block", self._block_receiver(b, k), dim, b,
-                                       self.params["mode"])
+                                       self.config.mode)
         else:
             for a in range(self.n):
                 self.readers.subscribe("state", self._receiver(a), dim, a,
-                                       self.params["mode"])
-        self.control = EnsembleControl(node, self.params["mode"])
+                                       self.config.mode)
+        self.control = EnsembleControl(node, self.config.mode)
         self.match = MatchServer(node, self.scene.tolerance, self.n, self.control)
         self.clock = SimClock(node) if self.lockstep else None  # /clock: the completed step's
 
@@ -172,7 +170,7 @@ class MonitorNode(NodeApp):
         and the agents, which wait for them (``pose_subscribers``), start.  So a run's recorder
         hears the first report too: the writers' and readers' endpoints are matched pair by
         pair, and a short run may report only once."""
-        want = self.params["report_readers"]
+        want = self.config.report_readers
         writers = [*self.pub.values(), self.diag_pub, self.status_pub, self.cert_pub]
         writers += [self.marker_pub] if self.marker_pub is not None else []
         deadline = time.monotonic() + REPORT_READERS_SECONDS
@@ -198,7 +196,7 @@ class MonitorNode(NodeApp):
     def _receiver(self, agent: int) -> Callable[[Any, MessageInfo], None]:
         """The callback of one agent's exchange topic (``wire.exchange``: only this run's
         messages are read, anything else is dropped and counted)."""
-        run_id = self.params["run_id"]
+        run_id = self.config.run_id
 
         def receive(msg: Any, info: MessageInfo) -> None:
             got, reason = wire.decode_exchange(msg, self.grp, self.model.dim, run_id, agent,
@@ -214,7 +212,7 @@ class MonitorNode(NodeApp):
     def _block_receiver(self, block: int, k: int) -> Callable[[Any, MessageInfo], None]:
         """The callback of one block's exchange topic (K agents per process): each
         row as one agent's message; a malformed row drops the whole message."""
-        run_id = self.params["run_id"]
+        run_id = self.config.run_id
 
         def receive(msg: Any, info: MessageInfo) -> None:
             got, reason = wire.decode_exchange_block(msg, self.grp, self.model.dim, run_id,
@@ -315,7 +313,7 @@ class MonitorNode(NodeApp):
         ``peer_timeout``."""
         self._drain()
         now = time.monotonic()
-        alive = [a for a, v in self.latest.items() if now - v[2] <= self.params["peer_timeout"]]
+        alive = [a for a, v in self.latest.items() if now - v[2] <= self.config.peer_timeout]
         if not alive:
             return
         rows = {a: wire.Row(self.latest[a][1].x, self.latest[a][1].rot) for a in alive}
@@ -381,13 +379,13 @@ class MonitorNode(NodeApp):
         t, met, heard = self.last if self.last is not None else (0.0, None, 0)
         return wire.RunRecord(
             role="monitor",
-            mode=self.params["mode"],
+            mode=self.config.mode,
             t=float(t),
             diameter=None if met is None else met.diameter,
             agents_heard=heard,
             reports=self.reports,
             dropped=dict(self.drops.counts),
-            run_id=int(self.params["run_id"]),
+            run_id=int(self.config.run_id),
         )
 
     def run(self) -> int:
@@ -474,7 +472,9 @@ def make_monitor(argv: list[str] | None = None) -> MonitorNode:
     from rclpy.node import Node
 
     node = Node("monitor", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE))
-    return MonitorNode(node, declare(node, MONITOR, resolve=resolve_monitor))
+    config, scene = resolve_monitor(given_config(node, MonitorConfig))
+    pin_config(node, config)
+    return MonitorNode(node, config, scene)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from ...core.model import Group, Model
     from ...core.scenes.scene import Scene
     from ...core.so import RotationGroup
+    from ..config.configs import MonitorConfig
     from ..wire.intake import DropCounter
 
 GROUP_COLOURS = [
@@ -33,7 +34,7 @@ class MonitorView(Protocol):
     """What these outputs read of the monitor (``monitor.MonitorNode``)."""
 
     node: Node
-    params: dict[str, Any]
+    config: MonitorConfig
     scene: Scene
     model: Model
     grp: RotationGroup
@@ -127,9 +128,9 @@ def _marker(mon: MonitorView, g: Group, a: int, colour: tuple[float, float, floa
     from geometry_msgs.msg import Point
     from visualization_msgs.msg import Marker
 
-    life = mon.params["peer_timeout"]
+    life = mon.config.peer_timeout
     m = Marker(type=Marker.LINE_LIST, action=Marker.ADD, ns=g.name, id=a)
-    m.header.frame_id = mon.params["frame_id"]
+    m.header.frame_id = mon.config.frame_id
     m.header.stamp = stamp
     m.scale.x = 0.03
     m.color.r, m.color.g, m.color.b = colour

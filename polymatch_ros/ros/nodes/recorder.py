@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ParameterError
 from .. import wire
-from ..config.params import Param, declare
+from ..config.configs import RecorderConfig, read_config
 from ..process.shell import NodeApp, ros_main
 from ..wire.recording import (
     RECORDER_DEPTH,
@@ -47,15 +47,6 @@ if TYPE_CHECKING:
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
 
-RECORDER = (
-    Param("output", "", "the MCAP file to write (replaced if it exists); required"),
-    Param("duration", 0.0, "stop after this many seconds (0 = at SIGINT or SIGTERM)",
-          (0.0, 1e9)),
-    Param("scene_file", "", "a scene file to attach (what `polymatch plot` draws); '' = none"),
-    Param("t_end", 0.0, "the run's end time, kept with the scene (0 = the scene's)",
-          (0.0, 1e12)),
-    Param("mode", "", "the run's mode, kept with the scene ('' = not a run)"),
-)
 #: string arrays, aligned: topic names; their types and writers' QoS keys ('' = as offered)
 LISTS = ("topics", "types", "qos")
 DRAIN_SECONDS = 1.0
@@ -107,19 +98,19 @@ def recorded_topics(lists: dict[str, list[str]]) -> list[RecordedTopic]:
 class Recorder(NodeApp):
     """Subscribes (raw) to the topics, writes each message to the MCAP file as it comes."""
 
-    def __init__(self, node: Node, params: dict[str, Any],
+    def __init__(self, node: Node, config: RecorderConfig,
                  topics: Sequence[RecordedTopic]) -> None:
         from rclpy.executors import SingleThreadedExecutor
 
-        if not params["output"]:
+        if not config.output:
             raise ParameterError("parameter 'output' is required (an .mcap file)")
-        self.node, self.params = node, params
+        self.node, self.config = node, config
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(node)
         self.stopping = False
         for sig in (signal.SIGINT, signal.SIGTERM):  # after rclpy's: the file is ours to end
             signal.signal(sig, self._stop)
-        self.file = RecordingWriter(params["output"])
+        self.file = RecordingWriter(config.output)
         self._attach_scene()
         self.waiting = [t for t in topics if not (t.type and t.qos)]
         offered = qos_profiles()
@@ -132,7 +123,7 @@ class Recorder(NodeApp):
         self.stopping = True
 
     def _attach_scene(self) -> None:
-        path = self.params["scene_file"]
+        path = self.config.scene_file
         if not path:
             return
         from ...core.scenes.scene import resolve_scene_path
@@ -141,8 +132,8 @@ class Recorder(NodeApp):
         path = resolve_scene_path(path)
         now = time.time_ns()
         self.file.attach(SCENE_ATTACHMENT, read_scene_file(path).encode(), "application/yaml", now)
-        self.file.metadata({"scene": os.path.abspath(path), "t_end": repr(self.params["t_end"]),
-                            "mode": self.params["mode"]})
+        self.file.metadata({"scene": os.path.abspath(path), "t_end": repr(self.config.t_end),
+                            "mode": self.config.mode})
 
     def _subscribe(self, name: str, type_: str, qos: QoSProfile,
                    offered: Sequence[QoSProfile]) -> Any:
@@ -170,7 +161,7 @@ class Recorder(NodeApp):
             self.waiting.remove(topic)
 
     def run(self) -> int:
-        duration = self.params["duration"]
+        duration = self.config.duration
         next_look = 0.0
         while not self.stopping:
             now = time.monotonic()
@@ -205,7 +196,7 @@ def make_recorder(argv: list[str] | None = None) -> Recorder:
 
     node = Node("recorder", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE))
     topics = recorded_topics(declare_lists(node))
-    return Recorder(node, declare(node, RECORDER), topics)
+    return Recorder(node, read_config(node, RecorderConfig), topics)
 
 
 def main(args: list[str] | None = None) -> int:

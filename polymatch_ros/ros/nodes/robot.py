@@ -37,44 +37,14 @@ from ...core.errors import ParameterError
 from ...core.robots.formation import positions
 from ...core.robots.robot_commands import saturate
 from ...core.robots.unicycle import unicycle_step
-from ..config.params import CMD_TYPES, Param, declare, scene_file
+from ..config.configs import RobotConfig, read_config
+from ..config.resolve import resolve_robot
 from ..process.shell import ros_main
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-ROBOT = (
-    Param("scene", str, "scene file (YAML) or shipped scene name: the initial pose; required; "
-          "shown as the file read"),
-    Param("agent", 0, "the agent whose initial pose the robot starts at", (0, 1_000_000)),
-    Param("rate", 50.0, "integration and pose publishing rate (Hz)", (0.1, 10000.0)),
-    Param("lag", 0.1, "actuator time constant (s): v' = (v_cmd - v) / lag (second order: of the "
-          "acceleration; 0: it follows the command at once)", (0.0, 1e3)),
-    Param("max_linear_speed", 1e6, "actuator linear speed limit (m/s)", (0.0, 1e6)),
-    Param("max_angular_speed", 1e6, "actuator angular speed limit (rad/s)", (0.0, 1e6)),
-    Param("position_noise", 0.0, "standard deviation of the measured position (m)", (0.0, 1e3)),
-    Param("angle_noise", 0.0, "standard deviation of the measured orientation (rad)", (0.0, 1.0)),
-    Param("seed", int, "noise seed: 1000 + agent unless given", (0, 2**31 - 1)),
-    Param("cmd_timeout", 0.5, "stop when no command came for this long (s)", (0.001, 1e6)),
-    Param("pose_type", "pose", "measured_pose is pose (PoseStamped) | odometry (second order)",
-          choices=("pose", "odometry")),
-    Param("cmd_type", "twist_stamped", "cmd_vel is twist_stamped (TwistStamped) | twist (Twist) "
-          "(first order)", choices=CMD_TYPES),
-    Param("command_frame", "world", "cmd_vel / cmd_accel components in the world | body frame",
-          choices=("world", "body")),
-    Param("frame_id", "world", "frame_id of the measured pose"),
-    Param("drive", "holonomic", "holonomic | unicycle (a differential-drive base: it follows "
-          "only linear.x and angular.z of a body-frame cmd_vel)",
-          choices=("holonomic", "unicycle")),
-    Param("pose_log", str, "file for one line per step: time, true and measured pose "
-          "(declared when given)"),
-)
 
-
-def resolve_robot(values: dict[str, Any]) -> dict[str, Any]:
-    """The robot's values: the scene file read, the noise seed 1000 + agent unless given."""
-    seed = 1000 + values["agent"] if values["seed"] is None else values["seed"]
-    return dict(values, scene=scene_file(values["scene"]), seed=seed)
 
 
 #: the columns of a ``pose_log`` line (world frame; quaternions x y z w)
@@ -183,7 +153,7 @@ class SimulatedRobot:
 class RobotNode:
     """The simulated robot as a node (``run()`` until Ctrl-C or SIGTERM)."""
 
-    def __init__(self, node: Node, params: dict[str, Any]) -> None:
+    def __init__(self, node: Node, config: RobotConfig) -> None:
         from ...core.scenes.scene import load_scene, resolve_scene_path
         from ..agents.bridge import (
             CMD_ACCEL,
@@ -194,44 +164,44 @@ class RobotNode:
             robot_qos,
         )
 
-        self.node, self.params = node, params
-        scene = load_scene(resolve_scene_path(params["scene"]))
+        self.node, self.config = node, config
+        scene = load_scene(resolve_scene_path(config.scene or ""))
         model = scene.model
-        if params["agent"] >= model.n_agents:
+        if config.agent >= model.n_agents:
             raise ParameterError(
-                f"parameter 'agent': {params['agent']} is not in the scene "
+                f"parameter 'agent': {config.agent} is not in the scene "
                 f"(0..{model.n_agents - 1})"
             )
         if model.dim > 3:
             raise ParameterError(f"robot: d = {model.dim}; robots live in 2-D or 3-D")
-        gi, row = model.group_of(params["agent"])
+        gi, row = model.group_of(config.agent)
         gs = scene.initial.groups[gi]
         assert gs is not None  # the scene's initial state has every group
         rot = model.rotations.to_matrices(model.rotations.take(gs.rot, [row]))[0]
         self.robot = SimulatedRobot(
-            positions(gs.x[[row]], scene.formation, scene.origin, np.array([params["agent"]]))[0],
-            rot, model.dim == 2, params["lag"],
-            params["max_linear_speed"], params["max_angular_speed"],
+            positions(gs.x[[row]], scene.formation, scene.origin, np.array([config.agent]))[0],
+            rot, model.dim == 2, config.lag,
+            config.max_linear_speed, config.max_angular_speed,
         )
         self.second_order = model.order == 2
-        if self.second_order and params["pose_type"] != "odometry":
+        if self.second_order and config.pose_type != "odometry":
             raise ParameterError("robot: a second-order scene publishes its velocity: "
                                  "pose_type:=odometry (nav_msgs/Odometry)")
-        self.rng = np.random.default_rng(params["seed"])
+        self.rng = np.random.default_rng(config.seed)
         self.command = (np.zeros(3), np.zeros(3), -math.inf)
         pose_qos, cmd_qos = robot_qos()
-        self.pose_msg = pose_class(params["pose_type"])
+        self.pose_msg = pose_class(config.pose_type)
         self.pose_pub = node.create_publisher(self.pose_msg, MEASURED_POSE, 10)
-        node.create_subscription(command_class(model.order, params["cmd_type"]),
+        node.create_subscription(command_class(model.order, config.cmd_type),
                                  CMD_ACCEL if self.second_order else CMD_VEL, self._command,
                                  cmd_qos)
         self.pose_log: TextIO | None = None
-        if params["pose_log"]:
+        if config.pose_log:
             try:
-                self.pose_log = open(params["pose_log"], "w", encoding="utf-8", buffering=1)
+                self.pose_log = open(config.pose_log, "w", encoding="utf-8", buffering=1)
             except OSError as exc:
                 raise ParameterError(f"parameter 'pose_log': {exc.strerror}: "
-                                     f"{params['pose_log']}") from None
+                                     f"{config.pose_log}") from None
             self.pose_log.write("# " + " ".join(POSE_LOG_COLUMNS) + "\n")
 
     def _command(self, msg: Any) -> None:
@@ -243,11 +213,11 @@ class RobotNode:
 
     def _publish(self) -> None:
         p, q = self.robot.measure(
-            self.rng, self.params["position_noise"], self.params["angle_noise"]
+            self.rng, self.config.position_noise, self.config.angle_noise
         )
         msg = self.pose_msg()
         msg.header.stamp = self.node.get_clock().now().to_msg()
-        msg.header.frame_id = self.params["frame_id"]
+        msg.header.frame_id = self.config.frame_id
         pose = msg.pose.pose if hasattr(msg, "child_frame_id") else msg.pose
         if hasattr(msg, "child_frame_id"):
             msg.child_frame_id = "base_link"
@@ -267,7 +237,7 @@ class RobotNode:
     def run(self) -> int:
         import rclpy
 
-        period = 1.0 / self.params["rate"]
+        period = 1.0 / self.config.rate
         last = time.monotonic()
         while rclpy.ok():
             rclpy.spin_once(self.node, timeout_sec=max(0.0, last + period - time.monotonic()))
@@ -284,12 +254,12 @@ class RobotNode:
         it is younger than ``cmd_timeout``, then the watchdog's stop (velocity to zero with the
         lag) for the rest of the step."""
         linear, angular, heard = self.command
-        valid = min(dt, max(0.0, heard + self.params["cmd_timeout"] - (now - dt)))
+        valid = min(dt, max(0.0, heard + self.config.cmd_timeout - (now - dt)))
         if valid > 0.0:
-            frame = self.params["command_frame"]
+            frame = self.config.command_frame
             if self.second_order:
                 self.robot.accelerate(valid, linear, angular, frame)
-            elif self.params["drive"] == "unicycle":
+            elif self.config.drive == "unicycle":
                 self.robot.roll(valid, linear[0], angular[2])
             else:
                 self.robot.step(valid, linear, angular, frame)
@@ -306,7 +276,7 @@ def make_robot(argv: list[str] | None = None) -> RobotNode:
     from rclpy.node import Node
 
     node = Node("robot", automatically_declare_parameters_from_overrides=False)
-    return RobotNode(node, declare(node, ROBOT, resolve=resolve_robot))
+    return RobotNode(node, read_config(node, RobotConfig, resolve_robot))
 
 
 def main(args: list[str] | None = None) -> int:

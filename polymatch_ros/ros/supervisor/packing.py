@@ -25,7 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ...core.errors import PolymatchError
-from .plan import Packing
+from ..wire.modes import Mode
 
 # rmw_fastrtps, under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, probes the first 32 participant
 # ports on 127.0.0.1 (its UDP maxInitialPeersRange): two participants beyond that never meet.
@@ -40,8 +40,24 @@ FULL_AGENT_NODES = 32
 
 
 @dataclass(frozen=True)
-class PackingChoice:
-    """Agents per process for this host, and why (the run's first line says it)."""
+class PackingAsked:
+    """What decides the agents per process: -k as asked and this host's own participants."""
+
+    requested: int | None      # -k; None: the mode's default (``choose_packing``)
+    monitor: bool              # the monitor is one more participant on this host
+    recorder: bool = False     # --record: the recorder is one more
+    mode: Mode = Mode.LOCKSTEP
+    agent_nodes: str = "auto"  # --agent-nodes as asked
+    whole: bool = True         # this host runs every agent (no --only): realtime may pack
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mode", Mode(self.mode))  # a mode's name is taken too
+
+
+@dataclass(frozen=True)
+class Packing:
+    """Agents per process for this host, and why (the run's first line says it): decided once,
+    with the run's plan (``plan.build_run_plan``)."""
 
     agents_per_process: int
     reason: str
@@ -53,14 +69,14 @@ def fewest_agents_per_process(n_agents: int, own: int) -> int:
     return -(-n_agents // (LOCALHOST_PARTICIPANTS - own))
 
 
-def choose_packing(packing: Packing, n_agents: int, localhost: bool) -> PackingChoice:
+def choose_packing(packing: PackingAsked, n_agents: int, localhost: bool) -> Packing:
     """-k as given (checked against the participant limit); else the measured rule of lockstep
     and of realtime (the whole run on this host), or one process per agent (bridge; realtime
     with ``--only``) while the processes fit; with the agent nodes for that packing
     (``agent_nodes``)."""
     choice = _agents_per_process(packing, n_agents, localhost)
     k = choice.agents_per_process
-    return PackingChoice(k, choice.reason, agent_nodes(packing.agent_nodes, min(k, n_agents)))
+    return Packing(k, choice.reason, agent_nodes(packing.agent_nodes, min(k, n_agents)))
 
 
 def agent_nodes(asked: str, k: int) -> str:
@@ -73,7 +89,7 @@ def agent_nodes(asked: str, k: int) -> str:
     return "full" if k <= FULL_AGENT_NODES else "lean"
 
 
-def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> PackingChoice:
+def _agents_per_process(packing: PackingAsked, n_agents: int, localhost: bool) -> Packing:
     own = 1 + int(packing.monitor) + int(packing.recorder)  # the runner, monitor, recorder
     need = fewest_agents_per_process(n_agents, own) if localhost else 1
     if packing.requested is not None:
@@ -84,22 +100,22 @@ def _agents_per_process(packing: Packing, n_agents: int, localhost: bool) -> Pac
                 f"LOCALHOST discovery reaches {LOCALHOST_PARTICIPANTS} per domain (rmw_fastrtps' "
                 f"initial-peer range); use -k {need} or more"
             )
-        return PackingChoice(packing.requested, f"-k {packing.requested} as asked")
+        return Packing(packing.requested, f"-k {packing.requested} as asked")
     if packing.mode.exact:
         k = max(need, min(n_agents, LOCKSTEP_AGENTS_PER_PROCESS))
-        return PackingChoice(k, f"lockstep's fastest measured packing, up to "
+        return Packing(k, f"lockstep's fastest measured packing, up to "
                                 f"{LOCKSTEP_AGENTS_PER_PROCESS} agents a process "
                                 f"(docs/bench/packing.md); -k 1: a process per agent")
     if packing.mode.packs and packing.whole:
         k = max(need, min(n_agents, REALTIME_AGENTS_PER_PROCESS))
-        return PackingChoice(k, f"realtime's measured packing: the least CPU a tick, up to "
+        return Packing(k, f"realtime's measured packing: the least CPU a tick, up to "
                                 f"{REALTIME_AGENTS_PER_PROCESS} agents a process "
                                 f"(docs/bench/realtime_scale.md); -k 1: a process per agent, "
                                 f"so that a crash costs one agent")
     if need > 1:
-        return PackingChoice(need, f"{n_agents} agents + {own} own processes exceed the "
+        return Packing(need, f"{n_agents} agents + {own} own processes exceed the "
                                    f"{LOCALHOST_PARTICIPANTS} DDS participants LOCALHOST "
                                    f"discovery reaches: the fewest agents a process that fit")
     why = "" if packing.whole else ", and other hosts' agents read agent_<i>/state (--only)"
-    return PackingChoice(1, f"{packing.mode}: a process per agent, so that a crash costs one "
+    return Packing(1, f"{packing.mode}: a process per agent, so that a crash costs one "
                             f"agent{why}")

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from .. import wire
+from ..config.configs import RecorderConfig, ros_args
 from ..wire.recording import run_topics
 from .children import Child
 from .plan import RunPlan
@@ -42,15 +43,12 @@ def recorder_argv(plan: RunPlan, directory: str) -> list[str]:
     params = os.path.join(directory, "recorder_params.yaml")
     with open(params, "w", encoding="utf-8") as fh:
         yaml.safe_dump({"/**": {"ros__parameters": lists}}, fh)
-    return [
-        sys.executable, "-m", "polymatch_ros.ros.nodes.recorder", "--ros-args",
-        "-r", f"__ns:={wire.namespace(plan.hosts.ensemble)}", "-r", "__node:=recorder",
-        "-p", f"output:={os.path.abspath(plan.outputs.record)}",
-        "-p", f"scene_file:={os.path.abspath(plan.scene_path)}",
-        "-p", f"t_end:={plan.scene.t_end!r}",
-        "-p", f"mode:={plan.mode}",
-        "--params-file", params,
-    ]
+    config = RecorderConfig(output=os.path.abspath(plan.outputs.record),
+                            scene_file=os.path.abspath(plan.scene_path), t_end=plan.scene.t_end,
+                            mode=plan.mode.value)
+    return [sys.executable, "-m", "polymatch_ros.ros.nodes.recorder", "--ros-args"] + ros_args(
+        config, namespace=wire.namespace(plan.hosts.ensemble), node="recorder",
+        params_file=params)
 
 
 def start_recorder(plan: RunPlan, env: dict[str, str], envs: DiscoveryEnvironments | None,

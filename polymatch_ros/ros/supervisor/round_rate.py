@@ -4,8 +4,9 @@
 In lockstep every integrator stage is one message round (``MethodInfo.rounds`` per step), so a
 method's wall time per simulated second is rounds per step / dt / rounds per second.  The
 rounds per second are measured here: the run `polymatch run SCENE --integrator M --dt DT
---t-end T --no-monitor --no-compare` would make (``runner.run`` on a ``RunPlan`` built here,
-every agent process with loopback discovery in a domain of its own), long enough for
+--t-end T --no-monitor --no-compare` would make (``runner.run`` on the plan
+``plan.build_run_plan`` makes of those options, every agent process with loopback discovery),
+long enough for
 ``rounds`` rounds, in a process of its own (``python -m`` this module): the runner hosts rclpy,
 whose teardown is bounded by ending that process (``teardown.end_process``), never the caller.
 The agents' run records (``wire.RunRecord.rounds_per_second``, counted after the first round,
@@ -29,9 +30,8 @@ from typing import IO
 
 from ...core.errors import PolymatchError
 from ...core.stepping.integrators import METHODS
-from ..wire import Mode, run_records
-from .packing import choose_packing
-from .plan import Packing
+from ..wire import run_records
+from .packing import PackingAsked, choose_packing
 
 __all__ = ["DEFAULT_ROUNDS", "RoundRate", "estimate_seconds", "main", "measure_round_rate"]
 
@@ -67,7 +67,8 @@ class RoundRate:
 
 def _processes(n_agents: int) -> int:
     """Agent processes `polymatch run --no-monitor` starts in lockstep (its default packing)."""
-    k = choose_packing(Packing(None, monitor=False), n_agents, localhost=True).agents_per_process
+    k = choose_packing(PackingAsked(None, monitor=False), n_agents,
+                       localhost=True).agents_per_process
     return -(-n_agents // k)
 
 
@@ -138,12 +139,9 @@ def _bounded(argv: list[str], out: IO[str], seconds: float) -> int:
 
 def main(argv: Sequence[str] | None = None) -> None:
     """The measuring process: SCENE METHOD DT T_END TIMEOUT RECORDS; ends with the run's code."""
-    from ...core.scenes.scene import load_scene
-    from ...core.stepping.simulate import plan
-    from ..network.discovery import parse_discovery_spec
     from ..process.teardown import end_process
     from . import runner
-    from .plan import Hosts, Outputs, RunPlan, Timing
+    from .plan import RunOptions, build_run_plan
 
     p = argparse.ArgumentParser(prog="round_rate")
     for name in ("scene", "method"):
@@ -154,17 +152,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = p.parse_args(argv)
     code = 1
     try:
-        scene = load_scene(args.scene, {"time.t_end": args.t_end})
-        numerics = plan(scene, args.method, args.dt, distributed=True)
-        n = scene.model.n_agents
-        hosts = Hosts(ENSEMBLE, tuple(range(n)), False, True, parse_discovery_spec("localhost"),
-                      None)
-        timing = Timing(timeout=args.timeout, hold=1e9, rate=50.0, time_scale=1.0,
-                        peer_timeout=1.0, delay=0.0, round_timeout=10.0)
-        outputs = Outputs(save=None, records=args.records, quiet=True, verbose=False,
-                          compare=False)
-        code = runner.run(RunPlan(args.scene, scene, numerics, Mode.LOCKSTEP, hosts, timing,
-                                  outputs))
+        # `polymatch run SCENE --integrator M --dt DT --t-end T --no-monitor --no-compare
+        # --quiet`, with the records kept and no stop before t_end
+        options = RunOptions(args.scene, integrator=args.method, dt=args.dt, t_end=args.t_end,
+                             timeout=args.timeout, hold=1e9, ensemble=ENSEMBLE, monitor=False,
+                             compare=False, quiet=True, records=args.records)
+        code = runner.run(build_run_plan(options))
     except PolymatchError as exc:
         print(f"polymatch: error: {json.dumps(str(exc))[1:-1]}", file=sys.stderr)
         code = exc.exit_code

@@ -19,12 +19,14 @@ import sys
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import FrameType
+from typing import Any
 
 from ...console import Progress
 from ...core.errors import PolymatchError
 from .. import wire
+from ..config.configs import AgentConfig, MonitorConfig, ros_args
 from ..network.discovery import (
     DISCOVERY_VARIABLES,
     DiscoveryEnvironments,
@@ -36,18 +38,10 @@ from ..network.environment import describe_domain, ros_environment, run_domain_i
 from ..process.teardown import teardown_watchdog
 from ..wire.checkpoint import Checkpoint, CheckpointFile
 from . import bridge_run
-from .children import (  # noqa: F401 (API)
-    REMOTE_FINAL_POSE_SECONDS,
-    Child,
-    Supervision,
-    describe_agents,
-    parse_only,
-    partition,
-    stop_all,
-)
-from .packing import PackingChoice, choose_packing
+from .children import Child, describe_agents, partition, stop_all
 from .plan import RunPlan
 from .recorder_child import report_recording, start_recorder
+from .run_loop import REMOTE_FINAL_POSE_SECONDS, Supervision
 from .shm import SegmentLedger
 from .summary import RunOutcome, report, verdict
 from .watcher import Watcher
@@ -56,13 +50,12 @@ from .watcher import Watcher
 @dataclass(frozen=True)
 class RunContext:
     """A run as it starts on this host: its plan, the ROS environment and domain of its
-    processes, the discovery environments (None for LOCALHOST) and the packing chosen."""
+    processes and the discovery environments (None for LOCALHOST)."""
 
     plan: RunPlan
     env: dict[str, str]                   # every process's environment (LOCALHOST discovery)
     domain: int                           # ROS_DOMAIN_ID
     envs: DiscoveryEnvironments | None    # client/super-client/server overlays, --discovery
-    packing: PackingChoice                # -k as given, or chosen (``choose_packing``)
     shared_domain: bool                   # the user's domain, or discovery beyond loopback
     directory: str                        # the run's private temporary directory
     run_id: int                           # the stage messages' and checkpoints' run id
@@ -70,7 +63,7 @@ class RunContext:
 
     @property
     def agents_per_process(self) -> int:
-        return self.packing.agents_per_process
+        return self.plan.packing.agents_per_process
 
     @property
     def exchange_blocks(self) -> int | None:
@@ -96,9 +89,6 @@ class RunContext:
         "super_client": monitor and recorder) under the run's discovery; LOCALHOST: ``env``."""
         return self.env if self.envs is None else self.envs.for_role(role, self.env)
 
-    def checkpoint_args(self, name: str) -> list[str]:
-        path = self.checkpoint_path(name)
-        return ["-p", f"checkpoint:={path}"] if path else []
 
 
 def run(plan: RunPlan) -> int:
@@ -116,12 +106,8 @@ def run(plan: RunPlan) -> int:
         env = ros_environment(domain)
         spec = plan.hosts.discovery
         envs = None if spec.kind == "localhost" else discovery_environments(spec, directory)
-        packing = choose_packing(
-            plan.packing, len(plan.hosts.agents), envs is None and _localhost(env)
-        )
         ledger = SegmentLedger()
-        context = RunContext(plan, env, domain, envs, packing, shared, directory,
-                             _run_id(plan), ledger)
+        context = RunContext(plan, env, domain, envs, shared, directory, _run_id(plan), ledger)
         _adopt(env if envs is None else envs.for_role("super_client", env))
         server = _start_server(context, directory)
         try:
@@ -146,7 +132,7 @@ def _node_names(context: RunContext, runner: str) -> list[str]:
     names += ["recorder"] if plan.outputs.record is not None else []
     for agents in partition(plan.hosts.agents, context.agents_per_process):
         names.append(_process_name(agents))
-        if len(agents) > 1 and context.packing.agent_nodes != "none":  # ``nodes.hosted``
+        if len(agents) > 1 and context.plan.packing.agent_nodes != "none":  # ``nodes.hosted``
             names += [f"agent_{a}" for a in agents]
     return names
 
@@ -154,10 +140,6 @@ def _node_names(context: RunContext, runner: str) -> list[str]:
 def _process_name(agents: Sequence[int]) -> str:
     """The node name of the process that hosts ``agents``."""
     return f"agent_{agents[0]}" if len(agents) == 1 else f"agents_{agents[0]}_{agents[-1]}"
-
-
-def _localhost(env: dict[str, str]) -> bool:
-    return env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
 
 
 def _adopt(env: dict[str, str]) -> None:
@@ -207,77 +189,45 @@ def _run_id(plan: RunPlan) -> int:
     return 1 + int.from_bytes(digest[:4], "big") % (2**31 - 2)
 
 
-def _node_args(context: RunContext) -> tuple[list[str], list[str]]:
-    """(--ros-args of the monitor, of every agent process) without the node's own remaps."""
+def _configs(context: RunContext) -> tuple[MonitorConfig, AgentConfig]:
+    """(the monitor's configuration, every agent process's before its own agents)."""
     plan, timing, k = context.plan, context.plan.timing, context.agents_per_process
-    common = [
-        "-r",
-        f"__ns:={wire.namespace(plan.hosts.ensemble)}",
-        "-p",
-        f"scene:={os.path.abspath(plan.scene_path)}",
-        "-p",
-        f"t_end:={plan.scene.t_end!r}",
-    ]
-    agent = common + [
-        "-p",
-        f"mode:={plan.mode}",
-        "-p",
-        f"run_id:={context.run_id}",
-        "-p",
-        f"agents_per_process:={k}",
-        "-p",
-        f"agent_nodes:={context.packing.agent_nodes}",
+    scene, t_end = os.path.abspath(plan.scene_path), plan.scene.t_end
+    recorded = int(plan.outputs.record is not None)
+    agent = AgentConfig(
+        scene=scene, t_end=t_end, mode=plan.mode.value, run_id=context.run_id,
+        agents_per_process=k, agent_nodes=context.plan.packing.agent_nodes,
         # the recorder (--record) reads every pose, the monitor every state of the exchange
-        "-p",
-        f"pose_subscribers:={int(plan.outputs.record is not None)}",
-        "-p",
-        f"exchange_subscribers:={int(plan.hosts.monitor)}",
-        "-p",
-        "autostart:=false",  # the runner drives the lifecycle (``lifecycle_driver``)
-        "-p",
-        f"integrator:={plan.numerics.name}",
-        "-p",
-        f"round_timeout:={timing.round_timeout!r}",
+        pose_subscribers=recorded, exchange_subscribers=int(plan.hosts.monitor),
+        autostart=False,  # the runner drives the lifecycle (``lifecycle_driver``)
+        integrator=plan.numerics.name, round_timeout=timing.round_timeout,
         # start-up of many processes on few cores takes a while: scale the patience
-        "-p",
-        f"discovery_timeout:={30.0 + 2.0 * len(partition(plan.n_agents, k))!r}",
-        "-p",
-        f"peer_timeout:={timing.peer_timeout!r}",
-        "-p",
-        f"peers_restart:={'true' if plan.on_failure.restart else 'false'}",
-        "-p",
+        discovery_timeout=30.0 + 2.0 * len(partition(plan.n_agents, k)),
+        peer_timeout=timing.peer_timeout, peers_restart=plan.on_failure.restart,
         # every agent keeps its latched final pose alive until the lead host has them all: a
         # writer that exits before the runner's reader matched it takes its sample along
-        f"hold_final:={REMOTE_FINAL_POSE_SECONDS!r}",
-    ]
-    agent += _stepping_args(plan)
+        hold_final=REMOTE_FINAL_POSE_SECONDS,
+    )
+    agent = replace(agent, **_stepping(plan))
     if plan.bridge is not None:
-        agent += bridge_run.agent_args(plan.bridge, plan.scene.model.order)
-    monitor = common + ["-p", f"mode:={plan.mode.monitored_as}"]
-    monitor += ["-p", f"peer_timeout:={timing.peer_timeout!r}", "-p", f"run_id:={context.run_id}"]
-    monitor += ["-p", f"agents_per_process:={k}"]  # how the agents' states come
-    # the recorder (--record) hears every report, the first too (``report_readers``)
-    monitor += ["-p", f"report_readers:={int(plan.outputs.record is not None)}"]
-    if plan.realtime:
-        monitor += ["-p", "rate:=10.0"]
+        agent = replace(agent, **bridge_run.agent_fields(plan.bridge, plan.scene.model.order))
+    monitor = MonitorConfig(
+        scene=scene, t_end=t_end, mode=plan.mode.monitored_as.value,
+        peer_timeout=timing.peer_timeout, run_id=context.run_id,
+        agents_per_process=k,  # how the agents' states come
+        # the recorder (--record) hears every report, the first too (``report_readers``)
+        report_readers=recorded,
+    )
     return monitor, agent
 
 
-def _stepping_args(plan: RunPlan) -> list[str]:
-    """The agents' --ros-args of how they step: on the wall clock (realtime), or by dt."""
+def _stepping(plan: RunPlan) -> dict[str, Any]:
+    """How the agents step: on the wall clock (realtime), or by dt."""
     timing = plan.timing
     if plan.realtime:
-        return [
-            "-p",
-            f"rate:={timing.rate!r}",
-            "-p",
-            f"time_scale:={timing.time_scale!r}",
-            "-p",
-            "start:=control",
-            "-p",
-            f"delay:={timing.delay!r}",
-        ]
-    return ["-p", f"dt:={plan.numerics.dt!r}"]
+        return dict(rate=timing.rate, time_scale=timing.time_scale, start="control",
+                    delay=timing.delay)
+    return dict(dt=plan.numerics.dt)
 
 
 def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
@@ -288,42 +238,23 @@ def _start(context: RunContext) -> tuple[Child | None, list[Child]]:
     """
     plan = context.plan
     agent_env, monitor_env = context.role_env("client"), context.role_env("super_client")
-    mon_args, agent_args = _node_args(context)
+    monitor_config, agent_config = _configs(context)
+    namespace = wire.namespace(plan.hosts.ensemble)
     py = [sys.executable, "-m"]
     monitor = None
     if plan.hosts.monitor:
-        monitor = Child(
-            "monitor",
-            py
-            + ["polymatch_ros.ros.nodes.monitor", "--ros-args"]
-            + mon_args
-            + ["-r", "__node:=monitor"],
-            monitor_env,
-            log_dir=plan.outputs.logs,
-        )
+        argv = py + ["polymatch_ros.ros.nodes.monitor", "--ros-args"]
+        argv += ros_args(monitor_config, namespace=namespace, node="monitor")
+        monitor = Child("monitor", argv, monitor_env, log_dir=plan.outputs.logs)
     children = []
     for agents in partition(plan.hosts.agents, context.agents_per_process):
         name = _process_name(agents)
-        sel = (
-            ["-p", f"agent:={agents[0]}"]
-            if len(agents) == 1
-            else ["-p", "agents:=[" + ",".join(map(str, agents)) + "]"]
-        )
-        children.append(
-            Child(
-                name,
-                py
-                + ["polymatch_ros.ros.nodes.agent", "--ros-args"]
-                + agent_args
-                + sel
-                + context.checkpoint_args(name)
-                + (bridge_run.remaps(agents[0]) if plan.bridge is not None else [])
-                + ["-r", f"__node:={name}"],
-                agent_env,
-                agents,
-                plan.outputs.logs,
-            )
-        )
+        hosted = (dict(agent=agents[0]) if len(agents) == 1 else dict(agents=list(agents)))
+        config = replace(agent_config, checkpoint=context.checkpoint_path(name), **hosted)
+        remaps = bridge_run.remaps(agents[0]) if plan.bridge is not None else None
+        argv = py + ["polymatch_ros.ros.nodes.agent", "--ros-args"]
+        argv += ros_args(config, namespace=namespace, node=name, remaps=remaps)
+        children.append(Child(name, argv, agent_env, agents, plan.outputs.logs))
     return monitor, children
 
 
@@ -340,9 +271,9 @@ def _announce(context: RunContext) -> None:
     processes = len(partition(plan.hosts.agents, k))
     packed = (f"{processes} processes" if k == 1 else
               f"{processes} process{'es' if processes > 1 else ''} of up to {k}, agent nodes "
-              f"{context.packing.agent_nodes}")
+              f"{context.plan.packing.agent_nodes}")
     print(
-        f"polymatch run: {which} in {packed} ({context.packing.reason}), "
+        f"polymatch run: {which} in {packed} ({context.plan.packing.reason}), "
         f"{plan.mode}, integrator {plan.numerics.name}, dt {plan.numerics.dt:g}, "
         f"ROS_DOMAIN_ID={context.domain}, discovery {discovery}, "
         f"ensemble {wire.namespace(plan.hosts.ensemble)}",
