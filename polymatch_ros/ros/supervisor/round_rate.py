@@ -73,10 +73,10 @@ def _processes(n_agents: int) -> int:
 
 
 def estimate_seconds(n_agents: int, rounds: int = DEFAULT_ROUNDS) -> float:
-    """A generous estimate of the measurement's wall time: start-up of the processes (about
-    1.5 s each on an idle machine, growing with the load per core: 6 agent processes took 33 s
-    at a load of 5.5 per core) and their rounds (about 130 rounds/s with 8 processes on 2
-    cores, falling with their square)."""
+    """A generous estimate of the measurement's wall time: start-up of the processes (linear in
+    their number, growing with the load per core) and their rounds (a round rate falling with
+    the square of the processes: docs/bench/scaling.md and packing.md hold the measured rates
+    the constants below stay above)."""
     procs = _processes(n_agents)
     load = os.getloadavg()[0] / (os.cpu_count() or 1)
     return 5.0 + (1.5 + 0.6 * load) * procs + rounds * procs ** 2 / 6000.0
