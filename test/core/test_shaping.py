@@ -19,8 +19,20 @@ from polymatch_ros.core.robots.shaping import CommandShaper, shaper_for
 from polymatch_ros.core.robots.unicycle import point_ahead, unicycle_step
 from polymatch_ros.core.scenes.scene import load_scene
 
-LIMITS = {"command_frame": "world", "max_linear_speed": 1e6, "max_angular_speed": 1e6,
-          "max_linear_accel": 1e6, "max_angular_accel": 1e6}
+#: a bridged agent's shaping options, unbounded (``ShapingOptions``; the tests set what they
+#: vary)
+UNBOUNDED_OPTIONS = dict(drive="holonomic", axle_offset=0.2, command_frame="world", rate=20.0,
+                         safety_radius=0.0, safety_alpha=0.0, safety_latency=0.05,
+                         safety_stale=0.5, max_linear_speed=1e6, max_angular_speed=1e6,
+                         max_linear_accel=1e6, max_angular_accel=1e6)
+
+
+def options(**given):
+    """Shaping options: ``UNBOUNDED_OPTIONS`` with ``given`` in their place."""
+    return SimpleNamespace(**{**UNBOUNDED_OPTIONS, **given})
+
+
+LIMITS = options()
 OFFSETS = [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.5]]
 
 
@@ -90,7 +102,7 @@ def test_peers_heard_late_are_kept_at_the_distance_they_can_close():
 
 def test_unicycle_command_moves_the_point_ahead_with_the_filtered_velocity():
     scene = _scene()
-    shaper = shaper_for(scene, 0, {"drive": "unicycle", "axle_offset": 0.25})
+    shaper = shaper_for(scene, 0, options(drive="unicycle", axle_offset=0.25))
     heading = 0.7
     axle = np.array([0.1, -0.2])
     world = np.array([point_ahead(axle, heading, 0.25), [2.0, -1.0], [0.5, 2.5]])
@@ -121,6 +133,6 @@ def test_safety_without_a_speed_bound_is_refused_in_one_line():
     """The discs of where a peer may be need the robots' speed bound: none given, one line."""
     scene = _scene(safety={"radius": 0.4})
     with pytest.raises(ParameterError, match="^the safety filter needs the robots' speed bound"):
-        shaper_for(scene, 0, {})
-    shaper = shaper_for(scene, 0, {"max_linear_speed": 1.5, "rate": 20.0, "safety_latency": 0.1})
+        shaper_for(scene, 0, options())
+    shaper = shaper_for(scene, 0, options(max_linear_speed=1.5, rate=20.0, safety_latency=0.1))
     assert shaper.bounds.speed == 1.5 and abs(shaper.bounds.horizon - 0.15) < 1e-15

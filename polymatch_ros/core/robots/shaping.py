@@ -16,9 +16,9 @@ peer too old to bound that is near holds the robot (``safety.stale_nearby``).  N
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -123,7 +123,7 @@ class CommandShaper:
         return got.value
 
     def command(self, system: System, gi: int, row: int, ensemble: Sequence[Any],
-                own: Any, rot: np.ndarray, t: float, p: dict[str, Any],
+                own: Any, rot: np.ndarray, t: float, p: ShapingOptions,
                 sight: PeerSight | None = None, own_age: float = 0.0) -> Twist:
         """The command of local row ``row`` of group gi (first order: a twist; second order: an
         acceleration), ``own`` the measured state (x, rot, v, w) measured ``own_age`` s ago,
@@ -135,16 +135,16 @@ class CommandShaper:
                                                coupling)
             brake = -(self.model.gamma / self.model.mass) * own.v
             linear = self._filter(t, accel[0], own.x, sight, brake, own.v, own_age)
-            return twist_command(linear, w_dot[0], rot, p["command_frame"],
-                                 p["max_linear_accel"], p["max_angular_accel"])
+            return twist_command(linear, w_dot[0], rot, p.command_frame, p.max_linear_accel,
+                                 p.max_angular_accel)
         velocity, skew = model_rates(system, gi, x, own_rot, coupling)
         linear = self._filter(t, velocity[0], own.x, sight, np.zeros_like(velocity[0]),
                               own_age=own_age)
         self.last_linear = linear
         if self.drive == "unicycle":
-            return self._unicycle(linear, rot, p["max_linear_speed"], p["max_angular_speed"])
-        return twist_command(linear, skew[0], rot, p["command_frame"], p["max_linear_speed"],
-                             p["max_angular_speed"])
+            return self._unicycle(linear, rot, p.max_linear_speed, p.max_angular_speed)
+        return twist_command(linear, skew[0], rot, p.command_frame, p.max_linear_speed,
+                             p.max_angular_speed)
 
     def _unicycle(self, velocity: np.ndarray, rot: np.ndarray, max_linear: float,
                   max_angular: float) -> Twist:
@@ -167,32 +167,71 @@ class CommandShaper:
                 "safety_deadlock": "yes" if self.watch.deadlocked else "no"}
 
 
-def motion_bounds(params: Mapping[str, Any]) -> MotionBounds:
+class ShapingOptions(Protocol):
+    """What the shaper takes of a bridged agent's parameters (``ros.config``'s agent table
+    gives each, with its default and range; the agent's typed configuration is one)."""
+
+    @property
+    def drive(self) -> str: ...
+
+    @property
+    def axle_offset(self) -> float: ...
+
+    @property
+    def command_frame(self) -> str: ...
+
+    @property
+    def rate(self) -> float: ...
+
+    @property
+    def safety_radius(self) -> float: ...
+
+    @property
+    def safety_alpha(self) -> float: ...
+
+    @property
+    def safety_latency(self) -> float: ...
+
+    @property
+    def safety_stale(self) -> float: ...
+
+    @property
+    def max_linear_speed(self) -> float: ...
+
+    @property
+    def max_angular_speed(self) -> float: ...
+
+    @property
+    def max_linear_accel(self) -> float: ...
+
+    @property
+    def max_angular_accel(self) -> float: ...
+
+
+def motion_bounds(options: ShapingOptions) -> MotionBounds:
     """What the filter assumes of the robots, from a bridged agent's parameters: a command acts
     one period (``rate``) plus ``safety_latency``; the robots' speed bound ``max_linear_speed``
     (on a unicycle base the point ahead's: hypot(v, axle_offset omega) at the limits), their
     acceleration bound ``max_linear_accel``, and ``safety_stale``."""
-    speed = float(params.get("max_linear_speed", 1e6))
-    if params.get("drive", "holonomic") == "unicycle":
-        speed = math.hypot(speed, params.get("axle_offset", 0.2)
-                           * params.get("max_angular_speed", 1e6))
-    return MotionBounds(1.0 / params.get("rate", 20.0) + params.get("safety_latency", 0.05),
-                        speed, float(params.get("max_linear_accel", 1e6)),
-                        float(params.get("safety_stale", 0.5)))
+    speed = float(options.max_linear_speed)
+    if options.drive == "unicycle":
+        speed = math.hypot(speed, options.axle_offset * options.max_angular_speed)
+    return MotionBounds(1.0 / options.rate + options.safety_latency, speed,
+                        float(options.max_linear_accel), float(options.safety_stale))
 
 
-def shaper_for(scene: Any, agent: int, params: Mapping[str, Any]) -> CommandShaper:
+def shaper_for(scene: Any, agent: int, options: ShapingOptions) -> CommandShaper:
     """The shaper of a bridged agent's parameters: ``drive``, ``axle_offset``, and
     ``safety_radius`` / ``safety_alpha`` (0: the scene's ``safety``, alpha 1 without one), and
     what the filter assumes of the robots (``motion_bounds``)."""
     spec = scene.safety
-    radius, alpha = params.get("safety_radius", 0.0), params.get("safety_alpha", 0.0)
+    radius, alpha = options.safety_radius, options.safety_alpha
     if radius > 0:
         spec = SafetySpec(radius, alpha if alpha > 0 else (spec.alpha if spec else 1.0))
     elif spec is not None and alpha > 0:
         spec = replace(spec, alpha=alpha)
-    if spec is not None and not params.get("max_linear_speed", UNBOUNDED) < UNBOUNDED:
+    if spec is not None and not options.max_linear_speed < UNBOUNDED:
         raise ParameterError("the safety filter needs the robots' speed bound: "
                              "max_linear_speed (m/s; polymatch run --max-linear-speed)")
-    return CommandShaper(scene, agent, params.get("drive", "holonomic"),
-                         params.get("axle_offset", 0.2), spec, motion_bounds(params))
+    return CommandShaper(scene, agent, options.drive, options.axle_offset, spec,
+                         motion_bounds(options))

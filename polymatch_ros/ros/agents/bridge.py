@@ -57,7 +57,6 @@ from ...core.robots.robot_commands import (
 from ...core.robots.safety import PeerSight
 from ...core.robots.shaping import shaper_for
 from .. import wire
-from ..config.configs import config_values
 from ..config.runtime_params import RuntimeParams
 from .agent_base import AgentBase
 from .realtime import PeerTable, RealtimeAgent
@@ -153,7 +152,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
             raise ParameterError("mode bridge: one agent per process (one robot each)")
         super()._configure(resolved)
         self.rebuild_system()  # refuses d >= 4 and undamped second order before any topic
-        self.shaper = shaper_for(self.scene, self.layout.local[0], config_values(config))
+        self.shaper = shaper_for(self.scene, self.layout.local[0], config)
         if self.model.order == 2 and config.pose_type != "odometry":
             raise ParameterError(
                 "mode bridge: a second-order scene needs the robot's velocity: "
@@ -281,7 +280,7 @@ class BridgeAgent(RuntimeParams, AgentBase):
         rot = self.grp.to_matrices(own.rot)[0]
         sight = self._peer_sight() if self.shaper.safety is not None else None
         return self.shaper.command(self.system, gi, row, ensemble, own, rot, self.state.t,
-                                   config_values(self.config), sight, time.monotonic() - own.heard)
+                                   self.config, sight, time.monotonic() - own.heard)
 
     def _peer_sight(self) -> PeerSight:
         """Every peer ever heard, silent ones too (a robot dropped from the sums is still in
