@@ -12,11 +12,12 @@ vectorised over them (the core's ``drive`` over the process's rows, as in lockst
 latest states the process has of the other processes' agents, and it publishes their states in
 one message a tick (``states/block_<b>``, read as one message per peer process).
 
-A tick's work: wait on the agent node (control, services, parameters) until the tick is due,
-take what the peers' readers hold (``PeerTable.drain``: straight from the middleware, at
-most a few states per reader), step, publish.  The peers' poses do not wake the agent between
-ticks: their readers keep the newest (depth 1), and the middleware's reception time stamps
-each one for the clock offsets and the silence timeout.
+A tick's work: sleep until the tick is due, serving the agent node (control, services,
+parameters) a few times a second, take what the peers' readers hold (``PeerTable.drain``:
+straight from the middleware, the newest state of each peer, decoded together), step,
+publish.  The peers' poses do not wake the agent between ticks: their readers keep the
+newest (depth 1), and the middleware's reception time stamps each one for the clock offsets
+and the silence timeout.
 """
 
 from __future__ import annotations
@@ -49,6 +50,9 @@ if TYPE_CHECKING:
 
 #: per group the arrays the core asks for (``wire.assemble``), None for groups not needed
 Ensemble = tuple[SimpleNamespace | None, ...]
+#: s between two spins of the agent node while ticking: control commands, service calls and
+#: parameters are taken within this long (as in lockstep)
+SERVE_PERIOD = 0.1
 
 
 class PeerTable:
@@ -148,7 +152,7 @@ class PeerTable:
         if self.layout.blocks:
             self.readers.drain(per_reader=4)
             return
-        taken = self.readers.take_newest(bound=4)
+        taken = self.readers.take_newest(bound=1)  # depth 1: a reader holds one at most
         got = wire.decode_exchanges([(self.reader_agents[i], msg) for i, msg, _ in taken],
                                     self.grp, self.model.dim, self.run_id, self.t_max)
         for (_, _, info), (agent, motion, reason) in zip(taken, got):
@@ -282,6 +286,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         self.peers = PeerTable.of_agent(self, self.clock)
         # process CPU time (s) when the ticks began and ended
         self.cpu_span: tuple[float, float | None] | None = None
+        self.served = 0.0  # monotonic time the agent node was last served (``_wait_tick``)
         self.watch_parameters()
 
     def rebuild_system(self) -> None:
@@ -334,13 +339,20 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         return epoch
 
     def _wait_tick(self, next_tick: float, period: float) -> None:
-        """Serve the agent node (control, services, parameters) until the tick is due; the
-        peers' poses wait in their readers for ``PeerTable.active``."""
+        """Sleep until the tick is due, serving the agent node (control, services, parameters)
+        every ``SERVE_PERIOD`` s, not at every tick: each spin rebuilds a wait set of all the
+        node's entities, which at 20 Hz and more cost a tick as much as its step.  The peers'
+        poses wait in their readers for ``PeerTable.active``."""
         while True:
-            left = next_tick - time.monotonic()
+            now = time.monotonic()
+            left = next_tick - now
             if left <= 0 or self.stop_requested:
                 break
-            self.spin_once(min(left, 0.05))
+            if now - self.served >= SERVE_PERIOD:
+                self.spin_once(0.0)
+                self.served = time.monotonic()
+                continue
+            time.sleep(min(left, self.served + SERVE_PERIOD - now))
         if time.monotonic() - next_tick > period:  # behind schedule: the CPU is short
             self.late_ticks += 1
 
