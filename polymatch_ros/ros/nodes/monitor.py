@@ -36,9 +36,9 @@ In lockstep it collects the steps' states the agents send at its pace (``exchang
 ``state_stride``) and reports, at most ``report_rate`` times a second, the latest simulated time
 that every agent's state has reached (its loop, at that rate, takes the states that came since
 its last report and publishes it; packed processes' block messages are held undecoded by step,
-and only the step a report shows is decoded, ``held_steps``); in realtime at ``rate`` Hz from the latest poses, taken only
-then.  Either way its reports take at most ``REPORT_CPU_SHARE`` of a core: where one costs
-more (a large ensemble), the reports come less often.
+and only the step a report shows is decoded, ``held_steps``); in realtime at ``rate`` Hz from
+the latest poses, taken only then.  Either way its reports take at most ``REPORT_CPU_SHARE``
+of a core: where one costs more (a large ensemble), the reports come less often.
 It ends on SIGINT or SIGTERM (exit 0), in lockstep after one more report of the latest step
 completed, and never in the middle of a report.
 The headline topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo`
