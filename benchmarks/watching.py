@@ -6,7 +6,8 @@ with ``--no-monitor``, the two alternating ``--repeats`` times, which one first 
 too (so that the machine's drift hits them alike).  A run's
 rate is the mean of its agent processes' rounds/s (their run records); the table gives the
 medians and their ratio, with the monitor over without: the monitor reads the agents' states at
-its report rate (``nodes.state_stride``), and should cost the run next to nothing.
+its report rate (``agents.state_stride``), decodes only the steps it reports
+(``nodes.held_steps``), and should cost the run next to nothing.
 
 The machine is shared: each run also gives the CPU the rest of the machine took meanwhile
 (``others``: the busy time of /proc/stat less the run's own processes' CPU time, in cores), and
