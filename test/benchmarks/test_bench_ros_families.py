@@ -10,6 +10,7 @@ killing and restarting processes, and what it measures is asserted in test/ros/t
 
 import math
 import re
+import statistics
 
 import pytest
 from bench_tables import family_tables, number
@@ -33,7 +34,8 @@ EXPECTED = {
               "injected delay"],
     "realtime_scale": ["| agents", "packing (processes x agents)", "ticks started late",
                        "CPU ms per agent tick", "wall / simulated time", "default: 1 x 8"],
-    "watching": ["| agents", "median with", "median without", "with / without"],
+    "watching": ["| agents", "median with", "median without", "with / without",
+                 "median of the pairs", "others' cores"],
     "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
                "true: median / max", "true / floor", "true below floor from (s)",
                "(A-2) alone (no noise, no lag"],
@@ -93,6 +95,15 @@ def _ratios(tables, out):
         on, off = number(row["median with"]), number(row["median without"])
         assert on > 0 and off > 0, row
         assert number(row["with / without"]) == pytest.approx(on / off, rel=0.05), row
+        # each pair's ratio from its two runs' rates, and their median
+        pairs = [float(a) / float(b) for a, b in zip(row["with the monitor (each run)"].split(),
+                                                     row["without (each run)"].split())]
+        shown = re.findall(r"([\d.]+) \(([\d.]+)/([\d.]+)\)",
+                           row["each pair: with / without (others' cores)"])
+        assert [float(p) for p, _, _ in shown] == pytest.approx(pairs, rel=0.05), row
+        assert all(float(c) >= 0 for _, a, b in shown for c in (a, b)), row
+        assert number(row["median of the pairs"]) == pytest.approx(
+            statistics.median(pairs), rel=0.05), row
 
 
 VALUES = {"distributed": _finished, "packing": _shapes_multiply, "scaling": _shapes_multiply,

@@ -12,11 +12,12 @@ vectorised over them (the core's ``drive`` over the process's rows, as in lockst
 latest states the process has of the other processes' agents, and it publishes their states in
 one message a tick (``states/block_<b>``, read as one message per peer process).
 
-A tick's work: wait on the agent node (control, services, parameters) until the tick is due,
-take what the peers' readers hold (``PeerTable.drain``: straight from the middleware, at
-most a few states per reader), step, publish.  The peers' poses do not wake the agent between
-ticks: their readers keep the newest (depth 1), and the middleware's reception time stamps
-each one for the clock offsets and the silence timeout.
+A tick's work: sleep until the tick is due, serving the agent node (control, services,
+parameters) a few times a second, take what the peers' readers hold (``PeerTable.drain``:
+straight from the middleware, the newest state of each peer, decoded together), step,
+publish.  The peers' poses do not wake the agent between ticks: their readers keep the
+newest (depth 1), and the middleware's reception time stamps each one for the clock offsets
+and the silence timeout.
 """
 
 from __future__ import annotations
@@ -51,6 +52,9 @@ if TYPE_CHECKING:
 
 #: per group the arrays the core asks for (``wire.assemble``), None for groups not needed
 Ensemble = tuple[SimpleNamespace | None, ...]
+#: s between two spins of the agent node while ticking: control commands, service calls and
+#: parameters are taken within this long (as in lockstep)
+SERVE_PERIOD = 0.1
 
 
 class PeerTable:
@@ -92,9 +96,10 @@ class PeerTable:
             for b in layout.peer_blocks():
                 self.readers.subscribe("state_block", self._block_receiver(b), dim, b,
                                        wire.Mode.REALTIME)
-        else:
+        else:  # a reader per peer, taken at the tick and decoded all at once (``drain``)
             for a in layout.peers:
-                self.readers.subscribe("state", self._receiver(a), dim, a, wire.Mode.REALTIME)
+                self.readers.subscribe("state", None, dim, a, wire.Mode.REALTIME)
+        self.reader_agents = [] if layout.blocks else list(layout.peers)
 
     @classmethod
     def of_agent(cls, agent: AgentBase, clock: ClockOffsets | None = None) -> PeerTable:
@@ -123,20 +128,6 @@ class PeerTable:
         if got.v is not None and agent in self.velocity_from:
             self.pending[agent].append((mono, "twist", got.v))
 
-    def _receiver(self, agent: int) -> Callable[[Any, MessageInfo], None]:
-        """The callback of one peer's exchange topic (``_heard``).  Another run's message, or
-        anything malformed, is dropped and counted."""
-
-        def receive(msg: Any, info: MessageInfo) -> None:
-            got, reason = wire.decode_exchange(msg, self.grp, self.model.dim, self.run_id,
-                                               agent, self.t_max)
-            if got is None:
-                self.drops(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
-                return
-            self._heard(agent, got, *received_at(info))
-
-        return receive
-
     def _block_receiver(self, block: int) -> Callable[[Any, MessageInfo], None]:
         """The callback of one peer process's block topic: each row of a peer as that peer's
         message (``_heard``); a malformed row drops the whole message."""
@@ -157,8 +148,20 @@ class PeerTable:
 
     def drain(self) -> None:
         """Take the poses and twists the peers' readers hold (depth 1: one of each per peer,
-        unless more come while they are taken)."""
-        self.readers.drain(per_reader=4)
+        unless more come while they are taken).  Per-peer readers: the newest state of each,
+        decoded together (``wire.decode_exchanges``); another run's message, or anything
+        malformed, is dropped and counted."""
+        if self.layout.blocks:
+            self.readers.drain(per_reader=4)
+            return
+        taken = self.readers.take_newest(bound=1)  # depth 1: a reader holds one at most
+        got = wire.decode_exchanges([(self.reader_agents[i], msg) for i, msg, _ in taken],
+                                    self.grp, self.model.dim, self.run_id, self.t_max)
+        for (_, _, info), (agent, motion, reason) in zip(taken, got):
+            if motion is None:
+                self.drops(f"agent {agent}", reason)  # type: ignore[arg-type]  # with None
+                continue
+            self._heard(agent, motion, *received_at(info))
 
     def destroy(self) -> None:
         """The readers' lean node (lifecycle cleanup, shutdown)."""
@@ -238,21 +241,30 @@ class PeerTable:
             self.in_range_count = len(out)
         return out
 
-    def ensemble(self, request: Request, alive: Iterable[int]) -> Ensemble:
-        """Frozen peers + the local stage rows, per needed group, ``index`` = the rows present."""
+    def peer_rows(self, alive: Iterable[int]) -> dict[int, dict[int, wire.Row]]:
+        """Group -> {group row: Row} of the ``alive`` peers' latest states, for each group
+        needed: what every stage of a tick sees of them (``ensemble``)."""
+        alive = set(alive)
+        out: dict[int, dict[int, wire.Row]] = {}
+        for gi in self.layout.groups_needed:
+            g = self.model.groups[gi]
+            out[gi] = {a - g.start: wire.Row((p := self.latest[a]).x, p.rot, p.v)
+                       for a in g.indices if a in alive}
+        return out
+
+    def ensemble(self, request: Request, alive: Iterable[int],
+                 peers: dict[int, dict[int, wire.Row]] | None = None) -> Ensemble:
+        """Frozen peers (``peer_rows``, found once a tick) + the local stage rows, per needed
+        group, ``index`` = the rows present."""
         model = self.model
         out: list[SimpleNamespace | None] = []
-        alive = set(alive)
+        peers = self.peer_rows(alive) if peers is None else peers
         with_v = model.order == 2 and "v" in request.fields
-        for gi, g in enumerate(model.groups):
-            if gi not in self.layout.groups_needed:
+        for gi in range(len(model.groups)):
+            if gi not in peers:
                 out.append(None)
                 continue
-            rows: dict[int, wire.Row] = {}
-            for a in g.indices:
-                if a in alive:
-                    p = self.latest[a]
-                    rows[a - g.start] = wire.Row(p.x, p.rot, p.v)
+            rows = peers[gi]
             own = len(self.layout.rows[gi]) > 0
             local = (self.layout.rows[gi], request.stage.groups[gi]) if own else None
             out.append(
@@ -276,6 +288,7 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         self.peers = PeerTable.of_agent(self, self.clock)
         # process CPU time (s) when the ticks began and ended
         self.cpu_span: tuple[float, float | None] | None = None
+        self.served = 0.0  # monotonic time the agent node was last served (``_wait_tick``)
         self.watch_parameters()
 
     def rebuild_system(self) -> None:
@@ -330,13 +343,20 @@ class RealtimeAgent(RuntimeParams, AgentBase):
         return epoch
 
     def _wait_tick(self, next_tick: float, period: float) -> None:
-        """Serve the agent node (control, services, parameters) until the tick is due; the
-        peers' poses wait in their readers for ``PeerTable.active``."""
+        """Sleep until the tick is due, serving the agent node (control, services, parameters)
+        every ``SERVE_PERIOD`` s, not at every tick: each spin rebuilds a wait set of all the
+        node's entities, which at 20 Hz and more cost a tick as much as its step.  The peers'
+        poses wait in their readers for ``PeerTable.active``."""
         while True:
-            left = next_tick - time.monotonic()
+            now = time.monotonic()
+            left = next_tick - now
             if left <= 0 or self.stop_requested:
                 break
-            self.spin_once(min(left, 0.05))
+            if now - self.served >= SERVE_PERIOD:
+                self.spin_once(0.0)
+                self.served = time.monotonic()
+                continue
+            time.sleep(min(left, self.served + SERVE_PERIOD - now))
         if time.monotonic() - next_tick > period:  # behind schedule: the CPU is short
             self.late_ticks += 1
 
@@ -363,9 +383,11 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             if self._held(t + step):
                 continue
             alive = self.peers.in_range(self.peers.active(), self.state)
+            heard = self.peers.peer_rows(alive)
 
-            def answer(request: Request, stage: int, alive: list[int] = alive) -> Ensemble:
-                return self.peers.ensemble(request, alive)
+            def answer(request: Request, stage: int, alive: list[int] = alive,
+                       heard: dict[int, dict[int, wire.Row]] = heard) -> Ensemble:
+                return self.peers.ensemble(request, alive, heard)
 
             self.state.coupling = None
             self.state = drive(method, self.system, self.state, step, answer)

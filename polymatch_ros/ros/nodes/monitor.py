@@ -35,9 +35,10 @@ Publishes (in the ensemble's namespace, default ``/polymatch``; see ``wire.TOPIC
 In lockstep it collects the steps' states the agents send at its pace (``exchange_rate``,
 ``state_stride``) and reports, at most ``report_rate`` times a second, the latest simulated time
 that every agent's state has reached (its loop, at that rate, takes the states that came since
-its last report and publishes it); in realtime at ``rate`` Hz from the latest poses, taken only
-then.  Either way its reports take at most ``REPORT_CPU_SHARE`` of a core: where one costs
-more (a large ensemble), the reports come less often.
+its last report and publishes it; packed processes' block messages are held undecoded by step,
+and only the step a report shows is decoded, ``held_steps``); in realtime at ``rate`` Hz from
+the latest poses, taken only then.  Either way its reports take at most ``REPORT_CPU_SHARE``
+of a core: where one costs more (a large ensemble), the reports come less often.
 It ends on SIGINT or SIGTERM (exit 0), in lockstep after one more report of the latest step
 completed, and never in the middle of a report.
 The headline topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo`
@@ -66,6 +67,7 @@ from ..config.resolve import resolve_monitor
 from ..process.shell import NodeApp, ros_main
 from ..wire.control import EnsembleControl
 from ..wire.intake import DropCounter, LeanReaders, received_at
+from .held_steps import Held, HeldSteps
 from .match_action import MatchServer
 from .monitor_output import certificate_status, diagnostics, markers
 from .sim_clock import SimClock
@@ -111,6 +113,8 @@ class MonitorNode(NodeApp):
         self.completed = -1  # lockstep: the latest stamp every agent (and velocity) reached
         # lockstep: (t, rows, velocities) of it until it is reported
         self.unreported: tuple[float, dict[int, wire.Row], dict[int, Velocity]] | None = None
+        # lockstep blocks: (t, messages) of the completed step, decoded when it is reported
+        self.unreported_held: tuple[float, list[Held]] | None = None
         # (t, metrics, agents heard) of the last report
         self.last: tuple[float, EnsembleMetrics, int] | None = None
         self.reports = 0
@@ -152,10 +156,13 @@ class MonitorNode(NodeApp):
         self._wait_for_report_readers()
         self.readers = LeanReaders(node, "_poses")
         k = self.config.agents_per_process
+        # lockstep blocks: held by step, decoded only when reported (``held_steps``)
+        self.held = HeldSteps(self.n, k, self.config.run_id, self.scene.t_end, self.grp,
+                              dim) if self.lockstep and k > 1 else None
         if k > 1:  # packed processes: a message per block and step (tick)
             for b in range(-(-self.n // k)):
-                self.readers.subscribe("state_block", self._block_receiver(b, k), dim, b,
-                                       self.config.mode)
+                receive = self._block_holder(b) if self.held else self._block_receiver(b, k)
+                self.readers.subscribe("state_block", receive, dim, b, self.config.mode)
         else:
             for a in range(self.n):
                 self.readers.subscribe("state", self._receiver(a), dim, a,
@@ -226,6 +233,58 @@ class MonitorNode(NodeApp):
 
         return receive
 
+    def _block_holder(self, block: int) -> Callable[[Any, MessageInfo], None]:
+        """Lockstep, the callback of one block's exchange topic: the message held undecoded
+        under its step (``HeldSteps.hold``); anything of another run, or malformed, dropped and
+        counted."""
+        assert self.held is not None
+
+        def receive(msg: Any, info: MessageInfo) -> None:
+            assert self.held is not None
+            why = self.held.hold(block, msg, received_at(info)[1], self.completed)
+            if why == "repeat":
+                self.repeats += 1
+            elif why == "stale":
+                self.drops(f"block {block}", "stale pose (a stamp from the past)")
+            elif why is not None:
+                self.drops(f"block {block}", why)
+
+        return receive
+
+    def _complete_held(self) -> None:
+        """Lockstep blocks: the newest step held whole becomes the completed one; its messages
+        wait undecoded in ``unreported_held`` for the next report, earlier ones are dropped."""
+        key = self.held.newest_complete() if self.held is not None else None
+        if key is None or self.held is None:
+            return
+        self.completed = key
+        self.unreported_held = (key * 1e-9, self.held.take(key))
+        self.unreported = None
+
+    def _decode_held(self) -> None:
+        """Decode the held step (``unreported_held``) into ``unreported`` (rows, velocities);
+        a message the decoder refuses is dropped and counted, and the step not reported."""
+        if self.unreported_held is None:
+            return
+        t, held = self.unreported_held
+        self.unreported_held = None
+        rows: dict[int, wire.Row] = {}
+        vel: dict[int, Velocity] = {}
+        k = self.config.agents_per_process
+        for block, msg, _ in held:
+            got, reason = wire.decode_exchange_block(msg, self.grp, self.model.dim,
+                                                     self.config.run_id, block, k,
+                                                     self.scene.t_end)
+            if got is None:
+                self.drops(f"block {block}", reason)  # type: ignore[arg-type]  # with None
+                return
+            for agent, motion in got:
+                rows[agent] = wire.Row(motion.x, motion.rot)
+                if motion.v is not None and motion.w is not None:
+                    vel[agent] = (motion.v, motion.w)
+        if len(rows) == self.n:
+            self.unreported = (t, rows, vel)
+
     def _take(self, agent: int, got: wire.Motion, heard: float) -> bool:
         """One agent's state, heard at monotonic time ``heard``: its latest, and in lockstep
         the pending report of its stamp (a Row, and in second order the velocities (v, W)).
@@ -293,12 +352,14 @@ class MonitorNode(NodeApp):
         that came, and advance ``/clock`` to the latest step every agent has completed.  The
         clock so keeps its pace when the reports are spaced out (``REPORT_CPU_SHARE``)."""
         self._drain()
+        self._complete_held()
         if self.clock is not None and self.completed >= 0:
             self.clock.advance(self.completed)
 
     def _report_completed(self) -> None:
         """Lockstep: publish the latest completed time if it is new."""
         self._follow()
+        self._decode_held()
         if self.unreported is not None:
             t, rows, vel = self.unreported
             self.unreported = None
@@ -431,6 +492,7 @@ class MonitorNode(NodeApp):
         super().destroy()
 
     def final_record(self) -> wire.RunRecord | None:
+        self._decode_held()
         if self.unreported is not None:  # completed after the last tick: the record is exact
             self._evaluate(*self.unreported)
             self.unreported = None

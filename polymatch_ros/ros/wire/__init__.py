@@ -9,6 +9,7 @@ from .exchange import (
     Motion,
     decode_exchange,
     decode_exchange_block,
+    decode_exchanges,
     encode_exchange,
     encode_exchange_block,
 )

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .stage_rows import (
+    bad_numbers,
     bad_rotation,
     bad_skew,
     block_members,
@@ -176,3 +177,64 @@ def decode_exchange_block(
             motion.v, motion.w = rows["v"][r].copy(), grp.algebra_take(w, [r])
         out.append((a, motion))
     return out, None
+
+
+
+def decode_exchanges(
+    messages: Sequence[tuple[int, Any]], grp: RotationGroup, dim: int, run_id: int,
+    t_max: float | None = None,
+) -> list[tuple[int, Motion | None, str | None]]:
+    """Several agents' AgentStates [(agent, msg), ...] -> [(agent, Motion, None) or
+    (agent, None, reason), ...] in their order: what ``decode_exchange`` makes of each.
+
+    What a tick takes from its peers, checked together: sender, stamp and layout message by
+    message (attribute reads), then the numbers, the rotations (SO(d)) and the W_i (skew) of
+    all of them in one array operation each.  A message that fails a check is decoded alone,
+    which names its reason; the others keep their values."""
+    out: list[tuple[int, Motion | None, str | None]] = [(a, None, None) for a, _ in messages]
+    batch: list[tuple[int, float, int]] = []  # (position, t, key) of the well-formed ones
+    kinds: set[bool] = set()  # second order (with v and W) or not, of those
+    for pos, (agent, msg) in enumerate(messages):
+        stamp = (header_time(msg, t_max)[0]
+                 if msg.run_id == run_id and msg.agent == agent else None)
+        second = len(msg.velocity) == dim and len(msg.angular_velocity) == dim * dim
+        laid = (len(msg.centroid) == dim and len(msg.rotation) == dim * dim
+                and (second or not (len(msg.velocity) or len(msg.angular_velocity))))
+        if stamp is None or not laid or kinds - {second}:
+            out[pos] = (agent, *decode_exchange(msg, grp, dim, run_id, agent, t_max))
+            continue
+        kinds.add(second)
+        batch.append((pos, *stamp))
+    if batch:
+        _decode_together(messages, batch, grp, dim, run_id, t_max, out)
+    return out
+
+
+def _decode_together(
+    messages: Sequence[tuple[int, Any]], batch: list[tuple[int, float, int]],
+    grp: RotationGroup, dim: int, run_id: int, t_max: float | None,
+    out: list[tuple[int, Motion | None, str | None]],
+) -> None:
+    """``decode_exchanges``' array checks of the well-formed messages at ``batch`` (all of one
+    order); every one of them decoded alone if one fails."""
+    msgs = [messages[pos][1] for pos, _, _ in batch]
+    n, second = len(msgs), len(msgs[0].velocity) > 0
+    names = {"x": "centroid", "v": "velocity", "rot": "rotation", "w": "angular_velocity"}
+    rows = {label: np.array([np.frombuffer(getattr(m, name), dtype=float) for m in msgs])
+            for label, name in names.items() if second or label in ("x", "rot")}
+    reason = next((r for r in map(bad_numbers, rows.values()) if r), None)
+    reason = reason or bad_rotation(rows["rot"].reshape(n, dim, dim))
+    if not reason and second:
+        reason = bad_skew(rows["w"].reshape(n, dim, dim))
+    if reason:
+        for pos, _, _ in batch:
+            agent, msg = messages[pos]
+            out[pos] = (agent, *decode_exchange(msg, grp, dim, run_id, agent, t_max))
+        return
+    rot = grp.from_matrices(rows["rot"].reshape(n, dim, dim))
+    w = grp.algebra_from_skew(rows["w"].reshape(n, dim, dim)) if second else None
+    for r, (pos, t, key) in enumerate(batch):
+        motion = Motion(t, key, rows["x"][r], grp.take(rot, [r]))
+        if w is not None:
+            motion.v, motion.w = rows["v"][r], grp.algebra_take(w, [r])
+        out[pos] = (messages[pos][0], motion, None)

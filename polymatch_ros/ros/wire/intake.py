@@ -198,16 +198,19 @@ class LeanReaders:
         self.events = quiet_events()[1]
         self.taken = 0  # messages taken (whatever the callback made of them)
         self.readers = 0
-        self.subscriptions: list[tuple[Subscription, Callable[[Any, MessageInfo], None]]] = []
+        self.subscriptions: list[
+            tuple[Subscription, Callable[[Any, MessageInfo], None] | None]] = []
 
-    def subscribe(self, key: str, callback: Callable[[Any, MessageInfo], None], dim: int,
-                  agent: int, mode: str) -> Subscription:
-        """A reader of ``key`` for ``agent``; ``callback(msg, info)``."""
+    def subscribe(self, key: str, callback: Callable[[Any, MessageInfo], None] | None,
+                  dim: int, agent: int, mode: str) -> Subscription:
+        """A reader of ``key`` for ``agent``; ``callback(msg, info)``, or None for a reader
+        only ``take_newest`` reads."""
         from .. import wire
 
         def counted(msg: Any, info: MessageInfo) -> None:
             self.taken += 1
-            callback(msg, info)
+            if callback is not None:
+                callback(msg, info)
 
         self.readers += 1
         sub = wire.subscription(self.node, key, counted, dim, agent, mode=mode,
@@ -224,7 +227,27 @@ class LeanReaders:
                 if got is None:
                     break
                 self.taken += 1
-                callback(*got)
+                if callback is not None:
+                    callback(*got)
+
+    def take_newest(self, bound: int = 4) -> list[tuple[int, Any, MessageInfo]]:
+        """(reader, message, info) of the newest message each reader holds, in the order the
+        readers were made, taking at most ``bound`` of each (the older ones taken are counted
+        and left: a newer one supersedes them).  The readers' callbacks are not called: the
+        caller decodes what the tick needs, all at once."""
+        out = []
+        for i, (sub, _) in enumerate(self.subscriptions):
+            newest = None
+            for _ in range(bound):
+                with sub.handle:
+                    got = sub.handle.take_message(sub.msg_type, sub.raw)
+                if got is None:
+                    break
+                self.taken += 1
+                newest = got
+            if newest is not None:
+                out.append((i, *newest))
+        return out
 
     def destroy(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
