@@ -167,6 +167,12 @@ STATE_CASES = [(case, expected) for case, expected in [
     (_state_case(centroid=[1e101, 0.0, 0.0]), "value out of range"),
     (_state_case(rotation=_flat(-np.reshape(ROT3, (3, 3)))), "rotation not in SO(d)"),
     (_state_case(angular_velocity=_flat(np.eye(3))), "angular velocity not skew"),
+    # skew to round-off (a subnormal on the diagonal) is taken, and kept exactly skew
+    (_state_case(2, angular_velocity=[1.2651982965703258e-293, -0.772527513734584,
+                                      0.772527513734584, 0.0]), ACCEPTED),
+    (_state_case(4, angular_velocity=_flat(np.diag([5e-324, 0.0, 0.0, 0.0])
+                                           + np.triu(np.ones((4, 4)), 1)
+                                           - np.tril(np.ones((4, 4)), -1))), ACCEPTED),
 ]]
 STATE_EXAMPLES = [{"case": c, "expected": e} for c, e in STATE_CASES]
 

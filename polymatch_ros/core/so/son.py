@@ -65,7 +65,11 @@ class SOn(RowsFirstGroup):
         return np.zeros((n, self.dim, self.dim))
 
     def algebra_from_skew(self, w: np.ndarray) -> Array:
-        return np.array(w, dtype=float)
+        """The skew part (W - W^T) / 2: a matrix skew to round-off (as read from a message) is
+        made skew exactly, so the algebra holds only so(d); an exactly skew W is returned as
+        it is (halving a doubled float is exact)."""
+        w = np.asarray(w, dtype=float)
+        return 0.5 * (w - np.swapaxes(w, -1, -2))
 
     def algebra_to_skew(self, a: Array) -> np.ndarray:
         return a
