@@ -255,7 +255,7 @@ def _agent(rate, late=0, steps=100):
 
 
 def test_lossy_time_to_tolerance_is_where_the_diameter_stays_under():
-    from benchmarks.lossy import time_to_tolerance
+    from benchmarks.ros_families.lossy import time_to_tolerance
 
     series = [_monitor(1.0, 1e-3), _monitor(2.0, 1e-7), _monitor(3.0, 1e-5),
               _monitor(4.0, 1e-7, heard=8), _monitor(5.0, 1e-7), _monitor(6.0, 1e-8)]
@@ -266,7 +266,7 @@ def test_lossy_time_to_tolerance_is_where_the_diameter_stays_under():
 
 
 def test_lossy_realtime_rows():
-    from benchmarks.lossy import REALTIME_HEADER, RealtimeCell, realtime_row
+    from benchmarks.ros_families.lossy import REALTIME_HEADER, RealtimeCell, realtime_row
 
     cell = RealtimeCell(10, 0.05, 0, [_monitor(1.0, 1e-3), _monitor(20.0, 5e-7)],
                         [_agent(0, late=3), _agent(0, late=1)], dropped=42)
@@ -280,7 +280,7 @@ def test_lossy_realtime_rows():
 
 
 def test_lossy_lockstep_rows_compare_with_no_loss():
-    from benchmarks.lossy import LOCKSTEP_HEADER, LockstepCell, lockstep_rows
+    from benchmarks.ros_families.lossy import LOCKSTEP_HEADER, LockstepCell, lockstep_rows
 
     cells = [LockstepCell(0, [_agent(40.0), _agent(60.0)], 1e-16, 0, 30.0),
              LockstepCell(10, [_agent(25.0)], 2e-16, 900, 45.0),
@@ -298,7 +298,7 @@ def test_lossy_deviation_of_the_centralised_run_itself_is_zero(tmp_path):
 
     import numpy as np
 
-    from benchmarks.lossy import central_deviation
+    from benchmarks.ros_families.lossy import central_deviation
     from polymatch_ros.core.scenes.scene import load_scene, resolve_scene_path
     from polymatch_ros.core.stepping.simulate import choose_numerics, simulate
     from polymatch_ros.ros.supervisor.summary import save_final

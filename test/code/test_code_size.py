@@ -1,6 +1,6 @@
 """Size rules, as lines: a module holds one concept (about 400 lines, at most 600), a function
-at most 60.  They cover the package and the benchmarks beside it.  A folder of the package is a
-room of at most 15 modules (its ``__init__`` aside); a larger one splits into rooms.
+at most 60.  They cover the package and the benchmarks beside it.  A folder of either is a room
+of at most 15 modules (its ``__init__`` and ``__main__`` aside); a larger one splits into rooms.
 
 A function's length is ``end_lineno - lineno + 1`` of its ``def`` (docstring and body, no
 decorators); nested functions and methods count on their own as well as inside their parent.
@@ -47,11 +47,11 @@ def test_functions_are_at_most_60_lines(path):
                                 for name, line, n in found)
 
 
-PACKAGE_FOLDERS = sorted(p.parent for p in (ROOT / "polymatch_ros").rglob("__init__.py"))
+FOLDERS = sorted(p.parent for tree in TREES for p in (ROOT / tree).rglob("__init__.py"))
 
 
-@pytest.mark.parametrize("folder", PACKAGE_FOLDERS, ids=lambda p: str(p.relative_to(ROOT)))
-def test_a_package_folder_holds_at_most_15_modules(folder):
+@pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_a_folder_holds_at_most_15_modules(folder):
     modules = [p for p in folder.glob("*.py") if p.name not in ("__init__.py", "__main__.py")]
     assert len(modules) <= FOLDER_MODULES, f"{folder.relative_to(ROOT)}: {len(modules)} modules"
 

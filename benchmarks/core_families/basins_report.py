@@ -1,8 +1,9 @@
-"""Tables, figure and findings of ``python -m benchmarks basins`` (``benchmarks/basins.py``)."""
+"""Tables, figure and findings of ``python -m benchmarks basins``
+(``benchmarks/core_families/basins.py``)."""
 
 import numpy as np
 
-from .report import Report
+from ..report import Report
 
 OUTCOME_SHORT = {"twisted": "twisted", "other equilibrium": "other eq.", "antipodal": "antipodal",
                  "too slow": "too slow"}
@@ -186,7 +187,8 @@ def report(name, args, ring, rand, twist):
     rep.text("First-order model (A-2) with degree-normalised weights, centroids together, "
              "Haar-uniform rotations, seeds 0 .. B-1 per cell; rkmk4 dt 0.5; an ensemble stops "
              "when it has matched (diameter < 1e-6) or is still (max |W_i| < 1e-6 times the "
-             "coupling rate) away from consensus.  See the module doc of benchmarks/basins.py.")
+             "coupling rate) away from consensus.  See the module doc of "
+             "benchmarks/core_families/basins.py.")
     rep.figure("fractions", figure(ring, rand, dims),
                "fraction matched against k/N on rings and p on random graphs; final q in 2-D")
     rep.table(*ring_table(ring, dims), caption="Rings: matched / ensembles and the twisted ends")

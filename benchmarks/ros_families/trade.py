@@ -204,7 +204,7 @@ def run(args, log):
     from polymatch_ros.core.scenes.scene import load_scene
     from polymatch_ros.ros.network.environment import private_ros_environment
 
-    from .report import Report
+    from ..report import Report
     from .ros_runs import write_scene
 
     report = Report(NAME, "Speed against accuracy over the ROS node set "

@@ -39,7 +39,7 @@ VARIANTS = ("shipped", "ledger off")
 
 
 def add_arguments(p):
-    from .options import at_least
+    from ..options import at_least
 
     p.add_argument("--t-end", type=at_least(0.1), default=4.0,
                    help="simulated seconds of each run, dt 0.05 (default 4: 320 rounds)")
@@ -47,7 +47,7 @@ def add_arguments(p):
 
 def _segments_under(root, seen, stop):
     """Note, until ``stop``, the Fast DDS segments mapped by each process under ``root``."""
-    from .hosts.runs import descendants
+    from ..hosts.runs import descendants
 
     while not stop.is_set():
         for pid in [root, *descendants(root)]:
@@ -86,7 +86,7 @@ def run(args, log):
 
     from polymatch_ros.ros.network.environment import private_ros_environment
 
-    from .report import Report
+    from ..report import Report
 
     report = Report(NAME, "What a run leaves in /dev/shm (`python -m benchmarks leftovers`)")
     t_end = 0.5 if args.quick else args.t_end

@@ -28,7 +28,7 @@ def _graph_yaml(graph, n):
 
 
 def add_arguments(p):
-    from .options import at_least, int_list
+    from ..options import at_least, int_list
 
     p.add_argument("--agents", type=int_list(2), default=[8, 32], metavar="N,N,...",
                    help="numbers of agents (default 8,32)")
@@ -89,7 +89,7 @@ def run(args, log):
 
     from polymatch_ros.ros.network.environment import ros_environment
 
-    from .report import Report
+    from ..report import Report
 
     sizes = [4] if args.quick else args.agents
     rounds = 24 if args.quick else args.rounds

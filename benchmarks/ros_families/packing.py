@@ -24,7 +24,7 @@ OWN = 2            # the runner and the monitor
 
 
 def add_arguments(p):
-    from .options import at_least, int_list
+    from ..options import at_least, int_list
     p.add_argument("--agents", type=int_list(2), default=[8, 32, 64, 256, 1024],
                    metavar="N,N,...", help="ensemble sizes (default 8,32,64,256,1024)")
     p.add_argument("--processes", type=int_list(1), default=[1, 2, 4, 8, 16, 32],
@@ -129,7 +129,7 @@ def _row(n, measured, default_k):
 
 
 def run(args, log):
-    from .report import Report
+    from ..report import Report
     from .ros_runs import private_runs, write_scene
 
     sizes = [8] if args.quick else args.agents

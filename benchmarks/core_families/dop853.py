@@ -9,7 +9,8 @@ Solvers, each at rtol = atol = tol for tol in 1e-3 ... 1e-12:
                     Proposition 2.1 (no evaluations, no step-size limit).
   ours (matrix)     the same in the general 2x2 matrix representation with the Cayley map.
   scipy DOP853      ``solve_ivp(method="DOP853")`` on y = (centroids (N, 2), O (N, 2, 2)) flattened
-                    (``benchmarks/flat.py``), right-hand side (A-2) written directly with numpy:
+                    (``benchmarks/core_families/paper_rhs.py``), right-hand side (A-2) written
+                    directly with numpy:
                         xbar_i' = kappa/N sum_k (xbar_k - xbar_i),
                         O_i'    = kappa/(2N) sum_k (O_k O_i^T - O_i O_k^T) O_i
                     (the sum taken through S = sum_k O_k); centroids are integrated too, and
@@ -35,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .timing import fmt_ms
+from ..timing import fmt_ms
 
 NAME = "dop853"
 HELP = "adaptive Lie DOP853 vs scipy solve_ivp DOP853 on congruent_triangles, cost per max error"
@@ -46,7 +47,7 @@ RATIO_TARGETS = tuple(10.0 ** -k for k in range(4, 11))
 
 
 def add_arguments(p):
-    from .options import at_least, float_list
+    from ..options import at_least, float_list
 
     small = at_least(1e-300, float)
     p.add_argument("--scene", default="congruent_triangles",
@@ -142,7 +143,7 @@ def _row(label, sc, scene, tol, runs, ref_dense, ref):
     """Wall/evals/error on the sample times (A) and on the solver's own steps (B), timed."""
     from polymatch_ros.core.metrics import orthogonality
 
-    from .timing import Timing
+    from ..timing import Timing
 
     dense_w = [a.wall for a, _ in runs]
     end_w = [b.wall for _, b in runs]
@@ -207,7 +208,7 @@ def _settings(args):
 
 def _intro(report, s, wall_ref, ref_gap, shift):
     """The scene, the two error measures and how far the two references agree."""
-    from .timing import fmt_ms
+    from ..timing import fmt_ms
 
     scene = s.scene
     report.text(
@@ -241,7 +242,7 @@ def run(args, log):
 
     from polymatch_ros.core import with_representation
 
-    from .report import Report
+    from ..report import Report
     from .solve import Solver, solve
 
     report = Report(NAME, "Adaptive Lie DOP853 vs scipy DOP853 (`python -m benchmarks dop853`)")

@@ -6,7 +6,8 @@ a sample) by ``core.sweep.run_batch``, by default with rkmk8 (DOP853's 8th-order
 as a fixed-step Munthe-Kaas method, ``core.sweep.chart_rk``) at the scene's sample interval;
 ``--integrator rkmk4 --dt 0.05`` is the scene's own integrator.  The same ensembles
 are then solved one at a time by scipy's DOP853 on the flattened system of
-``benchmarks/flat.py`` (``benchmarks/solve.py``), each to the time at which the batch saw it match.
+``benchmarks/core_families/paper_rhs.py`` (``benchmarks/core_families/solve.py``), each to the
+time at which the batch saw it match.
 
 Error: the largest vertex error max_{i,a} |x^i_a - x^i_a,ref| over the ensembles and every
 sample up to that time, against a reference of the same batch (same method) at dt/16.
@@ -30,7 +31,7 @@ CHUNK = 200
 
 
 def add_arguments(p):
-    from .options import at_least
+    from ..options import at_least
     p.add_argument("--ensembles", type=at_least(1), default=1000,
                    help="ensembles (default 1000)")
     p.add_argument("--scipy-ensembles", type=at_least(1), default=1000,
@@ -98,7 +99,7 @@ def scipy_loop(scenes, final_t, sample_times, tol, log=None, between=None):
 
     from polymatch_ros.core.metrics import vertices
 
-    from .flat import FlatSystem
+    from .paper_rhs import FlatSystem
     from .solve import Solver, solve
     solver = Solver("DOP853", "scipy", tol)
     flat = FlatSystem.for_scene(scenes[0])
@@ -191,7 +192,7 @@ def run(args, log):
 def _report(scenes, batch, timer, err, scipy):
     import numpy as np
 
-    from .report import Report
+    from ..report import Report
     scipy_err, scipy_wall, chosen, n_scipy = scipy
     b, wall = len(scenes), timer.wall
     per_batch, per_scipy = wall / b, scipy_wall / n_scipy

@@ -1,7 +1,7 @@
 """The bare transport's all-to-all lockstep exchange: the limit for the agents' round rate.
 
-    python -m benchmarks.bare_exchange INDEX K ROUNDS [PAYLOAD] [--executor single|events]
-        [--message untyped|typed]
+    python -m benchmarks.ros_families.bare_exchange INDEX K ROUNDS [PAYLOAD]
+        [--executor single|events] [--message untyped|typed]
 
 Process INDEX of K publishes one message of PAYLOAD doubles per round on
 /polymatch_bare/p<INDEX> (untyped: a std_msgs/Float64MultiArray; typed: the run's own

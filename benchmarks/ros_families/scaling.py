@@ -26,7 +26,7 @@ HELP = "lockstep at scale: rounds/s, start-up, memory, transport vs numerics, N 
 
 
 def add_arguments(p):
-    from .options import at_least, int_list
+    from ..options import at_least, int_list
     p.add_argument("--agents", type=int_list(2), default=[8, 64, 256, 1024, 4096],
                    metavar="N,N,...", help="numbers of agents (default 8,64,256,1024,4096)")
     p.add_argument("--rounds", type=at_least(8), default=200, help="rounds per run (default 200)")
@@ -72,7 +72,7 @@ def _measure(n, rounds, workdir, env, k=None):
 
 
 def run(args, log):
-    from .report import Report
+    from ..report import Report
     from .ros_runs import private_runs
 
     sizes, rounds = ([8], 40) if args.quick else (args.agents, args.rounds)

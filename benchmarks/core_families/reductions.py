@@ -12,7 +12,7 @@ HELP = ("cost of each model reduction (angles, SoA Cayley, no weights, exact cen
 
 
 def add_arguments(p):
-    from .options import add_number
+    from ..options import add_number
     add_number(p, "--agents", 2, 1000, "agents per case")
 
 
@@ -150,7 +150,7 @@ def _cases(n, t_end):
 
 
 def run(args, log):
-    from .report import Report
+    from ..report import Report
 
     n = 40 if args.quick else args.agents
     t_end = 0.2 if args.quick else 2.0

@@ -9,7 +9,8 @@ Solvers, each on the same scene:
   adaptive       ours (DOP853 in Cayley/angle charts, dense output) at tol 1e-3 ... 1e-12.
   scipy          ``solve_ivp`` RK45 and DOP853 at rtol = atol = tol 1e-3 ... 1e-12 on the
                  flattened system (centroids, velocities, d x d matrices, W), the paper's
-                 (A-1)/(A-2) written with numpy in mean-field form (see ``benchmarks/flat.py``).
+                 (A-1)/(A-2) written with numpy in mean-field form (see
+                 ``benchmarks/core_families/paper_rhs.py``).
 
 Error = max over the sample times (every 0.2 on [0, t_end]) and over all agents i and
 vertices a of |x^i_a - x^i_a(ref)|, x^i_a = xbar_i + O_i r_a in absolute coordinates.
@@ -55,7 +56,7 @@ QUICK_CASES = ["o1-d2-near", "o2-d3-far"]
 
 
 def add_arguments(p):
-    from .options import at_least, float_list
+    from ..options import at_least, float_list
     p.add_argument("--cases", default=",".join(CASES),
                    help="comma-separated case ids (default: all): " + ", ".join(CASES))
     p.add_argument("--steps", type=float_list(1e-300), default=STEPS,
@@ -294,7 +295,7 @@ def _frontier_section(report, frontier, orders, summary):
 
 
 def run(args, log):
-    from .report import Report
+    from ..report import Report
 
     report = Report(NAME, "Work-precision (`python -m benchmarks precision`)")
     s = _settings(args)
@@ -317,7 +318,7 @@ def _fmt_err(e):
 
 
 def case_table(cells, repeats):
-    from .timing import fmt_ms
+    from ..timing import fmt_ms
     rows = []
     for c in cells:
         if not c.ok:
@@ -353,7 +354,7 @@ def order_rows(cells, floor):
 
 
 def frontier_rows(label, cells, targets):
-    from .timing import fmt_ms
+    from ..timing import fmt_ms
 
     def name(c):
         return f"{c.name} {c.param}"

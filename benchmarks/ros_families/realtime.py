@@ -21,7 +21,7 @@ RATES = (25.0, 50.0, 100.0, 200.0)
 
 
 def add_arguments(p):
-    from .options import at_least
+    from ..options import at_least
 
     p.add_argument("--seconds", type=at_least(1), default=10,
                    help="wall-clock seconds of ticking per run (default 10)")
@@ -69,7 +69,7 @@ def run(args, log):
     from polymatch_ros.core.scenes.scene import load_scene, resolve_scene_path
     from polymatch_ros.ros.network.environment import private_ros_environment
 
-    from .report import Report
+    from ..report import Report
 
     report = Report(NAME, "Holding the realtime rate (`python -m benchmarks realtime`)")
     path = resolve_scene_path("congruent_triangles")

@@ -25,7 +25,7 @@ TARGET_SPEEDUP = 1000.0
 
 
 def add_arguments(p):
-    from .options import add_number, int_list
+    from ..options import add_number, int_list
     p.add_argument("--sizes", type=int_list(2), default=[1000, 10_000, 100_000],
                    help="N values (default 1000,10000,100000)")
     add_number(p, "--dim", 2, 3, "dimension")
@@ -58,8 +58,8 @@ def _mean_field_timings(base, repeats, log):
     own representation and, if that is not d x d matrices, in matrices too."""
     from polymatch_ros.core import System, with_representation
 
-    from .scenes import representation_label
-    from .timing import measure
+    from ..scenes import representation_label
+    from ..timing import measure
 
     n = base.model.n_agents
     reps = ([base] if base.model.rotations.name == "matrix"
@@ -85,7 +85,7 @@ def _naive_timings(base, idx, full_naive_max, log):
     Timing scaled to all N, Timing over all agents or None when N > ``full_naive_max``)."""
     import numpy as np
 
-    from .timing import measure
+    from ..timing import measure
 
     model = base.model
     n, k = model.n_agents, len(idx)
@@ -106,8 +106,8 @@ def _measure_size(n, dim, repeats, sample_size, full_naive_max, rng, log):
     """Table rows and result records of N = ``n``, one per representation of the mean field."""
     import numpy as np
 
-    from .scenes import timing_scene
-    from .timing import fmt_ms, fmt_time
+    from ..scenes import timing_scene
+    from ..timing import fmt_ms, fmt_time
 
     base = timing_scene(n, dim, order=1)
     mf = _mean_field_timings(base, repeats, log)
@@ -129,7 +129,7 @@ def _measure_size(n, dim, repeats, sample_size, full_naive_max, rng, log):
 
 
 def _notes(results, dim, repeats, full_naive_max):
-    from .timing import fmt_time
+    from ..timing import fmt_time
 
     lines = [f"- The naive double sum is timed on a random sample of agents "
              f"({NAIVE_REPEATS} passes, best) and scaled by N / sample; it was run over all N "
@@ -179,7 +179,7 @@ def _scaling_figure(results, dim):
 def run(args, log):
     import numpy as np
 
-    from .report import Report
+    from ..report import Report
 
     report = Report(NAME, "Mean field vs naive double sum (`python -m benchmarks meanfield`)")
     dim = args.dim

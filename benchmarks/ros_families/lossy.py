@@ -40,7 +40,7 @@ def _percents(text):
     """'0,10,20' -> [0, 10, 20]: whole percents in 0..99 (nftables draws integers)."""
     import argparse
 
-    from .options import int_list
+    from ..options import int_list
 
     values = int_list(0)(text)
     if max(values) > 99:
@@ -49,7 +49,7 @@ def _percents(text):
 
 
 def add_arguments(p):
-    from .options import at_least, float_list
+    from ..options import at_least, float_list
 
     p.add_argument("--loss", type=_percents, default=[0, 5, 10, 20, 40], metavar="P,...",
                    help="realtime: percent of packets every host drops (default 0,5,10,20,40)")
@@ -108,7 +108,7 @@ def _status_records(echo):
     theirs on the status topic too)."""
     from polymatch_ros.ros.wire import echoed_run_records
 
-    from .hosts.runs import Processes
+    from ..hosts.runs import Processes
 
     lines = Processes.output(echo).splitlines()
     records = echoed_run_records(lines)
@@ -117,8 +117,8 @@ def _status_records(echo):
 
 def _on_hosts(net, directory, argvs, during, seconds, captures):
     """run_on_hosts with the bridge as control; adds the DDS packet counts to ``captures``."""
-    from .hosts.namespaces import Capture
-    from .hosts.runs import run_on_hosts
+    from ..hosts.namespaces import Capture
+    from ..hosts.runs import run_on_hosts
 
     with Capture(directory, ["br0"], net.bridge, "bridge") as bridge:
         started, texts, root, found = run_on_hosts(net, directory, argvs, during, seconds)
@@ -128,7 +128,7 @@ def _on_hosts(net, directory, argvs, during, seconds, captures):
 
 
 def _realtime_cell(net, scene_file, n, t_end, loss, delay, captures):
-    from .hosts.runs import host_argv
+    from ..hosts.runs import host_argv
 
     k, seconds = n // HOSTS, int(t_end / TIME_SCALE) + 60
     _lossy(net, loss)
@@ -154,7 +154,7 @@ def _last_error(text):
 
 
 def _lockstep_cell(net, scene, scene_file, n, t_end, loss, captures):
-    from .hosts.runs import host_argv, lockstep_split
+    from ..hosts.runs import host_argv, lockstep_split
 
     seconds = 150
     _lossy(net, loss)
@@ -208,7 +208,7 @@ def _measure(args, log, net, workdir, captures):
     """(realtime cells, lockstep cells) over the hosts ``net``."""
     from polymatch_ros.core.scenes.scene import load_scene
 
-    from .hosts.runs import scene_with
+    from ..hosts.runs import scene_with
 
     n_rt, per_group, lock_t_end, rt_t_end = _sizes(args)
     losses = [0] if args.quick else args.loss
@@ -234,8 +234,8 @@ def _measure(args, log, net, workdir, captures):
 def run(args, log):
     from polymatch_ros.core.scenes.scene import load_scene
 
-    from .hosts.namespaces import NetnsHosts, unavailable_reason
-    from .report import Report
+    from ..hosts.namespaces import NetnsHosts, unavailable_reason
+    from ..report import Report
 
     report = Report(NAME, "Three hosts over a lossy, late network (`python -m benchmarks lossy`)")
     reason = unavailable_reason(("nft", "tcpdump"))

@@ -30,7 +30,7 @@ TARGET_SECONDS = 4e-3       # the issue's target: one rkmk4 step at N = 10,000, 
 
 
 def add_arguments(p):
-    from .options import at_least, int_list
+    from ..options import at_least, int_list
     p.add_argument("--n", type=at_least(1), default=10_000,
                    help="agents for the headline table (default 10000)")
     p.add_argument("--dim", type=at_least(2), default=3,
@@ -72,7 +72,7 @@ def _consecutive(meth, scene, dt, steps, repeats):
     """Seconds per step over ``steps`` consecutive steps of an evolving state (as in a run)."""
     from polymatch_ros.core import State, System, drive
 
-    from .timing import measure
+    from ..timing import measure
     system = System(scene.model)
 
     def chain(_):
@@ -99,7 +99,7 @@ def _configurations(n, dim, dt):
     stepper; "default" marks the representation a scene gets unless told otherwise."""
     from polymatch_ros.core import METHODS
 
-    from .scenes import representation_label, timing_scene
+    from ..scenes import representation_label, timing_scene
 
     reps = ["auto", "so3-exp", "matrix"] if dim == 3 else ["auto", "matrix"]
     configs = []
@@ -123,7 +123,7 @@ def _default_rkmk4(configs, order):
 
 def _one_step_table(report, configs, n, dim, repeats):
     """Best/median/max of one step of every configuration, timed interleaved."""
-    from .timing import fmt_ms
+    from ..timing import fmt_ms
 
     rows = [[MODEL_LABELS[c["order"]], c["rep"] + (" *default*" if c["default"] else ""),
              c["method"], c["stages"], fmt_ms(c["timing"].best), fmt_ms(c["timing"].median),
@@ -146,8 +146,8 @@ def _rkmk4_table(args, log, report, configs, n, dim):
     of a run of consecutive steps (and, at N = 10,000, d = 3, whether the target is met)."""
     from polymatch_ros.core import METHODS
 
-    from .scenes import timing_scene
-    from .timing import fmt_ms
+    from ..scenes import timing_scene
+    from ..timing import fmt_ms
 
     chain = 3 if args.quick else 50
     runs = 1 if args.quick else 5
@@ -190,7 +190,7 @@ def _headline_notes(configs, dim):
 
 def headline(args, log, report):
     """Every configuration at --n, --dim interleaved, then the default rkmk4 in a run."""
-    from .timing import measure_interleaved
+    from ..timing import measure_interleaved
 
     n, dim = (500, 3) if args.quick else (args.n, args.dim)
     repeats = args.repeats or (3 if args.quick else 30)
@@ -210,8 +210,8 @@ def dimension_ratios(args, log, report):
     """rkmk4 at one N for several d, interleaved: each d's cost against the previous d's."""
     from polymatch_ros.core import METHODS
 
-    from .scenes import representation_label, timing_scene
-    from .timing import fmt_ms, measure_interleaved
+    from ..scenes import representation_label, timing_scene
+    from ..timing import fmt_ms, measure_interleaved
 
     n = 500 if args.quick else args.n
     dims = [2, 3, 4] if args.quick else args.ratio_dims
@@ -247,7 +247,7 @@ def dimension_ratios(args, log, report):
 
 def _grid_notes(max_step_seconds, skipped):
     """Which cells were skipped and why, and what a step costs in each dimension."""
-    from .timing import fmt_time
+    from ..timing import fmt_time
 
     notes = [f"Cells predicted (linear in N from the previous N) to take longer than "
              f"{max_step_seconds:g} s per step are skipped (`--max-step-seconds`)."]
@@ -265,8 +265,8 @@ def grid(args, log, report):
     """rkmk4, one configuration at a time, over N x d; cells predicted too slow are skipped."""
     from polymatch_ros.core import METHODS
 
-    from .scenes import representation_label, timing_scene
-    from .timing import fmt_ms, fmt_time, measure
+    from ..scenes import representation_label, timing_scene
+    from ..timing import fmt_ms, fmt_time, measure
 
     sizes = [10, 100, 1000] if args.quick else sorted(args.sizes)
     dims = [2, 3, 4] if args.quick else args.dims
@@ -351,7 +351,7 @@ def _draw_scaling(results, sizes, dims, plt):
 def run(args, log):
     from functools import partial
 
-    from .report import Report
+    from ..report import Report
 
     report = Report(NAME, "One integrator step (`python -m benchmarks step`)")
     configs, n, dim = headline(args, log, report)

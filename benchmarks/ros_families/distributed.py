@@ -3,7 +3,7 @@
 For N = 4, 8, 16, 32 processes on this machine, alternately (R repeats each, so
 that the machine's drift hits both alike):
 
-  bare     ``python -m benchmarks.bare_exchange``: N processes exchanging one
+  bare     ``python -m benchmarks.ros_families.bare_exchange``: N processes exchanging one
            Float64MultiArray per round all-to-all with the agents' stage QoS, node and
            executor, no numerics — the transport's limit;
   typed    the same with the run's own typed message (polymatch_interfaces StageRows)
@@ -29,7 +29,7 @@ HELP = "lockstep rounds/s of the agent processes vs the bare rclpy exchange, N =
 
 
 def add_arguments(p):
-    from .options import at_least, int_list
+    from ..options import at_least, int_list
     p.add_argument("--agents", type=int_list(2), default=[4, 8, 16, 32], metavar="N,N,...",
                    help="numbers of processes (default 4,8,16,32)")
     p.add_argument("--rounds", type=at_least(8), default=400, help="rounds per run (default 400)")
@@ -71,7 +71,7 @@ def _bare(n, rounds, env, timeout, message="untyped"):
             [
                 sys.executable,
                 "-m",
-                "benchmarks.bare_exchange",
+                "benchmarks.ros_families.bare_exchange",
                 str(i),
                 str(n),
                 str(rounds),
@@ -278,7 +278,7 @@ def run(args, log):
 
     from polymatch_ros.ros.network.environment import private_ros_environment
 
-    from .report import Report
+    from ..report import Report
 
     sizes = [4] if args.quick else args.agents
     rounds = 40 if args.quick else args.rounds

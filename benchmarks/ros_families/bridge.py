@@ -43,7 +43,7 @@ groups:
 
 
 def add_arguments(p):
-    from .options import add_number, float_list
+    from ..options import add_number, float_list
 
     p.add_argument("--scene", default="congruent_triangles",
                    help="scene file or shipped scene (default congruent_triangles, Fig. 1)")
@@ -292,7 +292,7 @@ def run(args, log):
     from polymatch_ros.core.scenes.scene import resolve_scene_path
     from polymatch_ros.ros.network.environment import private_ros_environment
 
-    from .report import Report
+    from ..report import Report
 
     report = Report(NAME, "Robots that share a room: separation, formation and differential-drive "
                     "bases (`python -m benchmarks bridge --separation-only`)"

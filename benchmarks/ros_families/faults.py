@@ -33,7 +33,7 @@ FAILURE_KEY = "polymatch_failure"
 
 
 def add_arguments(p):
-    from .options import at_least
+    from ..options import at_least
 
     p.add_argument("--seconds", type=at_least(10), default=600,
                    help="wall-clock seconds of the realtime soak (default 600)")
@@ -46,7 +46,7 @@ def add_arguments(p):
 
 def _nodes(run):
     """{node name: pid} of the run's processes (``-r __node:=NAME``), and the runner's pid."""
-    from .hosts.runs import argv_of, descendants, node_name
+    from ..hosts.runs import argv_of, descendants, node_name
 
     out, runner = {}, None
     for pid in descendants(run.pid):
@@ -176,7 +176,7 @@ def run(args, log):
     from polymatch_ros.core.scenes.scene import resolve_scene_path
     from polymatch_ros.ros.network.environment import private_ros_environment
 
-    from .report import Report
+    from ..report import Report
 
     report = Report(NAME, "Process deaths (`python -m benchmarks faults`)")
     path = resolve_scene_path("congruent_triangles")

@@ -24,7 +24,7 @@ HELP = "lockstep rounds/s of `polymatch run` with the monitor over without, 8 ..
 
 
 def add_arguments(p):
-    from .options import int_list
+    from ..options import int_list
 
     p.add_argument("--agents", type=int_list(2), default=[8, 64, 1024], metavar="N,N,...",
                    help="ensemble sizes (default 8,64,1024)")
@@ -75,9 +75,9 @@ def _median(values):
 
 
 def run(args, log):
-    from .report import Report
+    from ..report import Report
+    from ..timing import load_span
     from .ros_runs import private_runs, write_scene
-    from .timing import load_span
 
     report = Report(NAME, "What watching costs (`python -m benchmarks watching`)")
     sizes = [8] if args.quick else args.agents

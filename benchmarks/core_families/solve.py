@@ -1,7 +1,8 @@
 """One solver harness for the accuracy benchmarks (a helper, not a family).
 
 ``solve(scene, solver, times)`` runs a registered fixed-step integrator, ours adaptive or
-scipy's ``solve_ivp`` (on the flattened system of ``benchmarks/flat.py``) on a single-group
+scipy's ``solve_ivp`` (on the flattened system of ``benchmarks/core_families/paper_rhs.py``) on a
+single-group
 congruent scene and returns the sample times, absolute centroids, rotation matrices, W
 (second order), the right-hand-side evaluations, steps and the wall time of the call.
 ``measure`` runs a list of solvers round-robin (a burst of machine load hits every solver
@@ -53,7 +54,7 @@ class Solver:
 
     @property
     def timing(self):
-        from .timing import Timing
+        from ..timing import Timing
 
         return Timing(tuple(self.walls))
 
@@ -97,7 +98,7 @@ def solve(scene, solver, times, flat=None):
     if solver.kind == "scipy":
         from scipy.integrate import solve_ivp
 
-        from .flat import FlatSystem
+        from .paper_rhs import FlatSystem
 
         flat = flat or FlatSystem.for_scene(scene)
         y0 = flat.initial(scene)
@@ -143,7 +144,7 @@ def measure(solvers, scene, times, repeats, log, warmup=False):
     """Run every live solver ``repeats`` times round-robin; ``solver.out`` keeps the first run."""
     from polymatch_ros.core import StabilityError
 
-    from .flat import FlatSystem
+    from .paper_rhs import FlatSystem
 
     flat = FlatSystem.for_scene(scene)
     if warmup:  # untimed, each solver once at its first setting: imports, caches, first calls

@@ -21,7 +21,7 @@ HELP = "realtime at 8 ... 1024 agents and 10 ... 50 Hz: late ticks, CPU per tick
 
 
 def add_arguments(p):
-    from .options import at_least, int_list
+    from ..options import at_least, int_list
 
     p.add_argument("--agents", type=int_list(2), default=[8, 64, 256, 1024], metavar="N,N,...",
                    help="ensemble sizes (default 8,64,256,1024)")
@@ -77,9 +77,9 @@ def _row(n, rate, packing, got):
 
 
 def run(args, log):
-    from .report import Report
+    from ..report import Report
+    from ..timing import load_span
     from .ros_runs import private_runs, write_scene
-    from .timing import load_span
 
     report = Report(NAME, "Realtime at the scale of a swarm (`python -m benchmarks "
                           "realtime_scale`)")

@@ -3,7 +3,7 @@
 Every registered fixed-step integrator runs 10^5 steps of dt = 0.05 (t = 5000) on a
 small ensemble (N = 4 regular tetrahedra in R^3, uniform rotations), and scipy's
 ``solve_ivp`` RK45 and DOP853 (rtol = atol = tol, on the flattened system of
-``benchmarks/flat.py``) and ours adaptive run over the same time span.
+``benchmarks/core_families/paper_rhs.py``) and ours adaptive run over the same time span.
 
   A  second-order model (A-1) with gamma = 0 (undamped; m = kappa = 1, random centroid and
      angular velocities).  By Proposition 2.2 (i) the energy
@@ -27,7 +27,7 @@ HELP = ("orthogonality defect and energy drift (gamma = 0) after 10^5 steps, "
 
 
 def add_arguments(p):
-    from .options import add_number, float_list
+    from ..options import add_number, float_list
     add_number(p, "--steps", 10, 100_000, "fixed steps per run")
     add_number(p, "--dt", 1e-300, 0.05, "fixed step", float)
     add_number(p, "--n", 2, 4, "agents")
@@ -273,7 +273,7 @@ def _section_b(report, span, log):
 
 
 def run(args, log):
-    from .report import Report
+    from ..report import Report
 
     report = Report(NAME, "Long horizons (`python -m benchmarks longhorizon`)")
     steps = 1000 if args.quick else args.steps

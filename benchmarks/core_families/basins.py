@@ -36,7 +36,7 @@ DIMS = (2, 3, 4)
 
 
 def add_arguments(p):
-    from .options import at_least, int_list
+    from ..options import at_least, int_list
     p.add_argument("--ensembles", type=at_least(1), default=100,
                    help="ensembles per ring and random-graph cell (default 100)")
     p.add_argument("--twist-ensembles", type=at_least(1), default=40,
