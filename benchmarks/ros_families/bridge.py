@@ -150,7 +150,7 @@ def _bridge_run(env, scene_path, case, t_end, workdir):
     out = run_cli(env, ["run", scene_path, "--mode", "bridge", "--rate", repr(rate),
                      "--lag", repr(lag), "--position-noise", repr(sigma),
                      "--angle-noise", repr(sigma), "--t-end", repr(t_end), "--hold", "1e9",
-                     "--ensemble", "bench_bridge", "-q", "--records", records,
+                     "--ensemble", "bench_bridge", "-q", "--run-records", records,
                      "--robot-log", logs, "--timeout", repr(t_end + 120.0)], t_end + 160.0)
     errors = [line for line in out.stderr.splitlines() if line.startswith("polymatch: error:")]
     # 3: the measured diameter was not under the tolerance at t_end (a short run, no noise)

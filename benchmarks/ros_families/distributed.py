@@ -120,7 +120,7 @@ def _deployed(path, env, timeout, per_process, extra=(), with_matched=False):
 
     records = path + ".records.jsonl"
     out = run_cli(env, ["run", path, "--no-compare", "--hold", "1e9", "--timeout",
-                        str(timeout - 10), "-q", "--records", records, "-k", str(per_process),
+                        str(timeout - 10), "-q", "--run-records", records, "-k", str(per_process),
                         *extra], timeout)
     rates, matched = _rates_and_matches(r for r in agent_records(records) if r.finished)
     errors = [line for line in out.stderr.splitlines() if line.startswith("polymatch: error:")]

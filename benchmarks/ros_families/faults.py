@@ -99,7 +99,7 @@ def soak(env, path, seconds, interval, rng, log):
     with tempfile.TemporaryDirectory() as tmp:
         records = os.path.join(tmp, "soak.jsonl")
         run = _start(env, ["run", path, "--mode", "realtime", "--rate", "20", "--t-end",
-                           str(seconds), "--hold", "1e9", "-q", "--records", records,
+                           str(seconds), "--hold", "1e9", "-q", "--run-records", records,
                            "--timeout", str(seconds + 120)], seconds + 180)
         agents = [f"agent_{i}" for i in range(8)]
         nodes, runner = _wait_up(run, agents + ["monitor"], 120)
@@ -139,7 +139,7 @@ def lockstep(env, path, kills, rng, log, t_end=6.0):
         with tempfile.TemporaryDirectory() as tmp:
             records = os.path.join(tmp, f"{label}.jsonl")
             t0 = time.monotonic()
-            run = _start(env, argv + ["--records", records], 960)
+            run = _start(env, argv + ["--run-records", records], 960)
             names = [f"agents_{i}_{i + 1}" for i in range(0, 8, 2)]
             _wait_up(run, names, 120)
             for k in range(n_kills):

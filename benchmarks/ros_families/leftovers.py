@@ -66,7 +66,7 @@ def one_run(env, variant, t_end, records):
     head = ["-c", LEDGER_OFF] if variant == "ledger off" else ["-m", "polymatch_ros.cli"]
     argv = ["timeout", "-k", "5", "300", sys.executable, *head, "run", "congruent_triangles",
             "-k", "1", "--integrator", "rkmk4", "--dt", "0.05", "--t-end", str(t_end),
-            "--no-compare", "-q", "--records", records, "--timeout", "240"]
+            "--no-compare", "-q", "--run-records", records, "--timeout", "240"]
     seen, stop = set(), threading.Event()
     start = time.monotonic()
     proc = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -136,7 +136,8 @@ def _realtime_cell(net, scene_file, n, t_end, loss, delay, captures):
         argvs = [host_argv(scene_file, f"{k * i}-{k * i + k - 1}", i == HOSTS - 1,
                            "--mode", "realtime", "--rate", RATE, "--time-scale", TIME_SCALE,
                            "--t-end", t_end, "-k", k, "--peer-timeout", PEER_TIMEOUT,
-                           "--delay", delay, "--records", os.path.join(directory, f"h{i}.jsonl"),
+                           "--delay", delay,
+                           "--run-records", os.path.join(directory, f"h{i}.jsonl"),
                            timeout=seconds - 10)
                  for i in range(HOSTS)]
         started, texts, (echo, dropped) = _on_hosts(
@@ -161,7 +162,7 @@ def _lockstep_cell(net, scene, scene_file, n, t_end, loss, captures):
     with tempfile.TemporaryDirectory(prefix="polymatch_lossy_") as directory:
         out = os.path.join(directory, "final.npz")
         argvs = [host_argv(scene_file, only, i == HOSTS - 1, "--t-end", t_end, "-k", n // HOSTS,
-                           "--records", os.path.join(directory, f"h{i}.jsonl"),
+                           "--run-records", os.path.join(directory, f"h{i}.jsonl"),
                            *(["--save", out] if i == HOSTS - 1 else []), timeout=seconds - 10)
                  for i, only in enumerate(lockstep_split(HOSTS, n))]
         began = time.monotonic()

@@ -36,7 +36,7 @@ def _run_rate(env, path, rate, seconds, tmp, tag):
     run_cli(env, ["run", path, "--mode", "realtime", "-k", "1", "--rate", str(rate),
                   "--time-scale", "1",
                   "--t-end", str(seconds), "--hold", "1e9", "-q", "--no-compare",
-                  "--records", records, "--timeout", str(seconds + 120)], seconds + 180)
+                  "--run-records", records, "--timeout", str(seconds + 120)], seconds + 180)
     recs = [r for r in agent_records(records) if r.finished and r.steps]
     if not recs:
         return None

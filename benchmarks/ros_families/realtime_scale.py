@@ -45,7 +45,7 @@ def _one_run(env, path, rate, seconds, k, records):
 
     bound = int(seconds * 3 + 90)
     argv = ["run", path, "--mode", "realtime", "--rate", str(rate), "--time-scale", "1",
-            "--hold", "1e9", "-q", "--no-compare", "--records", records,
+            "--hold", "1e9", "-q", "--no-compare", "--run-records", records,
             "--timeout", str(bound - 20)]
     if k is not None:
         argv += ["-k", str(k)]

@@ -41,7 +41,8 @@ def run_cli(env, argv, timeout):
 
 
 def agent_records(path):
-    """The agents' run records a `polymatch run --records` wrote (none if the run failed early)."""
+    """The agents' run records a `polymatch run --run-records` wrote (none if the run failed
+    early)."""
     from polymatch_ros.ros.wire import run_records
 
     if not os.path.exists(path):

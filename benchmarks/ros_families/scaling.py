@@ -3,7 +3,7 @@
 For each N (congruent triangles, first-order model, rkmk4: 4 rounds a step, R rounds), a run
 through `polymatch run` with the monitor, as a user starts it, with its default packing and
 with the agents split over P processes (``--split``, default 4: the transport's cost), and
-from its agents' run records (``--records``):
+from its agents' run records (``--run-records``):
 
   rounds/s        the mean over the agent processes (after the first round);
   first round     seconds from the command's start until the last process completed its
@@ -53,7 +53,7 @@ def _measure(n, rounds, workdir, env, k=None):
     started = time.time()
     asked = [] if k is None else ["-k", str(k)]
     out = run_cli(env, ["run", path, "--no-compare", "--hold", "1e9", "--timeout",
-                        str(timeout - 10), "-q", "--records", records, *asked], timeout)
+                        str(timeout - 10), "-q", "--run-records", records, *asked], timeout)
     wall = time.time() - started
     done = [r for r in agent_records(records) if r.finished]
     k = _default_k(n) if k is None else k

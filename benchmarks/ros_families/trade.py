@@ -109,7 +109,7 @@ def _lockstep_row(setup, method, dt, log):
     records = os.path.join(setup.tmp, f"lockstep_{method}_{dt}.jsonl")
     run_cli(setup.env, ["run", setup.path, "--integrator", method, "--dt", str(dt),
                         "--t-end", str(t_run), "--hold", "1e9", "--no-monitor", "--no-compare",
-                        "-q", "--records", records, "--timeout", "300"], 340)
+                        "-q", "--run-records", records, "--timeout", "300"], 340)
     rates = [r.rounds_per_second for r in agent_records(records)]
     rps = float(np.mean(rates)) if rates else float("nan")
     wall_per_s = per_step / (dt * rps) if rates else float("nan")
@@ -163,7 +163,8 @@ def _realtime_row(setup, rate, delay, log):
     out = run_cli(setup.env, ["run", setup.path, "--mode", "realtime", "--rate", str(rate),
                               "--time-scale", str(TIME_SCALE), "--delay", str(delay),
                               "--t-end", str(setup.t_end), "--hold", "1e9", "--no-monitor",
-                              "-q", "--records", records, "--save", npz, "--timeout", "200"], 240)
+                              "-q",
+                              "--run-records", records, "--save", npz, "--timeout", "200"], 240)
     late = _late_share(agent_records(records))
     if not os.path.exists(npz):
         return [rate, TIME_SCALE / rate, delay, "-", "-",

@@ -60,7 +60,7 @@ def _rate(env, path, timeout, extra):
         os.remove(records)
     before = _cpu_now()
     out = run_cli(env, ["run", path, "--no-compare", "--hold", "1e9", "--timeout",
-                        str(timeout - 10), "-q", "--records", records, *extra], timeout)
+                        str(timeout - 10), "-q", "--run-records", records, *extra], timeout)
     wall, busy, ours = (b - a for a, b in zip(before, _cpu_now()))
     rates = [r.rounds_per_second for r in agent_records(records) if r.finished]
     ok = out.returncode in (0, 3) and rates  # 3: ran to t_end without matching yet

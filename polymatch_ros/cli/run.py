@@ -119,7 +119,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", "-q", action="store_true",
                    help="no first line and no progress; the summary and errors only")
     p.add_argument("--verbose", "-v", action="store_true", help="print every agent's final line")
-    p.add_argument("--records", metavar="JSONL",
+    p.add_argument("--run-records", metavar="JSONL",
                    help="write every process's run record (JSON, one a line) to this file")
     p.add_argument("--logs", metavar="DIR",
                    help="write each process's whole output (its ROS log lines, its errors) to "

@@ -209,11 +209,11 @@ def test_a_lockstep_process_killed_after_its_run_ended_is_not_restarted_theorem_
 def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_path):
     """Realtime, 8 agents two a process: SIGKILL of agents 2-3, then of the monitor; both are
     restarted, the agents rejoin the ensemble's clock from their last state and the run
-    converges (exit 0); ``--records`` lists both deaths.  Agents 4-5, stopped (SIGSTOP) for
+    converges (exit 0); ``--run-records`` lists both deaths.  Agents 4-5, stopped (SIGSTOP) for
     2 s in between, are waited out (their peers go on without them), never killed."""
     records = tmp_path / "records.jsonl"
     run = _run(ros, "--mode", "realtime", "--rate", "20", "--time-scale", "4", "--t-end", "300",
-               "--records", records, "-k", "2")
+               "--run-records", records, "-k", "2")
     _until(ros, 4, run)
     os.kill(_process(run, "agents_2_3"), signal.SIGKILL)
     hung = _process(run, "agents_4_5")

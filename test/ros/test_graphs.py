@@ -68,7 +68,7 @@ def test_lockstep_on_a_graph_equals_the_centralised_run(ros, tmp_path, graph, di
     out, records = tmp_path / "final.npz", tmp_path / "records.jsonl"
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", path, "--t-end", str(T_END),
                       "-k", str(k), "--timeout", "150", "--save", str(out),
-                      "--records", str(records), "-q"], timeout=180)
+                      "--run-records", str(records), "-q"], timeout=180)
     rc = ros.wait(proc, 190)
     text = ros.output(proc)
     assert rc in (0, 3), text
@@ -118,7 +118,7 @@ def test_a_stop_on_convergence_reaches_every_agent_of_a_ring_at_the_same_step(ro
     records = tmp_path / "records.jsonl"
     # a process per agent (-k 1): the stop spreads between processes, one hop a round
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", str(path), "--timeout", "150",
-                      "--records", str(records), "-k", "1"], timeout=180)
+                      "--run-records", str(records), "-k", "1"], timeout=180)
     rc = ros.wait(proc, 190)
     text = ros.output(proc)
     assert rc == 0, text

@@ -77,7 +77,7 @@ def test_lockstep_equals_centralised_simulation(ros, tmp_path, name, integrator,
     out, records = tmp_path / "final.npz", tmp_path / "records.jsonl"
     proc = ros.start(
         cli_argv("run", scene_path(name), "--integrator", integrator, "--t-end", T_END, "-k", k,
-                 "--timeout", 150, "--no-compare", "--save", out, "-q", "--records", records),
+                 "--timeout", 150, "--no-compare", "--save", out, "-q", "--run-records", records),
         timeout=180,
     )
     rc = ros.wait(proc, 190)
@@ -124,7 +124,7 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     proc = ros.start(
         # two agent processes: each round crosses processes, and fewer processes step faster
         cli_argv("run", scene_path("congruent_triangles"), "-k", 4, "--timeout", 200,
-                 "--records", records, "--save", saved),
+                 "--run-records", records, "--save", saved),
         timeout=230,
     )
     shm = ShmWatch(lambda: [proc.pid])  # the run's processes' /dev/shm entries

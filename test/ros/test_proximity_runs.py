@@ -23,7 +23,7 @@ def test_lockstep_on_radio_connected_equals_the_centralised_run_while_pairs_ente
     path = scene_path("radio_connected")
     out, records = tmp_path / "final.npz", tmp_path / "records.jsonl"
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", path, "--t-end", "1", "-k", "4",
-                      "--timeout", "150", "--save", str(out), "--records", str(records), "-q"],
+                      "--timeout", "150", "--save", str(out), "--run-records", str(records), "-q"],
                      timeout=180)
     rc = ros.wait(proc, 190)
     text = ros.output(proc)

@@ -79,7 +79,7 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
                                     "/clock", "-o", other), timeout=150)
     # one agent process (-k 3): the runner, the monitor, the recorder and it
     proc = ros.start(cli_argv("run", scene_file, "-k", 3, "--record", mcap, "--save", saved,
-                              "--records", records, "--no-compare", "--timeout", 120),
+                              "--run-records", records, "--no-compare", "--timeout", 120),
                      timeout=150)
     rc = ros.wait(proc, 160)
     out = ros.output(proc)
@@ -144,6 +144,6 @@ def test_run_record_holds_every_step_and_equals_the_runs_results(ros, tmp_path):
     assert all(a < b for a, b in zip(ticks, ticks[1:])), ticks
     assert beside["/polymatch/diameter"][1][-1][1].data == mon.diameter  # latched: the last
     statuses = [m for _, m in beside["/polymatch/status"][1]]  # decoded by rosbags
-    # the monitor's last report, as the run's --records has it
+    # the monitor's last report, as the run's --run-records has it
     assert any(m.role == "monitor" and (m.t, m.diameter) == (mon.t, mon.diameter)
                for m in statuses), statuses

@@ -66,7 +66,7 @@ def realtime_argvs(scene_file, out, *options, t_end=T_END, timeout=100):
     """Realtime on three hosts, 4 agents (one process) each; the lead (host 2) saves."""
     return [host_argv(scene_file, f"{4 * i}-{4 * i + 3}", i == 2, "--mode", "realtime",
                       "--rate", RATE, "--time-scale", TIME_SCALE, "--t-end", t_end, "-k", 4,
-                      "--peer-timeout", PEER_TIMEOUT, "--records", f"{out}.h{i}.jsonl",
+                      "--peer-timeout", PEER_TIMEOUT, "--run-records", f"{out}.h{i}.jsonl",
                       *options, *(["--save", out] if i == 2 else []), timeout=timeout)
             for i in range(3)]
 

@@ -96,7 +96,7 @@ class RunOptions:
     record: str | None = None
     quiet: bool = False
     verbose: bool = False
-    records: str | None = None
+    run_records: str | None = None
     logs: str | None = None
     only: str | None = None
     run_id: int | None = None
@@ -145,7 +145,7 @@ class Outputs:
     """What the run prints and writes."""
 
     save: str | None       # npz of the final poses (checked writable, suffix appended)
-    records: str | None    # every process's run record, JSON lines
+    run_records: str | None    # every process's run record, JSON lines
     quiet: bool            # no progress, no first line
     verbose: bool          # every agent's final line
     compare: bool          # lockstep: compare with the centralised simulation
@@ -229,7 +229,7 @@ def build_run_plan(options: RunOptions) -> RunPlan:
         numerics = choose_numerics(scene, options.integrator, dt, distributed=True)
     outputs = Outputs(
         save=writable_output(options.save, ".npz") if options.save else None,  # before a run
-        records=options.records, quiet=options.quiet, verbose=options.verbose,
+        run_records=options.run_records, quiet=options.quiet, verbose=options.verbose,
         compare=options.compare,
         record=writable_output(options.record, ".mcap") if options.record else None,
         logs=_log_directory(options.logs) if options.logs else None,

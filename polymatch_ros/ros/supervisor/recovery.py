@@ -115,7 +115,7 @@ class Failure:
         return text
 
     def to_json(self) -> str:
-        """One line of ``--records`` (record readers skip it: ``wire.run_records``)."""
+        """One line of ``--run-records`` (record readers skip it: ``wire.run_records``)."""
         data = asdict(self)
         for key in ("restarted", "back"):
             value = data.pop(key)

@@ -156,7 +156,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         # --quiet`, with the records kept and no stop before t_end
         options = RunOptions(args.scene, integrator=args.method, dt=args.dt, t_end=args.t_end,
                              timeout=args.timeout, hold=1e9, ensemble=ENSEMBLE, monitor=False,
-                             compare=False, quiet=True, records=args.records)
+                             compare=False, quiet=True, run_records=args.run_records)
         code = runner.run(build_run_plan(options))
     except PolymatchError as exc:
         print(f"polymatch: error: {json.dumps(str(exc))[1:-1]}", file=sys.stderr)

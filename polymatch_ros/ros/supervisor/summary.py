@@ -48,7 +48,8 @@ class RunOutcome:
 
 
 def report(plan: RunPlan, outcome: RunOutcome) -> None:
-    """The end of the run on stdout/stderr (the summary on the lead host), --records written."""
+    """The end of the run on stdout/stderr (the summary on the lead host), --run-records
+    written."""
     watcher, monitor, progress = outcome.watcher, outcome.monitor, outcome.progress
     final = watcher.final_state() if watcher is not None else None
     records = [r for c in outcome.processes for r in c.records()]
@@ -61,8 +62,8 @@ def report(plan: RunPlan, outcome: RunOutcome) -> None:
     if watcher is not None:  # a process ended early (no final line): its last status
         records += [watcher.agents[c.agents] for c in outcome.children
                     if not c.records() and c.agents in watcher.agents]
-    if plan.outputs.records:
-        with open(plan.outputs.records, "w", encoding="utf-8") as fh:
+    if plan.outputs.run_records:
+        with open(plan.outputs.run_records, "w", encoding="utf-8") as fh:
             fh.writelines(r.to_json() + "\n" for r in records)
             fh.writelines(f.to_json() + "\n" for f in outcome.failures)
     lead = plan.hosts.lead
