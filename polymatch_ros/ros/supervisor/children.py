@@ -241,18 +241,21 @@ def describe_agents(agents: Sequence[int]) -> str:
 
 MONITOR_GRACE_SECONDS = 10.0
 # How long the watcher listens for the monitor's last reports once the agents are ended, unless
-# the monitor has already reported the final step with every agent (a lockstep run's end)
+# the monitor has already reported the final step with every agent (a lockstep run's end) and no
+# recorder is to hear them too
 LAST_REPORTS_SECONDS = 0.5
 
 
-def stop_all(children: Sequence[Child], monitor: Child | None, watcher: Watcher | None) -> None:
-    """End every child by its PID; the monitor last, after the watcher heard its last reports."""
+def stop_all(children: Sequence[Child], monitor: Child | None, watcher: Watcher | None,
+             recorded: bool = False) -> None:
+    """End every child by its PID; the monitor last, after the watcher (and the recorder of a
+    ``recorded`` run) heard its last reports."""
     for c in children:
         c.stop()
     if monitor is not None:
         t0 = time.monotonic()
         while (watcher is not None and time.monotonic() - t0 < LAST_REPORTS_SECONDS
-               and not watcher.monitor_reported_final()):
+               and (recorded or not watcher.monitor_reported_final())):
             watcher.spin(0.05)
         # its final record is the summary's monitor line: on a loaded machine (or under a
         # flood of rogue messages) it can take more than the agents' 3 s to write it

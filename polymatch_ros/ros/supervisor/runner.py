@@ -289,7 +289,7 @@ def _stop(context: RunContext, children: list[Child], monitor: Child | None,
     ledger has looked at each one still running (``shm``)."""
     running = [c for c in [*children, *others, monitor] if c is not None and c.poll() is None]
     context.ledger.note([c.pid for c in running], force=True)
-    stop_all(children, monitor, watcher)
+    stop_all(children, monitor, watcher, recorded=context.plan.outputs.record is not None)
     stop_all(others, None, None)
 
 
