@@ -138,7 +138,8 @@ def _bounded(argv: list[str], out: IO[str], seconds: float) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    """The measuring process: SCENE METHOD DT T_END TIMEOUT RECORDS; ends with the run's code."""
+    """The measuring process: SCENE METHOD DT T_END TIMEOUT RUN_RECORDS; ends with the run's
+    code."""
     from ..process.teardown import end_process
     from . import runner
     from .plan import RunOptions, build_run_plan
@@ -148,7 +149,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         p.add_argument(name)
     for name in ("dt", "t_end", "timeout"):
         p.add_argument(name, type=float)
-    p.add_argument("records")
+    p.add_argument("run_records")
     args = p.parse_args(argv)
     code = 1
     try:
