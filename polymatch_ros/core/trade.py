@@ -94,6 +94,7 @@ class Row:
     wall: float | None = None
     evals: int | None = None
     steps: int | None = None
+    cpu: float | None = None     # the CPU time of the thread that ran it (``Output.cpu``)
     predicted: float = 0.0       # seconds estimated before it ran
     detail: str = ""             # a failure's whole message (``status`` is cut for tables)
 
@@ -226,17 +227,22 @@ class _Costs:
     def __init__(self, t_end: float) -> None:
         self.t_end = t_end
         self.per_eval: dict[str, float] = {}
-        self.latest: dict[str, tuple[float, float]] = {}   # solver -> (tol, wall), last run
+        self.latest: dict[str, tuple[float, float]] = {}   # solver -> (tol, CPU s), last run
 
 
     def learn(self, row: Row) -> None:
+        """Price ``row``'s setting by the CPU time of its run: on a busy machine its wall time
+        holds what other processes took meanwhile, and a cheap probe stretched so would
+        predict the tight runs (the reference) many times too dear; the deadline still stops
+        a run that the machine makes overrun."""
         s = row.setting
-        if not row.ok or row.wall is None:
+        cost = row.cpu if row.cpu else row.wall
+        if not row.ok or cost is None:
             return
         if s.kind == "fixed" and row.evals:
-            self.per_eval[s.solver] = row.wall / row.evals
+            self.per_eval[s.solver] = cost / row.evals
         elif s.kind != "fixed":      # runs go loosest first: the last is the tightest so far
-            self.latest[s.solver] = (s.value, row.wall)
+            self.latest[s.solver] = (s.value, cost)
 
     def predict(self, s: Setting) -> float:
         if s.kind == "fixed":
@@ -269,6 +275,7 @@ def _attempt(runs: Runs, row: Row) -> Output | None:
         row.status = "failed: " + row.detail[:80]
         return None
     row.status, row.wall, row.evals, row.steps = "ok", out.wall, out.evals, out.steps
+    row.cpu = out.cpu
     return out
 
 

@@ -35,12 +35,15 @@ class OverBudget(PolymatchError):
 
 @dataclass(frozen=True)
 class Output:
-    """A run's vertices per group, (samples, N, vertices, d), with its cost."""
+    """A run's vertices per group, (samples, N, vertices, d), with its cost: its wall time and
+    the CPU time of the thread that ran it (``cpu``: what the run costs whatever else the
+    machine runs; the budget's predictions are priced by it)."""
 
     verts: list[np.ndarray]
     wall: float
     evals: int
     steps: int | None    # accepted steps (None: scipy's solve_ivp does not say)
+    cpu: float = 0.0
 
 
 def max_vertex_error(a: list[np.ndarray], b: list[np.ndarray]) -> float:
@@ -68,18 +71,18 @@ class Runs:
         state = State(0.0, tuple(replace(gs) for gs in scene.initial.all_groups()))
         states = [state]
         clock, deadline = time.perf_counter, self.deadline
-        start = clock()
+        start, cpu = clock(), time.thread_time()
         run = p.method.solver(System(scene.model), state, scene.t_end, self.times, p.dt)
         while run.status == RUNNING:
             states.extend(run.step())
             if clock() > deadline:
                 raise OverBudget(f"{p.name} passed the deadline at t = {run.state.t:g}")
-        wall = clock() - start
+        wall, cpu = clock() - start, time.thread_time() - cpu
         got = np.array([st.t for st in states])
         if len(got) != len(self.times) or np.max(np.abs(got - self.times)) > 1e-9 * max(
                 1.0, scene.t_end):
             raise PolymatchError(f"{p.name}: its sample times are not the grid's")
-        return Output(self._state_vertices(scene, states), wall, run.nfev, run.nsteps)
+        return Output(self._state_vertices(scene, states), wall, run.nfev, run.nsteps, cpu)
 
     def _state_vertices(self, scene: Scene, states: list[State]) -> list[np.ndarray]:
         model = scene.model
@@ -106,10 +109,10 @@ class Runs:
             return flat.rhs(t, y)
 
         y0 = flat.initial(self.scene)
-        start = clock()
+        start, cpu = clock(), time.thread_time()
         sol = solve_ivp(rhs, (0.0, self.scene.t_end), y0, method="DOP853", rtol=tol,
                         atol=tol, t_eval=self.times)
-        wall = clock() - start
+        wall, cpu = clock() - start, time.thread_time() - cpu
         if not sol.success:
             raise PolymatchError(f"{SCIPY_NAME}: {sol.message}")
         out = []
@@ -118,5 +121,5 @@ class Runs:
             x = np.array([p["x"] for p in parts])
             mats = np.array([p["rot"] for p in parts])
             out.append(vertices(x, mats, g.reference, g.scales))
-        return Output(out, wall, int(sol.nfev), None)
+        return Output(out, wall, int(sol.nfev), None, cpu)
 
