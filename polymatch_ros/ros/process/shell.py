@@ -8,9 +8,10 @@ application print its final lines, and bounds the DDS teardown (``teardown_watch
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from ...core.errors import PolymatchError
@@ -44,6 +45,18 @@ class NodeApp:
     def destroy(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
+
+@contextlib.contextmanager
+def destroyed_on_error(node: Node) -> Iterator[Node]:
+    """``node``, destroyed if the block raises (a refused parameter while the node is built):
+    the process's DDS participant ends with its last node, and with it the shared-memory files
+    Fast DDS made for it, which a process that ends at once would otherwise leave behind."""
+    try:
+        yield node
+    except BaseException:
+        node.destroy_node()
+        raise
+
 
 def ros_main(
     factory: Callable[[list[str]], Any],
