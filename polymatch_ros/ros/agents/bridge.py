@@ -262,7 +262,8 @@ class BridgeAgent(RuntimeParams, AgentBase):
         fields = ("rot", "x", "v") if self.model.order == 2 else ("rot", "x")
         request = SimpleNamespace(stage=self.state, fields=fields)
         heard = self.peers.in_range(self.peers.active(), self.state)  # a radio: peers in range
-        ensemble = self.peers.ensemble(request, heard)  # type: ignore[arg-type]
+        ensemble = self.peers.ensemble(request,  # type: ignore[arg-type]
+                                       self.peers.peer_rows(heard))
         twist = self._command(gi, row, ensemble, own, heard)
         if not twist.finite:
             self._hold("non-finite command", brake=True)

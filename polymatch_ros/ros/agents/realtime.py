@@ -252,13 +252,11 @@ class PeerTable:
                        for a in g.indices if a in alive}
         return out
 
-    def ensemble(self, request: Request, alive: Iterable[int],
-                 peers: dict[int, dict[int, wire.Row]] | None = None) -> Ensemble:
+    def ensemble(self, request: Request, peers: dict[int, dict[int, wire.Row]]) -> Ensemble:
         """Frozen peers (``peer_rows``, found once a tick) + the local stage rows, per needed
         group, ``index`` = the rows present."""
         model = self.model
         out: list[SimpleNamespace | None] = []
-        peers = self.peer_rows(alive) if peers is None else peers
         with_v = model.order == 2 and "v" in request.fields
         for gi in range(len(model.groups)):
             if gi not in peers:
@@ -385,9 +383,9 @@ class RealtimeAgent(RuntimeParams, AgentBase):
             alive = self.peers.in_range(self.peers.active(), self.state)
             heard = self.peers.peer_rows(alive)
 
-            def answer(request: Request, stage: int, alive: list[int] = alive,
+            def answer(request: Request, stage: int,
                        heard: dict[int, dict[int, wire.Row]] = heard) -> Ensemble:
-                return self.peers.ensemble(request, alive, heard)
+                return self.peers.ensemble(request, heard)
 
             self.state.coupling = None
             self.state = drive(method, self.system, self.state, step, answer)

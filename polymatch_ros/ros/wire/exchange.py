@@ -179,7 +179,6 @@ def decode_exchange_block(
     return out, None
 
 
-
 def decode_exchanges(
     messages: Sequence[tuple[int, Any]], grp: RotationGroup, dim: int, run_id: int,
     t_max: float | None = None,
