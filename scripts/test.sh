@@ -8,4 +8,7 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 bash scripts/install-system-packages.sh test
 bash scripts/build-colcon.sh
+# each test worker has a core of its own: OpenBLAS's worker threads only add start-up CPU to
+# every Python process the tests start (the ROS processes get the same from ros_environment)
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 exec .venv/bin/python -m pytest -q test "$@"

@@ -17,6 +17,21 @@ rounds after the first, which waits for the last peer to start:
     bare typed 3/8: RATE rounds/s over 400 rounds; matched after SECONDS s
 
 (its rates: ``docs/bench/distributed.md``)
+
+The bare realtime tick, the limit for one agent a process in realtime:
+
+    python -m benchmarks.ros_families.bare_exchange tick INDEX K RATE SECONDS
+
+Process INDEX of K publishes one polymatch_interfaces/msg/AgentState (a d = 2 pose, as a
+realtime agent fills it) per tick at RATE Hz on /polymatch_bare/s<INDEX>, with the QoS of the
+agents' state topic (writers RELIABLE, readers BEST_EFFORT depth 1), and takes the newest
+message of each peer's reader at each tick without an executor (as the agents do).  No
+numerics, no checks.  It waits for discovery as above, then ticks for SECONDS and prints its
+CPU time (every thread) per tick:
+
+    bare tick 3/16: CPU MS ms a tick over TICKS ticks at RATE Hz; HEARD of PEERS peers heard
+
+(its figures: ``docs/bench/realtime_scale.md``)
 """
 
 import array
@@ -144,9 +159,75 @@ def _exchange(executor, pub, inbox, k, rounds, payload, kind):
     return time.perf_counter() - t0
 
 
+def _tick_endpoints(node, me, k):
+    """This process's state writer and a reader of every peer's, with the agents' QoS."""
+    from polymatch_interfaces.msg import AgentState
+    from polymatch_ros.ros import wire
+    from polymatch_ros.ros.wire.intake import quiet_events
+
+    pub_events, sub_events = quiet_events()
+    qos = wire.qos_profiles()
+    pub = node.create_publisher(AgentState, f"/polymatch_bare/s{me}", qos["pose"],
+                                event_callbacks=pub_events)
+    subs = [node.create_subscription(AgentState, f"/polymatch_bare/s{p}", lambda _msg: None,
+                                     qos["latest"], event_callbacks=sub_events)
+            for p in range(k) if p != me]
+    return pub, subs
+
+
+def _ticks(pub, subs, me, rate, seconds):
+    """Tick at ``rate`` Hz for ``seconds``: publish a state, take each reader's newest message;
+    (ticks, process CPU seconds over them, peers heard at least once)."""
+    from polymatch_interfaces.msg import AgentState
+
+    period, ticks = 1.0 / rate, int(round(rate * seconds))
+    heard: set[int] = set()
+    next_tick = time.monotonic()
+    cpu0 = time.process_time()
+    for n in range(ticks):
+        next_tick += period
+        time.sleep(max(0.0, next_tick - time.monotonic()))
+        msg = AgentState()
+        msg.header.stamp.sec = int(n // rate)
+        msg.header.frame_id, msg.run_id, msg.agent = "world", 1, me
+        msg.centroid = array.array("d", [0.5 * n, 0.25])
+        msg.rotation = array.array("d", [1.0, 0.0, 0.0, 1.0])
+        pub.publish(msg)
+        for i, sub in enumerate(subs):
+            newest = None
+            while True:
+                with sub.handle:
+                    got = sub.handle.take_message(sub.msg_type, sub.raw)
+                if got is None:
+                    break
+                newest = got
+            if newest is not None:
+                heard.add(i)
+    return ticks, time.process_time() - cpu0, len(heard)
+
+
+def tick_main(argv):
+    me, k, rate, seconds = int(argv[0]), int(argv[1]), float(argv[2]), float(argv[3])
+    import rclpy
+
+    rclpy.init()
+    from polymatch_ros.ros.wire.intake import lean_node
+
+    node, executor = lean_node(f"bare_tick_{me}")
+    pub, subs = _tick_endpoints(node, me, k)
+    _wait_matched(executor, pub, subs, k)
+    ticks, cpu, heard = _ticks(pub, subs, me, rate, seconds)
+    print(f"bare tick {me}/{k}: CPU {cpu / ticks * 1e3:.3f} ms a tick over {ticks} ticks at "
+          f"{rate:g} Hz; {heard} of {k - 1} peers heard", flush=True)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
 def main(argv=None):
-    me, k, rounds, payload, executor_kind, message_kind = _parse(
-        sys.argv[1:] if argv is None else argv)
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["tick"]:
+        return tick_main(argv[1:])
+    me, k, rounds, payload, executor_kind, message_kind = _parse(argv)
     t_start = time.monotonic()
     import rclpy
     from rclpy.duration import Duration

@@ -19,10 +19,11 @@ id reserved for the benchmark, and a timeout.
 """
 
 import re
-import subprocess
 import sys
 import tempfile
 from dataclasses import dataclass, field
+
+from .ros_runs import run_parallel
 
 NAME = "distributed"
 HELP = "lockstep rounds/s of the agent processes vs the bare rclpy exchange, N = 4 ... 32"
@@ -43,30 +44,8 @@ def _scene_yaml(n, steps, dt):
             f"groups:\n  - {{name: triangles, shape: triangle, count: {n}}}\n")
 
 
-def _parallel(argvs, env, timeout):
-    procs = [
-        subprocess.Popen(
-            ["timeout", "-k", "5", str(timeout)] + argv,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        for argv in argvs
-    ]
-    outs = []
-    for p in procs:
-        try:
-            out, _ = p.communicate(timeout=timeout + 10)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            out, _ = p.communicate()
-        outs.append(out)
-    return outs
-
-
 def _bare(n, rounds, env, timeout, message="untyped"):
-    outs = _parallel(
+    outs = run_parallel(
         [
             [
                 sys.executable,
@@ -95,7 +74,7 @@ def _agents(n, path, env, timeout, run_id):
         + ros_args(AgentConfig(scene=path, agent=i, run_id=run_id), node=f"agent_{i}")
         for i in range(n)
     ]
-    return _parse_agents("\n".join(_parallel(argvs, env, timeout)).splitlines())
+    return _parse_agents("\n".join(run_parallel(argvs, env, timeout)).splitlines())
 
 
 def _parse_agents(lines):

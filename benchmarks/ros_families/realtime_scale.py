@@ -11,9 +11,16 @@ records: the share of ticks that started more than one period late; each process
 per tick (median and worst over processes, every thread); the wall time the ticks took over the
 simulated time they covered (1.00: real time held); and whether the run ended matched (exit 0)
 or only ran to t_end (exit 3).
+
+Beside each one-agent-a-process run, the bare transport's tick at the same size and rate
+(``bare_exchange tick``: N processes publishing one AgentState a tick and taking the newest of
+each peer's, with the agents' QoS and no numerics): what rclpy and Fast DDS alone cost a
+process a tick, and the agents' CPU over it.
 """
 
 import os
+import re
+import sys
 import time
 
 NAME = "realtime_scale"
@@ -67,6 +74,28 @@ def _one_run(env, path, rate, seconds, k, records):
             "took": took}
 
 
+def _bare_ticks(env, n, rate, seconds):
+    """CPU ms a tick of each of ``n`` bare tick processes (``bare_exchange tick``), sorted; the
+    processes that did not hear every peer are left out (empty: none finished)."""
+    from .ros_runs import run_parallel
+
+    argv = ["-m", "benchmarks.ros_families.bare_exchange", "tick"]
+    outs = run_parallel([[sys.executable, *argv, str(i), str(n), str(rate), str(seconds)]
+                         for i in range(n)], env, int(seconds * 3 + 60))
+    found = [re.search(r"CPU ([0-9.]+) ms a tick .*; (\d+) of (\d+) peers heard", o)
+             for o in outs]
+    return sorted(float(m.group(1)) for m in found if m and m.group(2) == m.group(3))
+
+
+def _bare_cells(got, bare):
+    """(bare CPU ms a tick median / worst, agents' median over the bare median) of a row."""
+    if not bare:
+        return ["-", "-"]
+    median = bare[len(bare) // 2]
+    ratio = f"{got['cpu_median'] / median:.2f}" if "cpu_median" in got else "-"
+    return [f"{median:.2f} / {bare[-1]:.2f}", ratio]
+
+
 def _row(n, rate, packing, got):
     if "failed" in got:
         return [str(n), f"{rate:g}", packing, "-", "-", "-", "-", f"failed: {got['failed']}"]
@@ -86,7 +115,7 @@ def run(args, log):
     sizes = [8] if args.quick else args.agents
     rates = [20] if args.quick else args.rates
     seconds = 2 if args.quick else args.seconds
-    k1 = [] if args.quick else args.k1_agents
+    k1 = [2] if args.quick else args.k1_agents
     rows = []
     load = [os.getloadavg()]
     with private_runs() as (tmp, env):
@@ -99,12 +128,14 @@ def run(args, log):
                     log(f"{n} agents at {rate:g} Hz, {label}")
                     records = os.path.join(tmp, f"rt_{n}_{rate}_{label.replace(' ', '')}.jsonl")
                     got = _one_run(env, path, rate, seconds, k, records)
-                    rows.append(_row(n, rate, label, got))
+                    bare = _bare_ticks(env, n, rate, seconds) if k == 1 else []
+                    rows.append(_row(n, rate, label, got) + _bare_cells(got, bare))
                     load.append(os.getloadavg())
     report.table(
         ["agents", "rate (Hz)", "packing (processes x agents)", "ticks started late",
          "CPU ms per tick per process (median / worst)", "CPU ms per agent tick",
-         "wall / simulated time", "end"],
+         "wall / simulated time", "end", "bare tick: CPU ms per tick per process (median / "
+         "worst)", "agents / bare (medians)"],
         rows,
         caption=f"Realtime, N congruent triangles (first order), time scale 1, {seconds} "
         f"simulated s per run, the monitor running; {load_span(load)}",
@@ -115,5 +146,9 @@ def run(args, log):
         "tick: over the agents it hosts.",
         "- wall / simulated: the wall-clock time of the ticks over the simulated time they "
         "covered; 1.00 holds real time.",
+        "- bare tick (one agent a process only): the same number of processes publishing one "
+        "AgentState a tick and taking each peer's newest, with the agents' QoS, no numerics and "
+        "no checks (`python -m benchmarks.ros_families.bare_exchange tick`): what rclpy and "
+        "Fast DDS alone cost a process a tick here.",
     )
     return report

@@ -49,3 +49,22 @@ def agent_records(path):
         return []
     with open(path, encoding="utf-8") as fh:
         return [r for r in run_records(fh) if r.role == "agent"]
+
+
+def run_parallel(argvs, env, timeout):
+    """Start every command of ``argvs`` at once under ``timeout -k 5 TIMEOUT``; the output of
+    each (stdout and stderr together), in order, once all have ended."""
+    procs = [
+        subprocess.Popen(["timeout", "-k", "5", str(timeout)] + argv, env=env,
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        for argv in argvs
+    ]
+    outs = []
+    for p in procs:
+        try:
+            out, _ = p.communicate(timeout=timeout + 10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, _ = p.communicate()
+        outs.append(out)
+    return outs

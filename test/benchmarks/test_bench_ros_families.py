@@ -33,7 +33,8 @@ EXPECTED = {
     "trade": ["| integrator", "rounds/step", "wall s per simulated s", "| rate (Hz)",
               "injected delay"],
     "realtime_scale": ["| agents", "packing (processes x agents)", "ticks started late",
-                       "CPU ms per agent tick", "wall / simulated time", "default: 1 x 8"],
+                       "CPU ms per agent tick", "wall / simulated time", "default: 1 x 8",
+                       "-k 1: 2 x 1", "agents / bare (medians)"],
     "watching": ["| agents", "median with", "median without", "with / without",
                  "median of the pairs", "others' cores"],
     "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
@@ -87,6 +88,25 @@ def _bridge(tables, out):
         assert row["true: median / max"] != "-", row
 
 
+def _realtime_scale(tables, out):
+    """The shapes multiply out; every one-agent-a-process row has its bare tick, whose processes
+    cost some CPU a tick (median no more than the worst), and the agents' median over it is the
+    quotient of the two medians; the packed rows have none."""
+    _shapes_multiply(tables, out)
+    rows = _rows(tables, "agents / bare (medians)")
+    assert any("-k 1" in row["packing (processes x agents)"] for row in rows), tables
+    for row in rows:
+        bare = row["bare tick: CPU ms per tick per process (median / worst)"]
+        if "-k 1" not in row["packing (processes x agents)"]:
+            assert bare == "-" and row["agents / bare (medians)"] == "-", row
+            continue
+        median, worst = (float(v) for v in bare.split(" / "))
+        assert 0 < median <= worst, row
+        agents = float(row["CPU ms per tick per process (median / worst)"].split(" / ")[0])
+        assert number(row["agents / bare (medians)"]) == pytest.approx(agents / median,
+                                                                        rel=0.02), row
+
+
 def _ratios(tables, out):
     """Every size ran with and without the monitor: its ratio is the medians' quotient."""
     rows = _rows(tables, "with / without")
@@ -108,7 +128,7 @@ def _ratios(tables, out):
 
 VALUES = {"distributed": _finished, "packing": _shapes_multiply, "scaling": _shapes_multiply,
           "graphs": None, "trade": _trade, "bridge": _bridge, "realtime": _finished,
-          "realtime_scale": _shapes_multiply, "watching": _ratios}
+          "realtime_scale": _realtime_scale, "watching": _ratios}
 
 
 @pytest.mark.usefixtures("ros")  # the slot and domain of a ROS world; the family takes its own

@@ -2,6 +2,7 @@
 arguments (the server itself, carrying more participants than loopback simple discovery reaches:
 test/ros/test_discovery_server.py)."""
 
+import os
 import subprocess
 import sys
 from xml.etree import ElementTree
@@ -152,3 +153,26 @@ def test_server_command_rejects_bad_arguments(argv, words):
     assert out.returncode == 2
     assert out.stderr.startswith("polymatch: error: ") and words in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
+
+
+def _threads_after_numpy(env):
+    """The threads of a Python process once it has imported numpy, as the kernel counts them."""
+    code = ("import numpy\n"
+            "print([ln.split()[1] for ln in open('/proc/self/status')\n"
+            "       if ln.startswith('Threads')][0])")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=60, check=True)
+    return int(out.stdout)
+
+
+def test_node_processes_start_one_openblas_thread_unless_the_user_says_otherwise():
+    """Every process a run starts steps in one thread: OpenBLAS starts no workers of its own
+    there (one a core otherwise), and a user's OPENBLAS_NUM_THREADS wins."""
+    from polymatch_ros.ros.network.environment import ros_environment
+
+    base = {k: v for k, v in os.environ.items() if not k.startswith("OPENBLAS")}
+    assert _threads_after_numpy(ros_environment(7, base=base)) == 1
+    assert _threads_after_numpy(dict(ros_environment(7, base=base),
+                                     OPENBLAS_NUM_THREADS="2")) == 2
+    assert ros_environment(7, base=dict(base, OPENBLAS_NUM_THREADS="3"))[
+        "OPENBLAS_NUM_THREADS"] == "3"

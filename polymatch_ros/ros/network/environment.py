@@ -53,6 +53,10 @@ def ros_environment(domain_id: int | None = None,
     if domain_id is not None:
         env["ROS_DOMAIN_ID"] = str(domain_id)
     env.setdefault("PYTHONUNBUFFERED", "1")
+    # each process steps its agents in one thread, on small matrices: OpenBLAS's worker threads
+    # (one a core, started at numpy's import) serve none of them, and their start is a share
+    # of every process's start-up CPU; a user's own setting wins
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
     return env
 
 

@@ -86,9 +86,9 @@ REPORT_READERS_SECONDS = 20.0
 #: an agent's velocities as heard: (v, W as one algebra row)
 Velocity = tuple[np.ndarray, np.ndarray]
 #: the share of a core the reports may take: a report that costs c s of CPU is followed by the
-#: next one no sooner than c / REPORT_CPU_SHARE s later (1024 agents: a few reports a second),
-#: so that watching a large ensemble leaves the agents the machine
-REPORT_CPU_SHARE = 0.05
+#: next one no sooner than c / REPORT_CPU_SHARE s later (a thousand agents: a report or two a
+#: second), so that watching an ensemble leaves the agents the machine
+REPORT_CPU_SHARE = 0.02
 
 
 class MonitorNode(NodeApp):
