@@ -176,3 +176,22 @@ def test_node_processes_start_one_openblas_thread_unless_the_user_says_otherwise
                                      OPENBLAS_NUM_THREADS="2")) == 2
     assert ros_environment(7, base=dict(base, OPENBLAS_NUM_THREADS="3"))[
         "OPENBLAS_NUM_THREADS"] == "3"
+
+
+def test_a_reserved_domain_is_marked_for_the_run_and_only_that_domain(monkeypatch):
+    """A test's or benchmark's environment names the domain it reserved; a run there has no
+    other ensemble to look for, a run in any other domain (the user's) still looks."""
+    from polymatch_ros.ros.network.environment import (
+        RESERVED_DOMAIN,
+        domain_reserved,
+        private_ros_environment,
+        ros_environment,
+    )
+
+    monkeypatch.setenv(RESERVED_DOMAIN, "12")  # a caller's own mark does not carry over
+    env = private_ros_environment(42)
+    assert env["ROS_DOMAIN_ID"] == "42" and env[RESERVED_DOMAIN] == "42"
+    assert domain_reserved(42, env) and not domain_reserved(41, env)
+    assert not domain_reserved(42, {}) and not domain_reserved(42, {RESERVED_DOMAIN: ""})
+    user = {k: v for k, v in os.environ.items() if k != RESERVED_DOMAIN}
+    assert RESERVED_DOMAIN not in ros_environment(42, base=user)

@@ -142,6 +142,9 @@ def test_runner_converges_theorem_4_2_and_echo_sees_diameter_below_tolerance(ros
     assert m and float(m.group(1)) <= 1e-9, text
     assert "converged: matching diameter < 1e-06" in text
     assert "stopped by request" not in text  # the runner's own stop, on convergence
+    # the harness reserved the domain for this test: the run says so (and so looked for no
+    # other ensemble of its name before it started)
+    assert f"ROS graph: domain {ros.domain}, reserved for this run by its caller" in text
     t_final = float(re.search(r"\nt = ([0-9.e+-]+), wall time", text).group(1))
     # a normal run is clean: nothing dropped, by the monitor or any agent
     assert re.search(r"^monitor: last report .*; no messages dropped$", text, re.M), text

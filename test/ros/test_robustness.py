@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 import yaml
 from ros_harness import PY, REPO, _children, cli_argv, needs_ros, node_argv, scene_path
+from shm_watch import fast_dds_names, private_shm_argv, private_shm_possible
 
 from benchmarks.hosts.runs import descendants
 from polymatch_ros.core.saved import load_saved
@@ -126,12 +127,19 @@ def test_foreign_well_formed_states_are_not_read_in_a_realtime_run_theorem_4_2(r
     assert ignored and int(ignored.group(1)) > 0, text[-3000:]
 
 
-def _refused(ros, argv):
-    """Start ``argv``: it must exit with code 2 and one line (no traceback); that line."""
+def _refused(ros, argv, tmp_path):
+    """Start ``argv``: it must exit with code 2 and one line (no traceback), and leave none of
+    Fast DDS's files in /dev/shm (its own /dev/shm where it can have one: the process refused
+    after its DDS participant was made); that line."""
+    listing = tmp_path / "shm_left.txt"
+    if private_shm_possible():
+        argv = private_shm_argv(argv, listing)
     proc = ros.start(argv, timeout=60)
     assert ros.wait(proc, 70) == 2
     text = ros.output(proc).strip()
     assert len(text.splitlines()) == 1 and "Traceback" not in text, text
+    if private_shm_possible():
+        assert fast_dds_names(listing) == [], text
     return text
 
 
@@ -147,15 +155,15 @@ def _refused(ros, argv):
         ("nodes.monitor", {"markers": "maybe"}, "expected a boolean"),
     ],
 )
-def test_bad_node_parameter_is_one_line_and_exit_code_2(ros, node, params, expect):
-    text = _refused(ros, node_argv(node, "congruent_triangles", **params))
+def test_bad_node_parameter_is_one_line_and_exit_code_2(ros, node, params, expect, tmp_path):
+    text = _refused(ros, node_argv(node, "congruent_triangles", **params), tmp_path)
     assert expect in text, text
 
 
-def test_missing_scene_is_one_line_and_exit_code_2(ros):
+def test_missing_scene_is_one_line_and_exit_code_2(ros, tmp_path):
     argv = [PY, "-m", "polymatch_ros.ros.nodes.monitor", "--ros-args", "-p",
             "scene:=/nonexistent.yaml"]
-    assert "no such scene file" in _refused(ros, argv)
+    assert "no such scene file" in _refused(ros, argv, tmp_path)
 
 
 def _scene_file(path, group, shape, count, dimension, dt, t_end, **extra):

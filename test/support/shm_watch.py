@@ -9,6 +9,7 @@ no live process holds the lock of (after a test, what its killed processes left)
 
 import contextlib
 import os
+import shutil
 import threading
 
 from proc_group import children
@@ -106,3 +107,26 @@ class ShmWatch:
             for path in (seg, seg + LOCK):
                 with contextlib.suppress(FileNotFoundError):
                     os.unlink(path)
+
+
+def private_shm_possible():
+    """Whether a process can be given a /dev/shm of its own (``private_shm_argv``): root and
+    util-linux's ``unshare``."""
+    return os.geteuid() == 0 and shutil.which("unshare") is not None
+
+
+def private_shm_argv(argv, listing):
+    """``argv`` run in a mount namespace of its own with an empty tmpfs on /dev/shm; once it has
+    ended, the names left in that /dev/shm are written to the file ``listing`` (one a line) and
+    its exit code is passed on.  Everything the process and its children made there is theirs
+    alone: no other process on the machine can add to it or take from it."""
+    script = ('mount -t tmpfs -o size=64m polymatch_shm /dev/shm || exit 97; "$@"; code=$?; '
+              'ls -A /dev/shm > "$LISTING"; exit $code')
+    return ["env", f"LISTING={listing}", "unshare", "--mount", "--propagation", "private",
+            "sh", "-c", script, "sh", *map(str, argv)]
+
+
+def fast_dds_names(listing):
+    """The Fast DDS entries (segments, locks, ports) among the names of a ``listing`` file."""
+    with open(listing, encoding="utf-8") as fh:
+        return sorted(n for n in fh.read().split() if "fastrtps" in n or "fastdds" in n)

@@ -60,12 +60,24 @@ def ros_environment(domain_id: int | None = None,
     return env
 
 
+#: names the domain its caller reserved (``domain_coordinator``) for itself alone: a run in that
+#: domain on loopback has no other ensemble to look for before it starts (``domain_reserved``)
+RESERVED_DOMAIN = "POLYMATCH_RESERVED_DOMAIN"
+
+
 def private_ros_environment(domain_id: int) -> dict[str, str]:
     """``ros_environment`` of a domain reserved for one run (a benchmark, a test): the user's
-    own ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE do not carry over."""
-    user = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+    own ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE do not carry over, and the domain is
+    marked reserved (``RESERVED_DOMAIN``)."""
+    user = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", RESERVED_DOMAIN)
     base = {k: v for k, v in os.environ.items() if k not in user}
-    return ros_environment(domain_id, base=base)
+    return dict(ros_environment(domain_id, base=base), **{RESERVED_DOMAIN: str(domain_id)})
+
+
+def domain_reserved(domain: int, environ: Mapping[str, str] | None = None) -> bool:
+    """Whether ``RESERVED_DOMAIN`` names ``domain``: its caller reserved it for this run."""
+    return (os.environ if environ is None else environ).get(RESERVED_DOMAIN, "").strip() == \
+        str(domain)
 
 
 #: ROS's domain when ROS_DOMAIN_ID is not set
@@ -103,6 +115,9 @@ def describe_domain(domain: int, isolated: bool, discovery: str) -> str:
     if isolated:
         return (f"ROS graph: domain {domain}, private to this run (--isolated): another shell "
                 f"does not see it")
+    if domain_reserved(domain):
+        return (f"ROS graph: domain {domain}, reserved for this run by its caller "
+                f"({RESERVED_DOMAIN}), discovery {discovery}")
     whose = ("your ROS_DOMAIN_ID" if os.environ.get("ROS_DOMAIN_ID", "").strip()
              else "ROS's default: ROS_DOMAIN_ID is not set")
     return (f"ROS graph: domain {domain} ({whose}), discovery {discovery}: a second shell with "

@@ -9,6 +9,7 @@ application print its final lines, and bounds the DDS teardown (``teardown_watch
 from __future__ import annotations
 
 import contextlib
+import gc
 import signal
 import sys
 from collections.abc import Callable, Iterator
@@ -101,4 +102,11 @@ def ros_main(
                 app.destroy()
             if rclpy.ok():
                 rclpy.shutdown()
+            # a destroyed LifecycleNode keeps its rcl node (and so the process's DDS participant
+            # and its files in /dev/shm) until its state machine is collected, and the exception
+            # of a refused start holds the nodes its frames made: with the application dropped
+            # and collected here, Fast DDS deletes the participant before the process ends
+            # without the interpreter's finalization
+            app = None
+            gc.collect()
     end_process(code)

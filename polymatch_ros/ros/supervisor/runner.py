@@ -34,7 +34,12 @@ from ..network.discovery import (
     discovery_environments,
     start_discovery_server,
 )
-from ..network.environment import describe_domain, ros_environment, run_domain_id
+from ..network.environment import (
+    describe_domain,
+    domain_reserved,
+    ros_environment,
+    run_domain_id,
+)
 from ..process.teardown import teardown_watchdog
 from ..wire.checkpoint import Checkpoint, CheckpointFile
 from . import bridge_run
@@ -96,13 +101,15 @@ def run(plan: RunPlan) -> int:
 
     The caller ends the process with it (``teardown.end_process``): rclpy ran in this process.
     """
-    # a domain reserved for this run (--isolated) holds no other ensemble; the user's, or one
-    # reached beyond loopback, may (``Watcher.refuse_names_in_use``)
+    # a domain reserved for this run (--isolated, or by its caller: ``domain_reserved``) holds
+    # no other ensemble; the user's, or one reached beyond loopback, may
+    # (``Watcher.refuse_names_in_use``)
     isolated = plan.hosts.isolated
-    shared = not isolated or plan.hosts.discovery.kind != "localhost"
     with run_domain_id(isolated) as domain, tempfile.TemporaryDirectory(
         prefix="polymatch_run_"
     ) as directory:
+        shared = (not (isolated or domain_reserved(domain))
+                  or plan.hosts.discovery.kind != "localhost")
         env = ros_environment(domain)
         spec = plan.hosts.discovery
         envs = None if spec.kind == "localhost" else discovery_environments(spec, directory)
