@@ -4,8 +4,8 @@
 
 Prints ``CLOCK <ns> <monotonic s>`` for every /clock message (and when it came) and
 ``POSE <ns>`` for every stamp on POSE_TOPIC (geometry_msgs/PoseStamped), until /clock reaches
-END_NS (then, once the pose of END_NS came too, ``NOW <ns> <ros time active>``: its own clock,
-which follows /clock) or BOUND_S seconds pass (exit 3).
+END_NS (then, once the pose of END_NS came and its own clock, which follows /clock, shows it,
+or 5 s later, ``NOW <ns> <ros time active>``: that clock) or BOUND_S seconds pass (exit 3).
 """
 
 import sys
@@ -47,11 +47,14 @@ def main():
             print("TIMEOUT", flush=True)
             return 3
         rclpy.spin_once(node, timeout_sec=0.1)
-    # the last step's pose comes on another writer than its /clock: wait for it (5 s at most)
-    last = time.monotonic() + 5.0
-    while end_ns not in poses and time.monotonic() < last:
-        rclpy.spin_once(node, timeout_sec=0.05)
+    # the last step's pose comes on another writer than its /clock, and the node's own clock
+    # follows /clock through rclpy's time source, a reader of its own whose callback may still
+    # be waiting its turn: wait for both (5 s at most)
     clock = node.get_clock()
+    last = time.monotonic() + 5.0
+    while (end_ns not in poses or clock.now().nanoseconds < end_ns) and \
+            time.monotonic() < last:
+        rclpy.spin_once(node, timeout_sec=0.05)
     print(f"NOW {clock.now().nanoseconds} {clock.ros_time_is_active}", flush=True)
     node.destroy_node()
     rclpy.shutdown()

@@ -231,6 +231,15 @@ def ros_slot(slots=ROS_SLOTS, poll=0.2):
         time.sleep(poll)
 
 
+def _attempt_folder(base):
+    """``base``, or ``base_2``, ``base_3``, ... for a test's rerun: each attempt's logs apart."""
+    folder, attempt = base, 1
+    while os.path.exists(folder):
+        attempt += 1
+        folder = f"{base}_{attempt}"
+    return folder
+
+
 @pytest.fixture
 def ros(request):
     """A private ROS world, in one of ``ROS_SLOTS`` slots; with POLYMATCH_KEEP_LOGS=DIR the
@@ -248,4 +257,5 @@ def ros(request):
                 getattr(request.node, "rep_call", None) is not None
                 and request.node.rep_call.failed
             )
-            world.close(os.path.join(keep, request.node.name) if keep and failed else None)
+            world.close(_attempt_folder(os.path.join(keep, request.node.name))
+                        if keep and failed else None)

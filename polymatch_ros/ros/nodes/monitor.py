@@ -38,7 +38,8 @@ that every agent's state has reached (its loop, at that rate, takes the states t
 its last report and publishes it; packed processes' block messages are held undecoded by step,
 and only the step a report shows is decoded, ``held_steps``); in realtime at ``rate`` Hz from
 the latest poses, taken only then.  Either way its reports take at most ``REPORT_CPU_SHARE``
-of a core: where one costs more (a large ensemble), the reports come less often.
+of a core: where one costs more (a large ensemble), the reports come less often, and still
+once a second at the least (``quiet_after``).
 It ends on SIGINT or SIGTERM (exit 0), in lockstep after one more report of the latest step
 completed, and never in the middle of a report.
 The headline topics are RELIABLE + TRANSIENT_LOCAL (depth 1): a late `ros2 topic echo`
@@ -89,6 +90,10 @@ Velocity = tuple[np.ndarray, np.ndarray]
 #: next one no sooner than c / REPORT_CPU_SHARE s later (a thousand agents: a report or two a
 #: second), so that watching an ensemble leaves the agents the machine
 REPORT_CPU_SHARE = 0.02
+#: the longest the reports stay quiet after a costly one: a report a second at the least (a
+#: first report that loads what it needs, scipy's graph routines for a proximity graph, or a
+#: thousand agents, would otherwise hold the next one for seconds)
+MOST_QUIET_SECONDS = 1.0
 
 
 class MonitorNode(NodeApp):
@@ -475,9 +480,7 @@ class MonitorNode(NodeApp):
                     self.report_due()
                 elif self.lockstep:  # no report: the states still taken, /clock advanced
                     self._follow()
-                # at most REPORT_CPU_SHARE of a core: a costly report spaces the next ones
-                quiet_until = max(quiet_until,
-                                  now + (time.thread_time() - cpu) / REPORT_CPU_SHARE)
+                quiet_until = quiet_after(quiet_until, now, time.thread_time() - cpu)
         if self.lockstep:
             self._report_completed()
         self.match.close(self.executor)  # open goals end; their results go out
@@ -501,6 +504,13 @@ class MonitorNode(NodeApp):
         rec = self.record()
         rec.finished = True
         return rec
+
+
+def quiet_after(quiet_until: float, now: float, spent: float) -> float:
+    """Until when the reports stay quiet after one that took ``spent`` s of CPU at ``now``: at
+    most ``REPORT_CPU_SHARE`` of a core, so ``spent / REPORT_CPU_SHARE`` s, but never more than
+    ``MOST_QUIET_SECONDS`` (nor earlier than ``quiet_until`` already said)."""
+    return max(quiet_until, now + min(spent / REPORT_CPU_SHARE, MOST_QUIET_SECONDS))
 
 
 def component_statuses(mon: MonitorNode, t: float, rows: Mapping[int, wire.Row]) -> list[Any]:
