@@ -88,25 +88,43 @@ class ShmWatch:
         """The noted entries still in /dev/shm."""
         return sorted(path for path in self.entries() if os.path.exists(path))
 
-    def remove_unheld(self):
-        """Remove the noted segments (and lock files) whose lock no live process holds."""
-        import fcntl
+    def remove_unheld(self, wait=5.0):
+        """Remove the noted segments (and lock files) whose lock no live process holds, once
+        their processes (which ``close`` has ended) are gone: a segment whose lock is held is
+        looked at again for up to ``wait`` s, as a SIGKILLed process holds its lock until the
+        kernel has taken all its threads down, after its parent's wait has returned."""
+        import time
+        deadline = time.monotonic() + wait
+        pending = set(self.segments)
+        while pending:
+            for seg in sorted(pending):
+                if _remove_if_unheld(seg):
+                    pending.discard(seg)
+            if not pending or time.monotonic() > deadline:
+                return  # what is left is held by a process that still runs: its own
+            time.sleep(0.05)
 
-        for seg in self.segments:
-            try:
-                fd = os.open(seg + LOCK, os.O_RDONLY)
-            except OSError:
-                fd = None
-            if fd is not None:
-                try:
-                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                except BlockingIOError:
-                    continue  # its owner lives
-                finally:
-                    os.close(fd)
-            for path in (seg, seg + LOCK):
-                with contextlib.suppress(FileNotFoundError):
-                    os.unlink(path)
+
+def _remove_if_unheld(seg):
+    """Remove segment ``seg`` and its lock file unless a process holds the lock; whether it is
+    gone."""
+    import fcntl
+
+    try:
+        fd = os.open(seg + LOCK, os.O_RDONLY)
+    except OSError:
+        fd = None
+    if fd is not None:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return False
+        finally:
+            os.close(fd)
+    for path in (seg, seg + LOCK):
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
+    return True
 
 
 def private_shm_possible():
