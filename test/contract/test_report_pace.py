@@ -4,7 +4,7 @@ a core, but never for more than MOST_QUIET_SECONDS, so that whoever watches gets
 second at the least (a first report that loads scipy's graph routines, a thousand agents).
 
 The oracle is the arithmetic of the rule written out here with the shipped constants' values
-(2% of a core, 1 s)."""
+(a fiftieth of a core, a second)."""
 
 import pytest
 from ros_harness import needs_ros
@@ -14,7 +14,7 @@ pytestmark = needs_ros
 
 @pytest.mark.parametrize("spent, quiet_for", [
     (0.0, 0.0),        # a free report: the next one at its period
-    (0.002, 0.1),      # 2 ms of CPU: 100 ms quiet (2% of a core)
+    (0.002, 0.1),      # 2 ms of CPU: 100 ms quiet (a fiftieth of a core)
     (0.01, 0.5),       # 10 ms: half a second
     (0.02, 1.0),       # 20 ms: the cap exactly
     (0.15, 1.0),       # a first report that loaded what it needs: capped at 1 s, not 7.5
