@@ -18,7 +18,7 @@ from .. import wire
 from ..config.configs import AgentConfig, given_config, pin_config
 from ..config.params import RUNTIME
 from ..config.resolve import resolve_agent
-from ..process.shell import destroyed_on_error, ros_main
+from ..process.shell import ros_main
 
 if TYPE_CHECKING:
     from ..agents.agent_base import AgentBase
@@ -49,11 +49,10 @@ def make_agent(argv: list[str] | None = None) -> ManagedAgent:
     modes ``RUNTIME`` may be set."""
     from ..agents.managed import ManagedAgent, lifecycle_node
 
-    with destroyed_on_error(lifecycle_node("agent", wire.namespace(wire.DEFAULT_ENSEMBLE))) \
-            as node:
-        resolved = resolve_agent(given_config(node, AgentConfig))
-        config = resolved.config
-        pin_config(node, config, RUNTIME if wire.mode_of(config.mode).ticks else ())
+    node = lifecycle_node("agent", wire.namespace(wire.DEFAULT_ENSEMBLE))
+    resolved = resolve_agent(given_config(node, AgentConfig))
+    config = resolved.config
+    pin_config(node, config, RUNTIME if wire.mode_of(config.mode).ticks else ())
     cls = agent_class(config.mode)
     return ManagedAgent(node, lambda n, ex: cls(n, resolved, ex), config.autostart)
 

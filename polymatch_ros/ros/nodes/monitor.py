@@ -65,7 +65,7 @@ from ...core.proximity import ComponentTracker
 from .. import wire
 from ..config.configs import MonitorConfig, given_config, pin_config
 from ..config.resolve import resolve_monitor
-from ..process.shell import NodeApp, destroyed_on_error, ros_main
+from ..process.shell import NodeApp, ros_main
 from ..wire.control import EnsembleControl
 from ..wire.intake import DropCounter, LeanReaders, received_at
 from .held_steps import Held, HeldSteps
@@ -543,11 +543,10 @@ def component_statuses(mon: MonitorNode, t: float, rows: Mapping[int, wire.Row])
 def make_monitor(argv: list[str] | None = None) -> MonitorNode:
     from rclpy.node import Node
 
-    with destroyed_on_error(Node("monitor", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE))) \
-            as node:
-        config, scene = resolve_monitor(given_config(node, MonitorConfig))
-        pin_config(node, config)
-        return MonitorNode(node, config, scene)
+    node = Node("monitor", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE))
+    config, scene = resolve_monitor(given_config(node, MonitorConfig))
+    pin_config(node, config)
+    return MonitorNode(node, config, scene)
 
 
 def main(args: list[str] | None = None) -> int:

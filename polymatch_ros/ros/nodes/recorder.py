@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 from ...core.errors import ParameterError
 from .. import wire
 from ..config.configs import RecorderConfig, read_config
-from ..process.shell import NodeApp, destroyed_on_error, ros_main
+from ..process.shell import NodeApp, ros_main
 from ..wire.recording import (
     RECORDER_DEPTH,
     SCENE_ATTACHMENT,
@@ -194,10 +194,9 @@ class Recorder(NodeApp):
 def make_recorder(argv: list[str] | None = None) -> Recorder:
     from rclpy.node import Node
 
-    with destroyed_on_error(Node("recorder", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE))) \
-            as node:
-        topics = recorded_topics(declare_lists(node))
-        return Recorder(node, read_config(node, RecorderConfig), topics)
+    node = Node("recorder", namespace=wire.namespace(wire.DEFAULT_ENSEMBLE))
+    topics = recorded_topics(declare_lists(node))
+    return Recorder(node, read_config(node, RecorderConfig), topics)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -39,7 +39,7 @@ from ...core.robots.robot_commands import saturate
 from ...core.robots.unicycle import unicycle_step
 from ..config.configs import RobotConfig, read_config
 from ..config.resolve import resolve_robot
-from ..process.shell import destroyed_on_error, ros_main
+from ..process.shell import ros_main
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -275,9 +275,8 @@ class RobotNode:
 def make_robot(argv: list[str] | None = None) -> RobotNode:
     from rclpy.node import Node
 
-    with destroyed_on_error(Node("robot", automatically_declare_parameters_from_overrides=False)) \
-            as node:
-        return RobotNode(node, read_config(node, RobotConfig, resolve_robot))
+    node = Node("robot", automatically_declare_parameters_from_overrides=False)
+    return RobotNode(node, read_config(node, RobotConfig, resolve_robot))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -8,11 +8,10 @@ application print its final lines, and bounds the DDS teardown (``teardown_watch
 
 from __future__ import annotations
 
-import contextlib
 import gc
 import signal
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from ...core.errors import PolymatchError
@@ -46,17 +45,6 @@ class NodeApp:
     def destroy(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
-
-@contextlib.contextmanager
-def destroyed_on_error(node: Node) -> Iterator[Node]:
-    """``node``, destroyed if the block raises (a refused parameter while the node is built):
-    the process's DDS participant ends with its last node, and with it the shared-memory files
-    Fast DDS made for it, which a process that ends at once would otherwise leave behind."""
-    try:
-        yield node
-    except BaseException:
-        node.destroy_node()
-        raise
 
 
 def ros_main(
@@ -102,11 +90,11 @@ def ros_main(
                 app.destroy()
             if rclpy.ok():
                 rclpy.shutdown()
-            # a destroyed LifecycleNode keeps its rcl node (and so the process's DDS participant
-            # and its files in /dev/shm) until its state machine is collected, and the exception
-            # of a refused start holds the nodes its frames made: with the application dropped
-            # and collected here, Fast DDS deletes the participant before the process ends
-            # without the interpreter's finalization
+            # every node the process made, destroyed or not, ends here, and with its last node
+            # the DDS participant and its files in /dev/shm: a destroyed LifecycleNode keeps its
+            # rcl node until its state machine is collected, and a start refused while the
+            # application was built leaves its nodes only to the collector (its exception held
+            # them); the process then ends without the interpreter's finalization
             app = None
             gc.collect()
     end_process(code)
