@@ -18,7 +18,7 @@ from bench_tables import family_tables, number
 from benchmarks import main
 
 ROS_QUICK_FAMILIES = ["distributed", "packing", "scaling", "graphs", "trade", "bridge",
-                      "realtime", "realtime_scale", "watching"]
+                      "realtime", "realtime_scale", "watching", "process_start"]
 
 # headers every family must print
 EXPECTED = {
@@ -35,6 +35,8 @@ EXPECTED = {
     "realtime_scale": ["| agents", "packing (processes x agents)", "ticks started late",
                        "CPU ms per agent tick", "wall / simulated time", "default: 1 x 8",
                        "-k 1: 2 x 1", "agents / bare (medians)"],
+    "process_start": ["| node processes", "CPU s of the run (median)", "| forked / exec",
+                      "| exec "],
     "watching": ["| agents", "median with", "median without", "with / without",
                  "median of the pairs", "others' cores"],
     "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
@@ -126,9 +128,23 @@ def _ratios(tables, out):
             statistics.median(pairs), rel=0.05), row
 
 
+def _start_ratios(tables, out):
+    """Each way ran and finished; the ratio is the quotient of the medians it shows."""
+    rows = {row["node processes"]: row for row in _rows(tables, "CPU s of the run (median)")}
+    forked, exec_ = rows["forked"], rows["exec"]
+    for row in (forked, exec_):
+        assert row["runs that finished"] == "1 of 1", row
+        assert number(row["CPU s of the run (median)"]) > 0, row
+        assert number(row["rounds/s (median)"]) > 0, row
+    cpu = number(forked["CPU s of the run (median)"]) / number(exec_["CPU s of the run (median)"])
+    assert number(rows["forked / exec"]["CPU s of the run (median)"]) == pytest.approx(
+        cpu, rel=0.02, abs=0.002)
+
+
 VALUES = {"distributed": _finished, "packing": _shapes_multiply, "scaling": _shapes_multiply,
           "graphs": None, "trade": _trade, "bridge": _bridge, "realtime": _finished,
-          "realtime_scale": _realtime_scale, "watching": _ratios}
+          "realtime_scale": _realtime_scale, "watching": _ratios,
+          "process_start": _start_ratios}
 
 
 @pytest.mark.usefixtures("ros")  # the slot and domain of a ROS world; the family takes its own

@@ -26,10 +26,11 @@ ROOT = Path(__file__).resolve().parents[2]
 FAMILY_NAMES = ["step", "meanfield", "dop853", "precision", "extremes", "longhorizon",
                 "distributed", "packing", "scaling", "sweep", "basins", "graphs", "lossy", "trade",
                 "bridge", "realtime", "realtime_scale", "watching", "reductions", "faults",
-                "leftovers"]
+                "leftovers", "process_start"]
 #: the families that start ROS processes (test/benchmarks/test_bench_ros_families.py runs them)
 ROS_FAMILIES = {"distributed", "packing", "scaling", "graphs", "lossy", "trade", "bridge",
-                "realtime", "realtime_scale", "watching", "faults", "leftovers"}
+                "realtime", "realtime_scale", "watching", "faults", "leftovers",
+                "process_start"}
 NUMERIC_FAMILIES = [name for name in FAMILY_NAMES if name not in ROS_FAMILIES]
 
 # headers every family must print

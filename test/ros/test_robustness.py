@@ -23,7 +23,7 @@ import yaml
 from ros_harness import PY, REPO, _children, cli_argv, needs_ros, node_argv, scene_path
 from shm_watch import fast_dds_names, private_shm_argv, private_shm_possible
 
-from benchmarks.hosts.runs import descendants
+from benchmarks.hosts.runs import argv_of, descendants, node_name
 from polymatch_ros.core.saved import load_saved
 from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.core.stepping.simulate import simulate
@@ -279,7 +279,7 @@ def test_runner_ends_every_process_it_started(ros, how):
         os.kill(runner, signal.SIGINT)
         expect_code, expect_text = 130, "interrupted"
     else:
-        agent = [p for p in _children(runner) if "agent_3" in open(f"/proc/{p}/cmdline").read()][0]
+        agent = [p for p in descendants(runner) if node_name(argv_of(p)) == "agent_3"][0]
         os.kill(agent, signal.SIGKILL)
         expect_code, expect_text = 1, "agent_3"
     assert ros.wait(proc, 40) == expect_code, ros.output(proc)

@@ -178,11 +178,13 @@ def node_argv(module, scene, node=None, namespace=None, **params):
         config, namespace=namespace, node=node)
 
 
-# How many tests run ROS worlds at once, across the pytest workers.  Their processes are
-# CPU-bound on two cores (four worlds at once kept a load average near 30), and a control loop
-# that runs on the wall clock (realtime agents, bridged robots) or a round timeout fails when it
-# gets a sliver of a core; the other workers run the core's tests meanwhile.
-ROS_SLOTS = int(os.environ.get("POLYMATCH_TEST_ROS_SLOTS", "2"))
+# How many tests run ROS worlds at once, across the pytest workers.  Their processes mostly
+# wait (discovery, round timeouts, ticks), but a control loop that runs on the wall clock
+# (realtime agents, bridged robots) or a round timeout fails when it gets a sliver of a core:
+# on two cores four worlds at once kept a load average near 30 while every node process still
+# imported its libraries itself; with node processes forked from the runner's fork server
+# (``ros/process/forked.py``) three fit.  The other workers run the core's tests meanwhile.
+ROS_SLOTS = int(os.environ.get("POLYMATCH_TEST_ROS_SLOTS", "3"))
 SLOT_DIR = os.path.join(os.environ.get("TMPDIR", "/tmp"), "polymatch_test_ros_slots")
 # The niceness of a slot's processes where the user may raise priorities (root): ahead of the
 # other workers' numerical tests, as a robot's control processes run ahead of batch work.  A

@@ -11,7 +11,8 @@ of a core)::
     python test/support/slot_use.py /tmp/slots.jsonl
 
 The CPU of a process that is killed and never reaped by a process the worker reaps is not
-counted, so a share is a lower bound.
+counted, nor that of the node processes a run forks (its fork server reaps them, and the system
+reaps the fork server once its runner has gone), so a share is a lower bound.
 """
 
 from __future__ import annotations

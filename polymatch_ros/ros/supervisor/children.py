@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from ...core.errors import ParameterError
 from .. import wire
+from ..process import forked
 from ..process.teardown import EXIT_GRACE, TEARDOWN_SECONDS, hung_in_teardown
 
 if TYPE_CHECKING:
@@ -23,26 +24,6 @@ if TYPE_CHECKING:
 # A process that reported its result ends within its teardown watchdog (TEARDOWN_SECONDS +
 # EXIT_GRACE); one still running this long after its final run record is ended by the runner.
 OVERSTAY_SECONDS = 2 * TEARDOWN_SECONDS + EXIT_GRACE
-
-
-def _child_setup() -> None:
-    """In the child, before exec: a process group of its own, and SIGTERM when the runner dies
-    (Linux): nothing outlives it.
-
-    Its own group keeps a terminal's Ctrl-C (sent to the foreground group) for the runner, which
-    stops the children in order.  Not a session of its own: Linux gives each session its own
-    scheduling group (``/proc/sys/kernel/sched_autogroup_enabled``), and lockstep processes in
-    separate groups waited about twice as long for each other's messages (8 agents: 124 and 132
-    rounds/s in separate sessions, 168 and 174 in one; ``polymatch bench distributed``,
-    deployed against agents, is the figure that showed it).
-    """
-    os.setpgid(0, 0)
-    try:
-        import ctypes
-
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
 
 
 class Child:
@@ -54,7 +35,7 @@ class Child:
     argv: list[str]
     env: dict[str, str] | None
     agents: tuple[int, ...]
-    proc: subprocess.Popen[str]
+    proc: subprocess.Popen[str] | forked.ForkedProcess
     lines: deque[str]
     reported_at: float | None
     ended_by_runner: bool
@@ -74,7 +55,9 @@ class Child:
         self._launch()
 
     def _launch(self) -> None:
-        self.proc = subprocess.Popen(
+        # a node module forked from the run's fork server (its imports done once), any
+        # other command line by exec
+        self.proc = forked.start(self.argv, self.env) or subprocess.Popen(
             self.argv,
             env=self.env,
             stdout=subprocess.PIPE,
@@ -82,7 +65,7 @@ class Child:
             stdin=subprocess.DEVNULL,
             text=True,
             bufsize=1,
-            preexec_fn=_child_setup,
+            preexec_fn=forked.child_setup,
         )
         self.stopped_since: float | None = None  # monotonic time it was first seen stopped
         self.hung_for: float | None = None  # it hung this long and the runner ended it
@@ -102,7 +85,7 @@ class Child:
             self.log.write(self.lines[-1] + "\n")
         self._launch()
 
-    def _read(self, proc: subprocess.Popen[str]) -> None:
+    def _read(self, proc: subprocess.Popen[str] | forked.ForkedProcess) -> None:
         assert proc.stdout is not None  # a pipe: stdout=PIPE
         for line in proc.stdout:
             line = line.rstrip("\n")

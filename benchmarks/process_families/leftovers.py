@@ -61,7 +61,7 @@ def _segments_under(root, seen, stop):
 
 def one_run(env, variant, t_end, records):
     """(agents' median rounds/s or None, wall s, segments made, /dev/shm entries left)."""
-    from .ros_runs import agent_records
+    from ..ros_families.ros_runs import agent_records
 
     head = ["-c", LEDGER_OFF] if variant == "ledger off" else ["-m", "polymatch_ros.cli"]
     argv = ["timeout", "-k", "5", "300", sys.executable, *head, "run", "congruent_triangles",

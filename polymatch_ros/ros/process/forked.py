@@ -1,0 +1,197 @@
+"""Node processes forked from a server that imported them once.
+
+Each node process imports Python, numpy, rclpy, its messages and the package before it does
+anything; a run of many processes pays that again in every one of them.  The runner instead
+starts its node processes from a fork server (Python's ``multiprocessing`` "forkserver": a
+fresh, single-threaded interpreter that imports ``PRELOAD`` once and forks a child per
+request), so each child starts with the imports done.  Nothing of ROS is initialised in the
+server: every child calls ``rclpy.init`` itself, with the environment it was given, and makes
+its own DDS participant, as a process started by ``exec`` would.
+
+A child is otherwise the process ``python -m MODULE ARGS`` would be: ``sys.argv``, the
+environment and ``__main__``-style exit code, its output on a pipe of the runner's, its own
+process group and SIGTERM when the runner goes (``child_setup``: the server's death is its
+parent's, and the server ends with the runner).  ``ForkedProcess`` gives the runner the part
+of ``subprocess.Popen``'s interface it uses; ``forkable`` says which command lines qualify.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Mapping, Sequence
+from multiprocessing.connection import Connection
+from typing import IO
+
+#: the modules a forked child may run (``python -m`` with one of them); the server imports them
+NODE_MODULES = (
+    "polymatch_ros.ros.nodes.agent",
+    "polymatch_ros.ros.nodes.monitor",
+    "polymatch_ros.ros.nodes.robot",
+    "polymatch_ros.ros.nodes.recorder",
+)
+#: what the server imports before it forks: the node modules and what they import only once
+#: running (rclpy, the messages, the type support loader)
+PRELOAD = (
+    *NODE_MODULES,
+    "rclpy",
+    "rclpy.executors",
+    "rclpy.lifecycle",
+    "rosidl_generator_py",
+    "geometry_msgs.msg",
+    "nav_msgs.msg",
+    "std_msgs.msg",
+    "std_srvs.srv",
+    "diagnostic_msgs.msg",
+    "rosgraph_msgs.msg",
+    "polymatch_interfaces.msg",
+    "polymatch_interfaces.action",
+)
+
+
+def child_setup() -> None:
+    """In a node process, before it runs: a process group of its own, and SIGTERM when its
+    parent dies (Linux): nothing outlives the runner.
+
+    Its own group keeps a terminal's Ctrl-C (sent to the foreground group) for the runner, which
+    stops the children in order.  Not a session of its own: Linux gives each session its own
+    scheduling group (``/proc/sys/kernel/sched_autogroup_enabled``), and lockstep processes in
+    separate groups waited about twice as long for each other's messages
+    (``polymatch bench distributed``, deployed against agents, is the figure that showed it).
+    """
+    os.setpgid(0, 0)
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def forkable(argv: Sequence[str]) -> str | None:
+    """The node module of ``[sys.executable, "-m", MODULE, ...]`` if MODULE is one the server
+    imports (``NODE_MODULES``), else None (that command line is started by ``exec``)."""
+    if len(argv) >= 3 and argv[0] == sys.executable and argv[1] == "-m":
+        return argv[2] if argv[2] in NODE_MODULES else None
+    return None
+
+
+_context: multiprocessing.context.ForkServerContext | None = None
+
+
+def _server() -> multiprocessing.context.ForkServerContext:
+    """The fork server's context; the server itself starts with the first child."""
+    global _context
+    if _context is None:
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(list(PRELOAD))
+        _context = context
+    return _context
+
+
+def _run_node(module: str, args: list[str], env: dict[str, str], out: Connection) -> None:
+    """The forked child: its output to the runner's pipe, its environment, then the node's
+    ``main`` as ``python -m module *args`` would run it."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os.dup2(out.fileno(), 1)
+    os.dup2(out.fileno(), 2)
+    out.close()
+    null = os.open(os.devnull, os.O_RDONLY)  # no terminal's input, as exec's stdin=DEVNULL
+    os.dup2(null, 0)
+    os.close(null)
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(AttributeError, ValueError):
+            stream.reconfigure(line_buffering=True)  # type: ignore[union-attr]
+    os.environ.clear()
+    os.environ.update(env)
+    child_setup()
+    show_command_line([sys.executable, "-m", module, *args])
+    node = importlib.import_module(module)
+    sys.argv = [node.__file__ or module, *args]
+    sys.exit(node.main())
+
+
+def show_command_line(argv: Sequence[str]) -> bool:
+    """Show ``argv`` as this process's command line (``/proc/PID/cmdline``, ``ps``): written
+    over the server's own in the process's memory, whole arguments as far as they fit, the
+    rest dropped.  False where the memory could not be found or written."""
+    try:
+        with open("/proc/self/stat", "rb") as fh:
+            fields = fh.read().rsplit(b")", 1)[1].split()
+        arg_start, arg_end = int(fields[45]), int(fields[46])  # stat fields 48 and 49
+    except (OSError, IndexError, ValueError):
+        return False
+    room = arg_end - arg_start
+    text = b""
+    for arg in argv:
+        piece = arg.encode() + b"\0"
+        if len(text) + len(piece) > room:
+            break
+        text += piece
+    if room <= 0 or not text:
+        return False
+    import ctypes
+
+    ctypes.memmove(arg_start, text.ljust(room, b"\0"), room)
+    return True
+
+
+class ForkedProcess:
+    """A node process forked from the server, with the part of ``subprocess.Popen``'s interface
+    the runner uses: ``pid``, ``stdout`` (text lines), ``poll``, ``wait``, ``returncode``."""
+
+    pid: int
+    stdout: IO[str]
+    returncode: int | None
+
+    def __init__(self, argv: Sequence[str], env: Mapping[str, str] | None) -> None:
+        module = forkable(argv)
+        if module is None:
+            raise ValueError(f"not a node module command line: {list(argv)[:3]}")
+        read_end, write_end = os.pipe()
+        out = Connection(write_end, readable=False)
+        try:
+            self._process = _server().Process(
+                target=_run_node,
+                args=(module, list(argv[3:]), dict(os.environ if env is None else env), out),
+                name=module.rsplit(".", 1)[-1],
+                daemon=True,  # an interpreter that exits with it still running ends it first
+            )
+            self._process.start()
+        except BaseException:
+            os.close(read_end)
+            raise
+        finally:
+            out.close()  # the child has its own copy
+        assert self._process.pid is not None  # started
+        self.pid = self._process.pid
+        self.stdout = open(read_end, encoding="utf-8", errors="replace")  # noqa: SIM115
+        self.returncode = None
+
+    def poll(self) -> int | None:
+        if self.returncode is None:
+            self.returncode = self._process.exitcode
+        return self.returncode
+
+    def wait(self, timeout: float | None = None) -> int:
+        if self.poll() is None:
+            self._process.join(timeout)
+        code = self.poll()
+        if code is None:
+            raise subprocess.TimeoutExpired(str(self._process.name), timeout or 0.0)
+        return code
+
+
+def start(argv: Sequence[str], env: Mapping[str, str] | None) -> ForkedProcess | None:
+    """``argv`` forked from the server if it is a node module's command line (``forkable``),
+    else None (the caller starts it by ``exec``)."""
+    if forkable(argv) is None:
+        return None
+    return ForkedProcess(argv, env)
