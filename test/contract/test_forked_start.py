@@ -104,3 +104,16 @@ def test_a_command_line_longer_than_the_room_keeps_whole_arguments():
     parts = cmdline.rstrip(b"\0").split(b"\0")
     assert shown and parts[:2] == [b"first", b"second"]
     assert all(part == b"x" * 100 for part in parts[2:]) and len(parts) < 1002
+
+
+def test_a_fork_server_that_cannot_start_leaves_every_start_to_exec(monkeypatch):
+    def no_room():
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(forked, "_server", no_room)
+    monkeypatch.setattr(forked, "_unavailable", None)
+    node = [sys.executable, "-m", "polymatch_ros.ros.nodes.agent", "--ros-args"]
+    assert forked.start(node, None) is None
+    assert forked._unavailable == "[Errno 28] No space left on device"
+    monkeypatch.setattr(forked, "_server", lambda: pytest.fail("asked the server again"))
+    assert forked.start(node, None) is None

@@ -189,9 +189,18 @@ class ForkedProcess:
         return code
 
 
+_unavailable: str | None = None  # why the fork server could not be used, once it could not
+
+
 def start(argv: Sequence[str], env: Mapping[str, str] | None) -> ForkedProcess | None:
     """``argv`` forked from the server if it is a node module's command line (``forkable``),
-    else None (the caller starts it by ``exec``)."""
-    if forkable(argv) is None:
+    else None (the caller starts it by ``exec``); None too, from then on, where the server
+    cannot be started or reached (no room for its socket, a server that died)."""
+    global _unavailable
+    if forkable(argv) is None or _unavailable is not None:
         return None
-    return ForkedProcess(argv, env)
+    try:
+        return ForkedProcess(argv, env)
+    except (OSError, EOFError) as exc:
+        _unavailable = str(exc) or type(exc).__name__
+        return None
