@@ -5,6 +5,7 @@ same module by exec (``subprocess``) and the kernel's ``/proc``.  No ROS process
 the module is a stand-in (``test/support/forked_probe.py``)."""
 
 import ast
+import multiprocessing
 import os
 import signal
 import subprocess
@@ -117,3 +118,27 @@ def test_a_fork_server_that_cannot_start_leaves_every_start_to_exec(monkeypatch)
     assert forked._unavailable == "[Errno 28] No space left on device"
     monkeypatch.setattr(forked, "_server", lambda: pytest.fail("asked the server again"))
     assert forked.start(node, None) is None
+
+
+def test_a_runs_fork_server_keeps_its_files_in_the_runs_folder_and_ends_with_it(
+        probe_forkable, tmp_path):
+    """Its socket and ``multiprocessing``'s temporary folder inside the run's folder (which the
+    runner removes), and the server and resource tracker ended when the run's block ends (the
+    kernel's /proc: no such process)."""
+    from multiprocessing import forkserver, resource_tracker, util
+
+    (tmp_path / "earlier").mkdir()
+    with forked.fork_server(str(tmp_path / "earlier")):
+        pass                                  # ends a server an earlier test of this worker left
+    run_folder = tmp_path / "run"
+    run_folder.mkdir()
+    with forked.fork_server(str(run_folder)):
+        child = forked.start([sys.executable, "-m", PROBE, "0"], _env())
+        assert child is not None and child.wait(timeout=60) == 0
+        server = forkserver._forkserver._forkserver_pid
+        tracker = resource_tracker._resource_tracker._pid
+        assert os.path.exists(f"/proc/{server}") and os.path.exists(f"/proc/{tracker}")
+        assert util.get_temp_dir() == str(run_folder)
+        assert forkserver._forkserver._forkserver_address.startswith(str(run_folder) + os.sep)
+    assert not os.path.exists(f"/proc/{server}") and not os.path.exists(f"/proc/{tracker}")
+    assert "tempdir" not in multiprocessing.current_process()._config

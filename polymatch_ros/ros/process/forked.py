@@ -24,7 +24,8 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import Mapping, Sequence
+import time
+from collections.abc import Iterator, Mapping, Sequence
 from multiprocessing.connection import Connection
 from typing import IO
 
@@ -190,6 +191,55 @@ class ForkedProcess:
 
 
 _unavailable: str | None = None  # why the fork server could not be used, once it could not
+
+
+@contextlib.contextmanager
+def fork_server(directory: str, seconds: float = 5.0) -> Iterator[None]:
+    """The fork server of one run: its socket (and ``multiprocessing``'s other files) in the
+    run's own ``directory``; once the block ends, the server and ``multiprocessing``'s
+    resource tracker ended, each by its PID (asked, then SIGKILL after ``seconds``).
+
+    A runner ends by ``os._exit``, skipping the interpreter's exit, where ``multiprocessing``
+    would remove its temporary folder; and a server left to notice its runner's end would
+    outlive it for a moment.  The caller removes ``directory`` afterwards.
+    """
+    config = multiprocessing.current_process()._config  # type: ignore[attr-defined]
+    config["tempdir"] = directory  # ``multiprocessing.util.get_temp_dir`` takes it from here
+    try:
+        yield
+    finally:
+        from multiprocessing import forkserver, resource_tracker
+
+        server = forkserver._forkserver  # type: ignore[attr-defined]
+        _end_helper(server, "_forkserver_pid", "_forkserver_alive_fd", seconds)
+        server._forkserver_address = None  # type: ignore[attr-defined]
+        _end_helper(resource_tracker._resource_tracker, "_pid", "_fd", seconds)
+        config.pop("tempdir", None)
+
+
+def _end_helper(helper: object, pid_name: str, fd_name: str, seconds: float) -> None:
+    """End one of ``multiprocessing``'s helper processes: close the pipe whose end tells it to
+    stop, wait ``seconds`` at most, then SIGKILL it; forget it, so that a later start makes a
+    new one."""
+    pid, fd = getattr(helper, pid_name, None), getattr(helper, fd_name, None)
+    setattr(helper, pid_name, None)
+    setattr(helper, fd_name, None)
+    if fd is not None:
+        with contextlib.suppress(OSError):
+            os.close(fd)
+    if pid is None:
+        return
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        with contextlib.suppress(ChildProcessError):
+            if os.waitpid(pid, os.WNOHANG)[0] == 0:
+                time.sleep(0.02)
+                continue
+        return
+    with contextlib.suppress(ProcessLookupError):
+        os.kill(pid, signal.SIGKILL)
+    with contextlib.suppress(ChildProcessError):
+        os.waitpid(pid, 0)
 
 
 def start(argv: Sequence[str], env: Mapping[str, str] | None) -> ForkedProcess | None:

@@ -40,6 +40,7 @@ from ..network.environment import (
     ros_environment,
     run_domain_id,
 )
+from ..process import forked
 from ..process.teardown import teardown_watchdog
 from ..wire.checkpoint import Checkpoint, CheckpointFile
 from . import bridge_run
@@ -107,7 +108,7 @@ def run(plan: RunPlan) -> int:
     isolated = plan.hosts.isolated
     with run_domain_id(isolated) as domain, tempfile.TemporaryDirectory(
         prefix="polymatch_run_"
-    ) as directory:
+    ) as directory, forked.fork_server(directory):
         shared = (not (isolated or domain_reserved(domain))
                   or plan.hosts.discovery.kind != "localhost")
         env = ros_environment(domain)
