@@ -10,9 +10,10 @@ import time
 
 import numpy as np
 import pytest
-from ros_harness import PY, REPO, needs_ros, scene_path
+from ros_harness import PY, REPO, needs_ros
 from scipy.spatial.transform import Rotation
 
+from benchmarks.hosts.runs import scene_with
 from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.config.configs import AgentConfig, RobotConfig, ros_args
 
@@ -34,6 +35,11 @@ groups:
   - {{name: triangles, shape: triangle, count: {count}, centroids: {{box: [-1.0, 1.0]}},
      rotations: {{within: 1.5}}}}
 """
+
+
+# robots (each beside its agent's process) in the runs to the noise floor: the claim does not
+# depend on their number, and each costs two processes
+BRIDGE_ROBOTS = 4
 
 
 def _scene(tmp_path, text, name="scene.yaml"):
@@ -241,10 +247,10 @@ def _check_matched_to_the_floor(text, scene, log_dir, count):
 @needs_ros
 @pytest.mark.parametrize("cmd_vel_type", ["twist_stamped", "twist"])
 def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path, cmd_vel_type):
-    """Eight first-order robots (A-2), each driven by its bridged agent, match to the noise
+    """Four first-order robots (A-2), each driven by its bridged agent, match to the noise
     floor (Theorem 4.2 up to the measurement noise), with commands on cmd_vel of either type
     (robots that took no command would not move): their logged true poses end below it."""
-    count = 8
+    count = BRIDGE_ROBOTS
     scene = _scene(tmp_path, SCENE_ROBOTS.format(t_end=25.0, count=count))
     proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene, "--mode", "bridge",
                       "--rate", "10", "--position-noise", "0.002", "--angle-noise", "0.002",
@@ -259,17 +265,18 @@ def test_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path, cmd_vel_type
 
 @needs_ros
 def test_second_order_bridge_run_drives_robots_to_the_noise_floor(ros, tmp_path):
-    """The shipped second-order scene (A-1): 8 double-integrator robots commanded accelerations
-    on cmd_accel from their Odometry, matched to the noise floor (their logged true poses)."""
-    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", "congruent_triangles_second_order",
+    """The shipped second-order scene (A-1), with four agents: double-integrator robots
+    commanded accelerations on cmd_accel from their Odometry, matched to the noise floor
+    (their logged true poses)."""
+    scene = scene_with(tmp_path, "congruent_triangles_second_order", BRIDGE_ROBOTS)
+    proc = ros.start([PY, "-m", "polymatch_ros.cli", "run", scene,
                       "--mode", "bridge", "--t-end", "30", "--rate", "10", "--position-noise",
                       "0.002", "--angle-noise", "0.002", "--lag", "0.2", "--robot-log",
                       str(tmp_path), "--timeout", "90"], timeout=110)
     rc = ros.wait(proc, 120)
     text = ros.output(proc)
     assert rc == 0, text[-3000:]
-    scene = load_scene(scene_path("congruent_triangles_second_order"))
-    _check_matched_to_the_floor(text, scene, tmp_path, 8)
+    _check_matched_to_the_floor(text, load_scene(scene), tmp_path, BRIDGE_ROBOTS)
 
 
 SCENE_CROSSING = """\

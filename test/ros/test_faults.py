@@ -30,7 +30,7 @@ SCENE = "congruent_triangles"
 PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "support",
                      "service_probe.py")
 BOUND = 150  # s: only a hang takes this long
-BRIDGE_AGENTS = 4
+BRIDGE_AGENTS = 3  # robots in a bridge run: agents 1 and 2 take the faults, agent 0 looks on
 SERVER_MODULE = b"polymatch_ros.ros.network.discovery_server"
 DEVIATION = re.compile(r"max vertex deviation (\S+)")
 FAILURE = re.compile(r"^  (\S+) \(pid (\d+)\) (killed by \w+|exit code -?\d+|hung \(stopped\) "
@@ -80,8 +80,8 @@ def _run(ros, *args, scene=None):
                      timeout=BOUND + 20, name="runner")
 
 
-def _four_robots(tmp_path):
-    """SCENE with 4 agents: a bridge run has a robot process beside each agent's."""
+def _bridge_scene(tmp_path):
+    """SCENE with BRIDGE_AGENTS agents: a bridge run has a robot process beside each agent's."""
     return scene_with(tmp_path, SCENE, BRIDGE_AGENTS)
 
 
@@ -232,7 +232,7 @@ def test_realtime_converges_after_an_agent_and_the_monitor_are_killed(ros, tmp_p
 
 
 def test_bridge_run_survives_every_fault_of_the_matrix(ros, tmp_path):
-    """Bridge, 4 robots, ``--discovery server``: SIGKILL of the discovery server, of agent 1's
+    """Bridge, 3 robots, ``--discovery server``: SIGKILL of the discovery server, of agent 1's
     process and of the monitor, SIGSTOP of agent 2's for 2 s (then SIGCONT). The dead are
     restarted (the agent takes its robot's measured pose, and finds its peers through the
     restarted server), the hung one is waited for, not killed, and the robots match to the
@@ -240,7 +240,7 @@ def test_bridge_run_survives_every_fault_of_the_matrix(ros, tmp_path):
     can match by t = 7: ``--hold 12`` keeps the run going past the last fault (at t = 10 to 12,
     real time), to t = 19 at the earliest."""
     run = _run(ros, "--mode", "bridge", "--rate", "10", "--t-end", "120", "--discovery", "server",
-               "--hold", "12", scene=_four_robots(tmp_path))
+               "--hold", "12", scene=_bridge_scene(tmp_path))
     _progress_past(ros, run, 2)
     os.kill(_server(run), signal.SIGKILL)
     # progress lines come about every 2 s of the run: the one past 2 may already be past 4, and
@@ -274,7 +274,7 @@ def test_on_failure_stop_ends_the_run_at_the_first_death(ros):
 
 EARLY_END_OPTIONS = {"lockstep": ["--dt", "0.02", "-k", "4"],
                      "realtime": ["--mode", "realtime", "--rate", "20", "-k", "4"],
-                     "bridge": ["--mode", "bridge", "--rate", "10"]}  # 4 robots, 8 processes
+                     "bridge": ["--mode", "bridge", "--rate", "10"]}  # 3 robots, 6 processes
 
 
 @pytest.mark.parametrize("mode", list(EARLY_END_OPTIONS))
@@ -282,7 +282,7 @@ def test_a_run_ended_early_saves_each_agents_last_state_marked_partial(ros, tmp_
     """SIGTERM to the runner mid-run: exit 130, and --save still holds every agent's last
     state, its time, and ``partial``; no process is left over."""
     save = tmp_path / "poses.npz"
-    scene, n = (_four_robots(tmp_path), BRIDGE_AGENTS) if mode == "bridge" else (None, 8)
+    scene, n = (_bridge_scene(tmp_path), BRIDGE_AGENTS) if mode == "bridge" else (None, 8)
     run = _run(ros, "--t-end", "500", "--save", save, *EARLY_END_OPTIONS[mode], scene=scene)
     _until(ros, 0.5, run)
     before = descendants(run.pid)
