@@ -38,6 +38,7 @@ class Probe:
     def __init__(self):
         self.node = Node("service_probe")
         self.times = {}
+        self.size = 0
         self.poses = {}
         latched = rclpy.qos.QoSProfile(
             depth=100,
@@ -50,6 +51,7 @@ class Probe:
         rec = RunRecord.from_msg(msg)
         if rec is not None and rec.role == "agent":
             self.times[rec.agents] = rec.t
+            self.size = max(self.size, rec.n_agents)
 
     def spin(self, seconds):
         end = time.monotonic() + seconds
@@ -73,7 +75,13 @@ class Probe:
         print(f"RESULT {name} {answer.success} {answer.message}", flush=True)
 
     def slowest(self):
-        return min(self.times.values()) if self.times else None
+        """The slowest agent's time, once a record of every agent of the ensemble (its size as
+        the records give it) has come: None before (the first records to come may all be of
+        agents ahead of the others)."""
+        heard = {agent for agents in self.times for agent in agents}
+        if not self.times or len(heard) < self.size:
+            return None
+        return min(self.times.values())
 
     def until_t(self, t):
         self.wait(lambda: self.slowest() is not None and self.slowest() >= float(t), f"t {t}")
