@@ -1,9 +1,10 @@
 """A discovery server carries more participants than loopback simple discovery reaches
 (rmw_fastrtps probes 32 ports).
 
-Everything here stays on 127.0.0.1.  The server test starts 34 publisher processes (34
-participants), then two listeners (a super client and a plain client) after all of them: a late
-listener under LOCALHOST simple discovery only finds the participants on the first 32 ports.
+Everything here stays on 127.0.0.1.  The server test starts 34 publishing participants (two
+processes of 17 contexts each), then two listeners (a super client and a plain client) after all
+of them: a late listener under LOCALHOST simple discovery only finds the participants on the
+first 32 ports.
 """
 
 import contextlib
@@ -19,8 +20,10 @@ from ros_harness import needs_ros
 from polymatch_ros.core.errors import PolymatchError
 from polymatch_ros.ros.network import discovery
 
-# 34 publishers and 2 listeners: more participants than LOCALHOST discovery reaches (32)
-PUBLISHERS = 34
+# 34 publishers and 2 listeners: more participants than LOCALHOST discovery reaches (32); the
+# publishers in two processes, since what counts is participants, and a process costs a start
+PUBLISHER_PROCESSES, PARTICIPANTS_EACH = 2, 17
+PUBLISHERS = PUBLISHER_PROCESSES * PARTICIPANTS_EACH
 
 
 # -- more than 32 participants through a discovery server --------------------------------------
@@ -46,9 +49,12 @@ def test_server_carries_more_participants_than_localhost_discovery_reaches(ros, 
                 envs.spec.port, env=envs.for_role("server", base), seconds=120,
                 log_path=str(tmp_path / "server.log"))
             client = envs.for_role("client", base)
-            publishers = [procs.probe(f"p{i}", client, 90) for i in range(PUBLISHERS)]
+            publishers = [procs.probe(f"p{i}", client, 90, participants=PARTICIPANTS_EACH)
+                          for i in range(PUBLISHER_PROCESSES)]
             assert procs.wait_for(publishers, "ready", 60) == []
-            names = [f"p{i}/0" for i in range(PUBLISHERS)]
+            names = [f"p{i}.{j}/0" for i in range(PUBLISHER_PROCESSES)
+                     for j in range(PARTICIPANTS_EACH)]
+            assert len(set(names)) == PUBLISHERS
             listeners = [procs.probe("super", envs.for_role("super_client", base), 60,
                                      listen=True, expect=names),
                          procs.probe("client", client, 60, listen=True, expect=names)]

@@ -7,6 +7,7 @@ import textwrap
 
 from ros_harness import PY, needs_ros, scene_path
 
+from benchmarks.hosts.runs import scene_with
 from polymatch_ros.ros.network.environment import RESERVED_DOMAIN
 
 pytestmark = needs_ros
@@ -33,14 +34,16 @@ PROBE = textwrap.dedent("""
 """)
 
 
-def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
-    first = [f"/polymatch/agent_{i}" for i in range(8)] + [
+def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros, tmp_path):
+    # four agents an ensemble (the scene's triangles): names, not numbers, are under test
+    scene = scene_with(tmp_path, scene_path("congruent_triangles"), 4)
+    first = [f"/polymatch/agent_{i}" for i in range(4)] + [
         "/polymatch/monitor",
         "/polymatch/runner",
     ]
-    # packed 4 a process: each agent is its own node too, here a lean one (``agents/hosted.py``)
-    second = ["/second/agents_0_3", "/second/agents_4_7", "/second/monitor", "/second/runner"]
-    second += [f"/second/agent_{i}" for i in range(8)]
+    # packed 2 a process: each agent is its own node too, here a lean one (``agents/hosted.py``)
+    second = ["/second/agents_0_1", "/second/agents_2_3", "/second/monitor", "/second/runner"]
+    second += [f"/second/agent_{i}" for i in range(4)]
     probe = ros.start([PY, "-c", PROBE, json.dumps(first + second)], timeout=200)
     runs = [
         ros.start(
@@ -49,7 +52,7 @@ def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
                 "-m",
                 "polymatch_ros.cli",
                 "run",
-                scene_path("congruent_triangles"),
+                scene,
                 "-q",
                 "--ensemble",
                 name,
@@ -67,7 +70,7 @@ def test_nodes_in_the_ensemble_namespace_and_two_ensembles_coexist(ros):
             ],
             timeout=200,
         )  # two ensembles on 2 cores
-        for name, k, nodes in (("polymatch", "1", "auto"), ("second", "4", "lean"))
+        for name, k, nodes in (("polymatch", "1", "auto"), ("second", "2", "lean"))
     ]
     for run in runs:
         rc = ros.wait(run, 210)

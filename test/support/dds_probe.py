@@ -1,9 +1,11 @@
 """A minimal rclpy participant for the discovery and multi-host tests.
 
     python test/support/dds_probe.py --name NAME [--nodes K] [--messages M] [--expect NAME ...]
-                             [--expect-count N] [--reliable] [--seconds S]
+                             [--expect-count N] [--reliable] [--seconds S] [--participants P]
 
-One process, one ROS context (one DDS participant), ``--nodes`` nodes in it.  Each node publishes
+One process, one ROS context (one DDS participant), ``--nodes`` nodes in it; a publishing probe
+with ``--participants P`` has P contexts (P participants, the senders ``NAME.J/<node>``), so
+that a test of many participants does not pay for as many processes.  Each node publishes
 on ``--topic`` the lines ``"<name>/<node> <seq>"``: ``--messages M`` sends exactly seq 0..M-1
 (TRANSIENT_LOCAL + KEEP_ALL + RELIABLE, so a late reader still gets all of them), otherwise it
 keeps sending every 0.2 s.  With ``--expect``/``--expect-count`` the process also listens and
@@ -35,7 +37,12 @@ def parse(argv):
     parser.add_argument("--expect-count", type=int, default=0)
     parser.add_argument("--listen", action="store_true", help="subscribe, publish nothing")
     parser.add_argument("--seconds", type=float, default=60.0)
-    return parser.parse_args(argv)
+    parser.add_argument("--participants", type=int, default=1,
+                        help="contexts in this process (a publishing probe only)")
+    args = parser.parse_args(argv)
+    if args.participants > 1 and (args.listen or args.expect or args.expect_count):
+        parser.error("--participants is for a probe that only publishes")
+    return args
 
 
 def qos_for(args):
@@ -87,6 +94,8 @@ def main(argv=None):
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
+    if args.participants > 1:
+        return publish_from_participants(args, stop)
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     executor = SingleThreadedExecutor()
     qos = qos_for(args)
@@ -94,7 +103,7 @@ def main(argv=None):
     listener = Listener(args)
     publishers, subscriptions = [], []
     for index in range(args.nodes):
-        node = Node(f"probe_{args.name}_{index}".replace("-", "_").replace(".", "_"))
+        node = Node(node_name(args.name, index))
         executor.add_node(node)
         if not args.listen:
             publishers.append((f"{args.name}/{index}", node.create_publisher(String, args.topic,
@@ -129,6 +138,40 @@ def main(argv=None):
     executor.shutdown()
     rclpy.try_shutdown()
     return 0 if ok else 1
+
+
+def node_name(name, index):
+    return f"probe_{name}_{index}".replace("-", "_").replace(".", "_")
+
+
+def publish_from_participants(args, stop):
+    """``--participants P``: P contexts, each its own participant, whose nodes publish every
+    0.2 s (or the ``--messages``) until SIGINT/SIGTERM or ``--seconds``; nothing spins (a
+    publisher needs no executor, and discovery runs in each participant's own threads)."""
+    qos = qos_for(args)
+    contexts, publishers = [], []
+    for participant in range(args.participants):
+        context = rclpy.Context()
+        rclpy.init(context=context,
+                   signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        contexts.append(context)
+        for index in range(args.nodes):
+            sender = f"{args.name}.{participant}"
+            node = Node(node_name(sender, index), context=context)
+            publishers.append((f"{sender}/{index}",
+                               node.create_publisher(String, args.topic, qos)))
+    print(f"ready at {time.time():.1f}", flush=True)
+    end = time.monotonic() + args.seconds
+    seq = 0
+    while not stop and time.monotonic() < end:
+        if not args.messages or seq < args.messages:
+            for sender, publisher in publishers:
+                publisher.publish(String(data=f"{sender} {seq}"))
+            seq += 1
+        time.sleep(0.02 if args.messages else 0.2)
+    for context in contexts:
+        rclpy.try_shutdown(context=context)
+    return 0
 
 
 if __name__ == "__main__":
