@@ -95,7 +95,7 @@ def test_rogue_publisher_changes_nothing_and_drops_are_counted(ros, tmp_path):
     ), text
 
 
-def test_foreign_well_formed_states_are_not_read_in_a_realtime_run_theorem_4_2(ros):
+def test_foreign_well_formed_states_are_not_read_in_a_realtime_run_theorem_4_2(ros, tmp_path):
     """Another writer sends well-formed states of agent 3, far away and stamped late in the
     run (newer than any real pose), on agent_3/pose and on agent_3/exchange with another run's
     id.  The agents and the monitor read only their run's exchange: the ensemble converges
@@ -108,7 +108,8 @@ def test_foreign_well_formed_states_are_not_read_in_a_realtime_run_theorem_4_2(r
     while "rogue: flooding" not in ros.output(rogue) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert "rogue: flooding" in ros.output(rogue), ros.output(rogue)
-    proc = ros.start(cli_argv("run", scene_path("congruent_triangles"), "--mode", "realtime",
+    scene_file = scene_with(tmp_path, scene_path("congruent_triangles"), ROGUE_AGENTS)
+    proc = ros.start(cli_argv("run", scene_file, "--mode", "realtime",
                               "--rate", "20", "--time-scale", "4", "--t-end", FOREIGN_STAMP + 1,
                               "-k", 1, "--timeout", 150), timeout=180)
     rc = ros.wait(proc, 190)
@@ -121,7 +122,7 @@ def test_foreign_well_formed_states_are_not_read_in_a_realtime_run_theorem_4_2(r
     assert rogue.poll() is None, "the rogue must still be sending when the run ends"
     # -k 1: every other agent reads agent 3's exchange, where the foreign states are (a packed
     # process reads its peers' blocks: states/block_<b>)
-    peers = re.search(r"^agent 4: finished.*; dropped \d+ messages \((.*)\)$", text, re.M)
+    peers = re.search(r"^agent 2: finished.*; dropped \d+ messages \((.*)\)$", text, re.M)
     assert peers and "unknown sender (run id)" in peers.group(1), text[-3000:]
     mon = re.search(r"^monitor: .*dropped (\d+) messages \((.*)\)$", text, re.M)
     assert mon and "unknown sender (run id)" in mon.group(2), text[-3000:]

@@ -14,16 +14,23 @@ import numpy as np
 import pytest
 from ros_harness import PY, cli_argv, needs_ros, scene_path
 
+from benchmarks.hosts.runs import scene_with
 from polymatch_ros.core.scenes.scene import load_scene
 from polymatch_ros.ros.wire import run_records
 
 pytestmark = needs_ros
 
 SCENE = "congruent_triangles"
-N = 8
+N = 4  # of the scene's triangles: the services, not the count, are under test
 PROBE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "support",
                      "service_probe.py")
 BOUND = 150  # s: only a hang takes this long
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """The scene with ``N`` agents, a process each where a test starts one per agent."""
+    return scene_with(tmp_path_factory.mktemp("scene"), scene_path(SCENE), N)
 
 
 def _probe(ros, *actions, timeout=BOUND, beside=None):
@@ -52,9 +59,9 @@ def _poses(text):
     return [tuple(float(v) for v in row) for row in rows]
 
 
-def test_lockstep_pause_holds_every_process_and_stop_ends_all_at_the_same_step(ros):
-    ros.monitor(SCENE, timeout=BOUND, t_end=1000.0)
-    agents = [ros.agent(SCENE, i, timeout=BOUND, t_end=1000.0) for i in range(N)]
+def test_lockstep_pause_holds_every_process_and_stop_ends_all_at_the_same_step(ros, scene):
+    ros.monitor(scene, timeout=BOUND, t_end=1000.0)
+    agents = [ros.agent(scene, i, timeout=BOUND, t_end=1000.0) for i in range(N)]
     text = _probe(
         ros,
         "until_t 0.5",
@@ -81,11 +88,11 @@ def test_lockstep_pause_holds_every_process_and_stop_ends_all_at_the_same_step(r
     assert finals[0].t < 1000.0
 
 
-def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converges(ros):
+def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converges(ros, scene):
     """Through ``polymatch run`` (which starts and stops the ensemble by its services); a
     process per agent (-k 1), so that agent_0 is a lifecycle node of its own."""
     run = ros.start(
-        cli_argv("run", scene_path(SCENE), "--mode", "realtime", "--rate", "20",
+        cli_argv("run", scene, "--mode", "realtime", "--rate", "20",
                  "--time-scale", "2", "--t-end", "80", "--timeout", str(BOUND), "-k", "1"),
         timeout=BOUND + 20,
         name="runner",
@@ -111,8 +118,8 @@ def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converge
     assert re.findall(r"^STATE (\S+)$", text, re.M) == ["active"], text
     held_a, held_b, reset, resumed = _poses(text)
     assert held_a[1:] == held_b[1:] and held_b[0] > held_a[0], text  # held, on the clock
-    scene = load_scene(scene_path(SCENE))
-    initial = scene.initial.groups[0].x[0] + scene.origin
+    loaded = load_scene(scene)
+    initial = loaded.initial.groups[0].x[0] + loaded.origin
     assert np.allclose(reset[1:], initial, rtol=0, atol=1e-12), (reset, initial)
     assert held_a[1:] != reset[1:] and resumed[1:] != reset[1:] and resumed[0] > reset[0]
     rc = ros.wait(run, BOUND + 30)
@@ -120,13 +127,13 @@ def test_realtime_pause_holds_the_state_reset_returns_to_it_and_the_run_converge
     assert rc == 0 and "converged" in out, out[-3000:]
 
 
-def test_a_run_stopped_by_the_stop_service_says_so_and_exits_4(ros):
+def test_a_run_stopped_by_the_stop_service_says_so_and_exits_4(ros, scene):
     """``polymatch run`` in lockstep, its ensemble stopped from outside (as by ``ros2 service
     call /polymatch/stop``) long before it converges: every process ends, and the run reports
     ``stopped by request``, not that it did not converge at t_end."""
     run = ros.start(
         # a process per agent (-k 1): fast enough to stop mid-run, slow enough not to converge
-        cli_argv("run", scene_path(SCENE), "--t-end", "1000", "--timeout", str(BOUND), "-k", "1"),
+        cli_argv("run", scene, "--t-end", "1000", "--timeout", str(BOUND), "-k", "1"),
         timeout=BOUND + 20,
         name="runner",
     )
@@ -138,7 +145,7 @@ def test_a_run_stopped_by_the_stop_service_says_so_and_exits_4(ros):
                         r"called at t = (\S+)\): matching diameter (\S+), tolerance", out, re.M)
     assert rc == 4 and stopped, out[-3000:]
     assert 0.5 <= float(stopped.group(1)) < 1000 and float(stopped.group(2)) >= 0.5
-    assert float(stopped.group(3)) >= load_scene(scene_path(SCENE)).tolerance
+    assert float(stopped.group(3)) >= load_scene(scene).tolerance
     assert "did not converge" not in out
 
 
@@ -171,24 +178,24 @@ rclpy.shutdown()
     (0.45, [0.6] * (N - 1), 0.45),           # an agent not yet heard: the monitor's alone
 ])
 def test_a_stop_is_dated_at_the_latest_time_every_agent_is_known_to_have_reached(
-        ros, monitor_t, agents_t, dated):
+        ros, scene, monitor_t, agents_t, dated):
     """``stopped by request ... called at t``: the runner dates a stop it did not send at the
     later of its two lower bounds of the ensemble's time, so a stop called once every agent's
     run record said t (as the test above calls it) is never dated before t."""
-    args = [scene_path(SCENE), monitor_t, *agents_t]
+    args = [scene, monitor_t, *agents_t]
     proc = ros.start([PY, "-c", STOP_TIME, *args], timeout=60, name="watcher")
     rc = ros.wait(proc, 70)
     out = ros.output(proc)
     assert rc == 0 and f"STOP {dated!r}" in out, out[-2000:]
 
 
-def test_lifecycle_agent_walks_every_transition_and_steps_only_when_active(ros):
+def test_lifecycle_agent_walks_every_transition_and_steps_only_when_active(ros, scene):
     """A managed agent (autostart off) through lifecycle_msgs ChangeState: unconfigured it has
     no pose topic; configured it has one but is silent; cleanup removes it; active it moves;
     deactivated it holds its pose on the clock; activated again it moves; shutdown ends it."""
     realtime = dict(mode="realtime", start="now", rate=20.0, t_end=1000.0, timeout=BOUND)
-    managed = ros.agent(SCENE, 0, autostart=False, **realtime)
-    ros.agent(SCENE, 1, **realtime)  # a peer, so that agent 0 has something to match
+    managed = ros.agent(scene, 0, autostart=False, **realtime)
+    ros.agent(scene, 1, **realtime)  # a peer, so that agent 0 has something to match
     node, topic = "/polymatch/agent_0", "/polymatch/agent_0/pose"
     text = _probe(
         ros,
