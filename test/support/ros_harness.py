@@ -245,8 +245,8 @@ def _attempt_folder(base):
 @pytest.fixture
 def ros(request):
     """A private ROS world, in one of ``ROS_SLOTS`` slots; with POLYMATCH_KEEP_LOGS=DIR the
-    processes' output of a failed test is kept in DIR/<test name>/ (what
-    test/support/repeat_tests.py uses to look into a failure)."""
+    processes' output of a failed test, and the failure (``failure.txt``), are kept in
+    DIR/<test name>/ (what test/support/repeat_tests.py uses to look into a failure)."""
     from domain_coordinator import domain_id
 
     with ros_slot(), domain_id() as dom:
@@ -259,5 +259,10 @@ def ros(request):
                 getattr(request.node, "rep_call", None) is not None
                 and request.node.rep_call.failed
             )
-            world.close(_attempt_folder(os.path.join(keep, request.node.name))
-                        if keep and failed else None)
+            folder = (_attempt_folder(os.path.join(keep, request.node.name))
+                      if keep and failed else None)
+            world.close(folder)
+            if folder is not None:  # why it failed, also for a test whose rerun passes
+                os.makedirs(folder, exist_ok=True)
+                with open(os.path.join(folder, "failure.txt"), "w", encoding="utf-8") as fh:
+                    fh.write(request.node.rep_call.longreprtext)
