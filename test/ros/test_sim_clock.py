@@ -13,10 +13,12 @@ from ros_harness import PY, cli_argv, needs_ros
 
 pytestmark = needs_ros
 
-# 2000 lockstep steps (a few seconds): long enough that the probe's readers match while the
-# run goes on (the
-# agents publish poses only to matched readers, and a reader matched after the last step
-# would hear nothing)
+# 2000 lockstep steps, a process per agent (-k 1): the agents start stepping only once they
+# have discovered each other, which the probe, started first, does meanwhile, so that its readers
+# match while the run goes on (the agents publish poses only to matched readers, and a reader
+# matched after the last step would hear nothing).  One process stepping all three agents
+# needs no discovery before its first step, and twice ended its run before the probe's pose
+# reader had matched.
 DT, T_END = 0.01, 20.0
 SCENE = triangles_yaml("three_triangles", seed=5, count=3, method="lie_euler", dt=DT,
                        t_end=T_END, snapshots=[0])
@@ -32,7 +34,7 @@ def test_clock_follows_the_simulated_time_of_the_poses(ros, tmp_path):
     end_ns = round(T_END * 1e9)
     probe = ros.start([PY, PROBE, "/polymatch/agent_0/pose", str(end_ns), "150"], timeout=160,
                       name="clock probe")
-    run = ros.start(cli_argv("run", scene_file, "-k", 3, "--no-compare", "--hold", "1e9",
+    run = ros.start(cli_argv("run", scene_file, "-k", 1, "--no-compare", "--hold", "1e9",
                              "--timeout", 120), timeout=150)
     assert ros.wait(run, 160) == 0, ros.output(run)  # matched, held to t_end
     assert ros.wait(probe, 60) == 0, ros.output(probe)[-2000:]
