@@ -262,10 +262,9 @@ def test_runner_ends_every_process_it_started(ros, tmp_path, how):
     stop``, when a child dies (four agents, a process each: what counts is that every process
     of each kind ends)."""
     policy = ["--on-failure", "stop"] if how == "child-dies" else []  # restarts: test_faults
-    scene = _scene_file(tmp_path / "four.yaml", "triangles", "triangle", 4, 2, 0.01, 500,
-                        seed=3)
+    scene = scene_with(tmp_path, scene_path("congruent_triangles"), 4)
     proc = ros.start(
-        cli_argv("run", scene, "--timeout", 120, "-k", 1, *policy),
+        cli_argv("run", scene, "--t-end", 500, "--timeout", 120, "-k", 1, *policy),
         timeout=150,
     )
     deadline = time.monotonic() + 60

@@ -155,8 +155,8 @@ def publish_from_participants(args, stop):
         rclpy.init(context=context,
                    signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
         contexts.append(context)
+        sender = f"{args.name}.{participant}"
         for index in range(args.nodes):
-            sender = f"{args.name}.{participant}"
             node = Node(node_name(sender, index), context=context)
             publishers.append((f"{sender}/{index}",
                                node.create_publisher(String, args.topic, qos)))

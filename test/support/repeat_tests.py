@@ -6,10 +6,10 @@ Each run is `python -m pytest -q test` (the whole suite, as CI runs it), or pyte
 given arguments (e.g. `-m ros test` for the multi-process ROS tests), in a fresh pytest
 process, bounded by a timeout.  The processes' output of every failed test of a ROS world, and
 its failure, are kept under DIR/run_<k>/<test>/ (POLYMATCH_KEEP_LOGS), so a rare failure can
-be read afterwards.  Prints
-one line per run, then a `  rerun: <test id>` line for each test a green run passed only on its
-rerun (pytest's ``-rR`` summary), and a closing `N passed, N failed` line; the pytest output of a
-run that failed or needed a rerun is kept in DIR/run_<k>.txt.  Exits 1 if any run failed.
+be read afterwards.  Prints one line per run, then a `  rerun: <test id>` line for each test a
+green run passed only on its rerun (pytest's ``-rR`` summary), and a closing `N passed, N
+failed` line; the pytest output of a run that failed or needed a rerun is kept in
+DIR/run_<k>.txt.  Exits 1 if any run failed.
 """
 
 import argparse
