@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 
 import pytest
 
@@ -142,3 +143,39 @@ def test_a_runs_fork_server_keeps_its_files_in_the_runs_folder_and_ends_with_it(
         assert forkserver._forkserver._forkserver_address.startswith(str(run_folder) + os.sep)
     assert not os.path.exists(f"/proc/{server}") and not os.path.exists(f"/proc/{tracker}")
     assert "tempdir" not in multiprocessing.current_process()._config
+
+
+@pytest.mark.parametrize("other_thread", [False, True], ids=["one thread", "two threads"])
+def test_a_runs_fork_server_is_the_runners_fork_only_where_the_runner_runs_one_thread(
+        probe_forkable, tmp_path, other_thread):
+    """Where the runner runs one thread when its run begins (``fork_server``), the server is a
+    fork of it: the kernel shows the runner's command line and the runner as its parent (no
+    second interpreter imports the node modules again), and it holds none of the runner's files
+    but the standard streams.  With another thread running, a fork could copy a lock that
+    thread holds: the server is then ``multiprocessing``'s own fresh interpreter.  A child of
+    either starts as one started by exec (``_by_exec``, the oracle)."""
+    from multiprocessing import forkserver
+
+    stop = threading.Event()
+    if other_thread:
+        threading.Thread(target=stop.wait, daemon=True).start()
+    else:
+        assert threading.active_count() == 1  # the case's premise: this worker's only thread
+    held, run_folder = tmp_path / "a file of the runner's", tmp_path / "run"
+    run_folder.mkdir()
+    with open(held, "w"), forked.fork_server(str(run_folder)):
+        child = forked.start([sys.executable, "-m", PROBE, "0"], _env())
+        assert child is not None
+        server = forkserver._forkserver._forkserver_pid
+        with open(f"/proc/{server}/cmdline", "rb") as fh:
+            server_cmdline = fh.read()
+        server_files = {os.readlink(f"/proc/{server}/fd/{n}") for n in os.listdir(
+            f"/proc/{server}/fd")}
+        code, text = child.wait(timeout=60), child.stdout.read()
+    stop.set()
+    with open("/proc/self/cmdline", "rb") as fh:
+        own_cmdline = fh.read()
+    assert (server_cmdline == own_cmdline) is not other_thread
+    assert (b"multiprocessing.forkserver" in server_cmdline) is other_thread
+    assert str(held) not in server_files
+    assert (code, text) == _by_exec(["0"])

@@ -2,11 +2,14 @@
 
 Each node process imports Python, numpy, rclpy, its messages and the package before it does
 anything; a run of many processes pays that again in every one of them.  The runner instead
-starts its node processes from a fork server (Python's ``multiprocessing`` "forkserver": a
-fresh, single-threaded interpreter that imports ``PRELOAD`` once and forks a child per
-request), so each child starts with the imports done.  Nothing of ROS is initialised in the
-server: every child calls ``rclpy.init`` itself, with the environment it was given, and makes
-its own DDS participant, as a process started by ``exec`` would.
+starts its node processes from a fork server (Python's ``multiprocessing`` "forkserver", which
+forks a child per request), so each child starts with the imports done.  Where the runner is
+still single-threaded when its run begins (``fork_server``), the server is the runner's own
+fork, made after the runner imported ``PRELOAD``: no second interpreter imports them again
+(``_fork_server_from_here``).  Otherwise ``multiprocessing`` starts it as it does by default, a
+fresh interpreter that imports ``PRELOAD``.  Nothing of ROS is initialised in the server: every
+child calls ``rclpy.init`` itself, with the environment it was given, and makes its own DDS
+participant, as a process started by ``exec`` would.
 
 A child is otherwise the process ``python -m MODULE ARGS`` would be: ``sys.argv``, the
 environment and ``__main__``-style exit code, its output on a pipe of the runner's, its own
@@ -18,16 +21,19 @@ of ``subprocess.Popen``'s interface it uses; ``forkable`` says which command lin
 from __future__ import annotations
 
 import contextlib
+import gc
 import importlib
 import multiprocessing
 import os
 import signal
+import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from multiprocessing.connection import Connection
-from typing import IO
+from typing import IO, NoReturn
 
 #: the modules a forked child may run (``python -m`` with one of them); the server imports them
 NODE_MODULES = (
@@ -52,7 +58,40 @@ PRELOAD = (
     "rosgraph_msgs.msg",
     "polymatch_interfaces.msg",
     "polymatch_interfaces.action",
+    # what a node imports once it runs: its role's classes, the services' event messages
+    "polymatch_ros.ros.agents.managed",
+    "polymatch_ros.ros.agents.lockstep",
+    "polymatch_ros.ros.agents.realtime",
+    "polymatch_ros.ros.agents.bridge",
+    "polymatch_ros.ros.agents.hosted",
+    "rclpy.serialization",
+    "service_msgs.msg",
+    "type_description_interfaces.msg",
 )
+#: the message packages whose C type support every node loads when it makes its publishers,
+#: subscriptions and services (``rosidl_generator_py.import_type_support``)
+TYPE_SUPPORT_PACKAGES = (
+    "builtin_interfaces",
+    "diagnostic_msgs",
+    "geometry_msgs",
+    "lifecycle_msgs",
+    "polymatch_interfaces",
+    "rcl_interfaces",
+    "service_msgs",
+    "std_msgs",
+    "std_srvs",
+    "type_description_interfaces",
+)
+
+
+def preload() -> None:
+    """Import ``PRELOAD`` and the type support of ``TYPE_SUPPORT_PACKAGES`` here."""
+    for module in PRELOAD:
+        importlib.import_module(module)
+    from rosidl_generator_py import import_type_support  # type: ignore[import-untyped]
+
+    for package in TYPE_SUPPORT_PACKAGES:
+        import_type_support(package)
 
 
 def child_setup() -> None:
@@ -194,9 +233,11 @@ _unavailable: str | None = None  # why the fork server could not be used, once i
 
 
 @contextlib.contextmanager
-def fork_server(directory: str, seconds: float = 5.0) -> Iterator[None]:
-    """The fork server of one run: its socket (and ``multiprocessing``'s other files) in the
-    run's own ``directory``; once the block ends, the server and ``multiprocessing``'s
+def fork_server(directory: str, seconds: float = 5.0, also: Sequence[str] = ()) -> Iterator[None]:
+    """The fork server of one run, started now where it can be this process's fork
+    (``_fork_server_from_here``, with the modules ``also`` preloaded too: what several of the
+    run's children import once running); its socket (and ``multiprocessing``'s other files) in
+    the run's own ``directory``; once the block ends, the server and ``multiprocessing``'s
     resource tracker ended, each by its PID (asked, then SIGKILL after ``seconds``).
 
     A runner ends by ``os._exit``, skipping the interpreter's exit, where ``multiprocessing``
@@ -206,6 +247,7 @@ def fork_server(directory: str, seconds: float = 5.0) -> Iterator[None]:
     config = multiprocessing.current_process()._config  # type: ignore[attr-defined]
     config["tempdir"] = directory  # ``multiprocessing.util.get_temp_dir`` takes it from here
     try:
+        _fork_server_from_here(also)
         yield
     finally:
         from multiprocessing import forkserver, resource_tracker
@@ -215,6 +257,106 @@ def fork_server(directory: str, seconds: float = 5.0) -> Iterator[None]:
         server._forkserver_address = None  # type: ignore[attr-defined]
         _end_helper(resource_tracker._resource_tracker, "_pid", "_fd", seconds)
         config.pop("tempdir", None)
+
+
+def _fork_server_from_here(also: Sequence[str] = ()) -> bool:
+    """Start the fork server as a fork of this process, once this process has imported what
+    the server preloads (``preload``) and the modules ``also``; False, leaving the start to
+    ``multiprocessing`` (a fresh interpreter, with the first child), where this process runs
+    other threads (a fork copies only the calling thread, and a lock another one held stays
+    held in the copy), already has a server, or could not make the server's socket.
+
+    The server is ``multiprocessing``'s own loop (``forkserver.main``) with nothing left to
+    import; this process then holds its socket's address, PID and "alive" pipe, as
+    ``multiprocessing`` would after starting one.  The objects alive at the fork are frozen for
+    the collector (``gc.freeze``) in the server and so in every child: a child's collections
+    pass over none of them, and its pages of them stay shared, not copied on write.
+    """
+    global _unavailable
+    from multiprocessing import connection, forkserver
+
+    server = forkserver._forkserver  # type: ignore[attr-defined]
+    if threading.active_count() > 1 or _unavailable is not None or vars(server).get(
+            "_forkserver_pid"):
+        return False
+    preload()
+    for module in also:
+        importlib.import_module(module)
+    listener = socket.socket(socket.AF_UNIX)
+    try:
+        address = connection.arbitrary_address("AF_UNIX")  # type: ignore[attr-defined]
+        listener.bind(address)
+        os.chmod(address, 0o600)
+        listener.listen()
+    except OSError as exc:
+        listener.close()
+        _unavailable = str(exc) or type(exc).__name__
+        return False
+    alive_r, alive_w = os.pipe()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()  # not written again by the server's children
+    gc.freeze()
+    pid = os.fork()
+    if pid == 0:
+        _serve(listener.fileno(), alive_r)
+    gc.unfreeze()
+    listener.close()
+    os.close(alive_r)
+    vars(server).update(_forkserver_address=address, _forkserver_alive_fd=alive_w,
+                        _forkserver_pid=pid)
+    return True
+
+
+def _serve(listener_fd: int, alive_r: int) -> NoReturn:
+    """The forked server: every file this process had open closed but its standard streams,
+    its socket and the read end of its "alive" pipe (a lock or pipe end of the runner's is
+    not held by the server or its children), then ``multiprocessing``'s server loop, which
+    ends once every holder of the pipe's write end has closed it."""
+    code = 0
+    try:
+        _fresh_signal_handling()
+        _fresh_standard_streams()
+        keep = {0, 1, 2, listener_fd, alive_r}
+        for name in os.listdir("/proc/self/fd"):
+            if int(name) not in keep:
+                with contextlib.suppress(OSError):
+                    os.close(int(name))
+        from multiprocessing import forkserver
+
+        forkserver.main(listener_fd, alive_r, [])
+    except SystemExit:
+        pass
+    except BaseException:  # noqa: BLE001 -- the server's end is its runner's to see
+        code = 1
+    finally:
+        os._exit(code)
+
+
+def _fresh_signal_handling() -> None:
+    """Signals handled as in a fresh interpreter: no wakeup file (the runner's would be written
+    to by the server's signals), and every handler this process set in Python back to the
+    default (Ctrl-C's ``KeyboardInterrupt`` for SIGINT)."""
+    signal.set_wakeup_fd(-1)
+    for number in signal.valid_signals():
+        handler = signal.getsignal(number)
+        if callable(handler) and handler is not signal.default_int_handler:
+            signal.signal(number, signal.default_int_handler if number == signal.SIGINT
+                          else signal.SIG_DFL)
+
+
+#: the streams this process had as ``sys.stdout`` and ``sys.stderr`` when it became a server,
+#: kept from being deallocated (which would close their files: perhaps numbers reused by then)
+_inherited_streams: list[object] = []
+
+
+def _fresh_standard_streams() -> None:
+    """``sys.stdout`` and ``sys.stderr`` on files 1 and 2, as in a fresh interpreter: the
+    runner's may write elsewhere (a test's capture), and a child writes what it prints through
+    them once its output pipe is on 1 and 2 (``_run_node``)."""
+    _inherited_streams.extend((sys.stdout, sys.stderr))
+    sys.stdout = open(1, "w", closefd=False)  # noqa: SIM115
+    sys.stderr = open(2, "w", errors="backslashreplace", buffering=1, closefd=False)  # noqa: SIM115
 
 
 def _end_helper(helper: object, pid_name: str, fd_name: str, seconds: float) -> None:

@@ -108,7 +108,7 @@ def run(plan: RunPlan) -> int:
     isolated = plan.hosts.isolated
     with run_domain_id(isolated) as domain, tempfile.TemporaryDirectory(
         prefix="polymatch_run_"
-    ) as directory, forked.fork_server(directory):
+    ) as directory, forked.fork_server(directory, also=_preloaded_for(plan)):
         shared = (not (isolated or domain_reserved(domain))
                   or plan.hosts.discovery.kind != "localhost")
         env = ros_environment(domain)
@@ -126,6 +126,13 @@ def run(plan: RunPlan) -> int:
                 server.stop()  # the one running now (``recovery`` may have restarted it)
             ledger.remove_ended()  # what its ended (or killed) children left in /dev/shm
     return code
+
+
+def _preloaded_for(plan: RunPlan) -> tuple[str, ...]:
+    """What the fork server imports for this run beyond its own list: a bridge run's robots,
+    one per agent, each turn poses with scipy's rotations (``nodes.robot``)."""
+    robots = len(plan.hosts.agents) if plan.bridge is not None else 0
+    return ("scipy.spatial.transform",) if robots > 1 else ()
 
 
 # How long a run in a shared domain listens to the ROS graph before it starts any process
