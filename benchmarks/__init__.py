@@ -13,7 +13,8 @@
     python -m benchmarks watching     lockstep rounds/s with the monitor over without, 8 ... 1024
     python -m benchmarks faults       process deaths: a realtime soak with kills, lockstep resumes
     python -m benchmarks leftovers    /dev/shm after a run; rounds/s with and without its clean-up
-    python -m benchmarks process_start  a run's CPU with its node processes forked or exec'd
+    python -m benchmarks process_start  a run's CPU: node processes forked (runner's fork, fresh
+                                        server) or exec'd
     python -m benchmarks basins       basins of consensus on rings and random graphs, d = 2, 3, 4
     python -m benchmarks all --out DIR [--only A,B]   every family, one report DIR/report.md
 

@@ -1,15 +1,17 @@
 """What starting a run's node processes costs: the CPU of a whole run with its node processes
-forked from the runner's fork server (as shipped, ``ros/process/forked.py``) and with each
-started by exec (the fork server switched off in the runner), side by side.
+forked from a fork server that is the runner's own fork (as shipped, ``ros/process/forked.py``),
+from a fork server that is a fresh interpreter importing the node modules itself
+(``multiprocessing``'s own start, which the runner falls back to), and with each started by exec
+(the fork server switched off in the runner), side by side.
 
 Each repeat runs the paper's 8 triangles in lockstep (rkmk4, one agent per process and the
-monitor: nine node processes) once each way, in alternating order.  The CPU is that of every
+monitor: nine node processes) once each way, in rotating order.  The CPU is that of every
 process of the run — `timeout`, the runner, the fork server, the nodes — however it ended:
 this process is their subreaper (``PR_SET_CHILD_SUBREAPER``), so a process that outlives its
 parent (the fork server, once the runner has gone) is reaped here, and the kernel's count of
 the reaped children's CPU (``RUSAGE_CHILDREN``) holds all of them.  Reported per variant: the
-run's CPU seconds and wall seconds (medians over repeats) and the agents' rounds/s; then
-forked / exec.  Short runs show the start-up; ``--t-end`` lengthens them.
+run's CPU seconds and wall seconds (medians over repeats) and the agents' rounds/s; then the
+quotients of the medians.  Short runs show the start-up; ``--t-end`` lengthens them.
 """
 
 import ctypes
@@ -21,7 +23,7 @@ import sys
 import time
 
 NAME = "process_start"
-HELP = "the CPU of a run with its node processes forked from the fork server against exec'd"
+HELP = "the CPU of a run with its node processes forked (runner's fork, fresh server) or exec'd"
 
 #: the runner with its fork server switched off: every node process started by exec
 EXEC_ONLY = (
@@ -31,15 +33,26 @@ EXEC_ONLY = (
     "from polymatch_ros.cli import main\n"
     "sys.exit(main(sys.argv[1:]))\n"
 )
-VARIANTS = ("forked", "exec")
+#: the runner with a fork server that is a fresh interpreter (its fork switched off)
+FRESH_SERVER = (
+    "import sys\n"
+    "from polymatch_ros.ros.process import forked\n"
+    "forked._fork_server_from_here = lambda also=(): False\n"
+    "from polymatch_ros.cli import main\n"
+    "sys.exit(main(sys.argv[1:]))\n"
+)
+HEADS = {"forked": ["-m", "polymatch_ros.cli"], "fresh server": ["-c", FRESH_SERVER],
+         "exec": ["-c", EXEC_ONLY]}
+VARIANTS = tuple(HEADS)
 PR_SET_CHILD_SUBREAPER = 36
 
 
 def add_arguments(p):
     from ..options import at_least
 
-    p.add_argument("--t-end", type=at_least(0.05), default=0.5,
-                   help="simulated seconds of each run, dt 0.05 (default 0.5: 40 rounds)")
+    p.add_argument("--t-end", type=at_least(0.05), default=None,
+                   help="simulated seconds of each run, dt 0.05 (default 0.5: 10 rounds; "
+                   "--quick: 0.1)")
 
 
 def _children_cpu():
@@ -62,10 +75,10 @@ def one_run(env, variant, t_end, records):
     median rounds/s)."""
     from ..ros_families.ros_runs import agent_records
 
-    head = ["-c", EXEC_ONLY] if variant == "exec" else ["-m", "polymatch_ros.cli"]
-    argv = ["timeout", "-k", "5", "300", sys.executable, *head, "run", "congruent_triangles",
-            "-k", "1", "--integrator", "rkmk4", "--dt", "0.05", "--t-end", str(t_end),
-            "--no-compare", "-q", "--run-records", records, "--timeout", "240"]
+    argv = ["timeout", "-k", "5", "300", sys.executable, *HEADS[variant], "run",
+            "congruent_triangles", "-k", "1", "--integrator", "rkmk4", "--dt", "0.05",
+            "--t-end", str(t_end), "--no-compare", "-q", "--run-records", records,
+            "--timeout", "240"]
     cpu, start = _children_cpu(), time.monotonic()
     proc = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     proc.wait()
@@ -89,16 +102,17 @@ def run(args, log):
                     "cannot be counted.")
         return report
     repeats = 1 if args.quick else (args.repeats or 5)
+    t_end = args.t_end if args.t_end is not None else (0.1 if args.quick else 0.5)
     results = {v: [] for v in VARIANTS}
     with private_runs() as (tmp, env):
         for i in range(repeats):
-            for variant in (VARIANTS if i % 2 == 0 else VARIANTS[::-1]):
+            for variant in VARIANTS[i % 3:] + VARIANTS[:i % 3]:
                 records = os.path.join(tmp, f"{variant}_{i}.jsonl")
-                results[variant].append(one_run(env, variant, args.t_end, records))
+                results[variant].append(one_run(env, variant, t_end, records))
                 finished, cpu, wall, rate = results[variant][-1]
                 log(f"{variant} #{i + 1}: {'finished' if finished else 'FAILED'}, CPU "
                     f"{cpu:.2f} s, wall {wall:.2f} s, {rate} rounds/s")
-    _table(report, results, args.t_end, repeats)
+    _table(report, results, t_end, repeats)
     return report
 
 
@@ -113,13 +127,15 @@ def _table(report, results, t_end, repeats):
                      " / ".join(f"{r[1]:.2f}" for r in runs),
                      "-" if not rates else f"{statistics.median(rates):.1f}",
                      f"{sum(r[0] for r in runs)} of {len(runs)}"])
-    (cpu_f, wall_f), (cpu_e, wall_e) = medians["forked"], medians["exec"]
-    rows.append(["forked / exec", f"{cpu_f / cpu_e:.3f}", f"{wall_f / wall_e:.3f}", "", "", ""])
+    for over in ("exec", "fresh server"):
+        (cpu_f, wall_f), (cpu_o, wall_o) = medians["forked"], medians[over]
+        rows.append([f"forked / {over}", f"{cpu_f / cpu_o:.3f}", f"{wall_f / wall_o:.3f}", "",
+                     "", ""])
     report.table(
         ["node processes", "CPU s of the run (median)", "wall s (median)", "CPU s, each run",
          "rounds/s (median)", "runs that finished"],
         rows,
         caption=f"8 triangles in lockstep, rkmk4, dt 0.05, t_end {t_end:g}, one agent per "
-        f"process and the monitor (9 node processes), {repeats} alternating repeats; CPU of "
-        "every process of the run",
+        f"process and the monitor (9 node processes), {repeats} repeats in rotating order; CPU "
+        "of every process of the run",
     )

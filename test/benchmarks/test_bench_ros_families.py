@@ -36,7 +36,7 @@ EXPECTED = {
                        "CPU ms per agent tick", "wall / simulated time", "default: 1 x 8",
                        "-k 1: 2 x 1", "agents / bare (medians)"],
     "process_start": ["| node processes", "CPU s of the run (median)", "| forked / exec",
-                      "| exec "],
+                      "| forked / fresh server", "| fresh server ", "| exec "],
     "watching": ["| agents", "median with", "median without", "with / without",
                  "median of the pairs", "others' cores"],
     "bridge": ["| sigma (m, rad)", "| lag (s)", "noise floor", "measured: median / max",
@@ -129,16 +129,17 @@ def _ratios(tables, out):
 
 
 def _start_ratios(tables, out):
-    """Each way ran and finished; the ratio is the quotient of the medians it shows."""
+    """Each way ran and finished; each ratio is the quotient of the medians it shows."""
     rows = {row["node processes"]: row for row in _rows(tables, "CPU s of the run (median)")}
-    forked, exec_ = rows["forked"], rows["exec"]
-    for row in (forked, exec_):
-        assert row["runs that finished"] == "1 of 1", row
-        assert number(row["CPU s of the run (median)"]) > 0, row
-        assert number(row["rounds/s (median)"]) > 0, row
-    cpu = number(forked["CPU s of the run (median)"]) / number(exec_["CPU s of the run (median)"])
-    assert number(rows["forked / exec"]["CPU s of the run (median)"]) == pytest.approx(
-        cpu, rel=0.02, abs=0.002)
+    for name in ("forked", "fresh server", "exec"):
+        assert rows[name]["runs that finished"] == "1 of 1", rows[name]
+        assert number(rows[name]["CPU s of the run (median)"]) > 0, rows[name]
+        assert number(rows[name]["rounds/s (median)"]) > 0, rows[name]
+    forked = number(rows["forked"]["CPU s of the run (median)"])
+    for over in ("exec", "fresh server"):
+        cpu = forked / number(rows[over]["CPU s of the run (median)"])
+        assert number(rows[f"forked / {over}"]["CPU s of the run (median)"]) == pytest.approx(
+            cpu, rel=0.02, abs=0.002)
 
 
 VALUES = {"distributed": _finished, "packing": _shapes_multiply, "scaling": _shapes_multiply,

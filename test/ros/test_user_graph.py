@@ -54,7 +54,10 @@ def test_isolated_run_is_private_and_echo_says_where_it_listened(ros):
     """--isolated: the run reserves another domain, and `polymatch echo` in the user's domain,
     without --timeout, gives up after 10 s (exit 1) naming that domain and its loopback range."""
     shell = users_shell(ros.domain)
-    run = ros.start(cli_argv("run", scene_path(SCENE), "-k", 4, "--t-end", 60, "--hold", 1e9,
+    # paced in real time (36 simulated s in 12 wall s): the run lasts while the echo listens,
+    # its agents idle between their steps
+    run = ros.start(cli_argv("run", scene_path(SCENE), "-k", 4, "--mode", "realtime",
+                             "--time-scale", 3, "--rate", 30, "--t-end", 36, "--hold", 1e9,
                              "--timeout", 200, "--isolated"), timeout=230, name="run", env=shell)
     echo = ros.start(cli_argv("echo", "/polymatch/diameter"), timeout=60, name="echo", env=shell)
     assert ros.wait(echo, 60) == 1, ros.output(echo)
