@@ -37,6 +37,7 @@ HERE = pathlib.Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE / "support"))
 sys.path.insert(0, str(HERE.parent))        # benchmarks/, beside the package
 
+import shm_account  # noqa: E402
 from ros_harness import ROS_SLOTS, ros  # noqa: E402, F401
 
 collect_ignore = ["support"]
@@ -51,6 +52,7 @@ sys.dont_write_bytecode = False
 
 
 def pytest_configure(config):
+    shm_account.register(config)  # what Fast DDS files the run left in /dev/shm, and when
     if not hasattr(config, "workerinput"):  # the controller, or a run without xdist
         for folder in COMPILED:
             compileall.compile_dir(HERE.parent / folder, quiet=1)

@@ -1,14 +1,14 @@
 """What a run leaves in /dev/shm, and what removing it costs: lockstep rounds/s with the
-runner's clean-up of its children's Fast DDS segments and without it, side by side.
+runner's sweep of the Fast DDS files its dead children left and without it, side by side.
 
 Under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST rmw_fastrtps gives every participant a
 shared-memory transport of its own, whatever the profile says (``supervisor.shm``); each
 process makes a segment and its lock file in /dev/shm, and one that is killed or ends before
-rclpy let go of its last node leaves them.  The runner notes its children's segments while
-they run (a look at /proc/PID/fd of each child that has none yet, every 0.25 s) and removes
-them once they ended.  Each repeat runs the paper's 8 triangles in lockstep (rkmk4, one agent
-per process, the monitor running) twice, in alternating order: as shipped, and with the
-runner's ledger switched off in that process (no look, no removal).  Reported per variant:
+rclpy let go of its last node leaves them.  Once its processes have ended, the runner removes
+every such file that appeared during the run and whose owner has died (``ShmSweep``).  Each
+repeat runs the paper's 8 triangles in lockstep (rkmk4, one agent per process, the monitor
+running) twice, in alternating order: as shipped, and with the runner's sweep switched off in
+that process.  Reported per variant:
 the agents' rounds/s (median over agents, then over repeats), the run's wall time, the
 segments its processes made (seen here, through the maps of every process under the run)
 and the /dev/shm entries of them left after it ended; then shipped / off.
@@ -26,16 +26,15 @@ import time
 NAME = "leftovers"
 HELP = "/dev/shm after a run, and lockstep rounds/s with and without the runner's clean-up"
 
-#: the runner with its ledger switched off: no look at its children, nothing removed
-LEDGER_OFF = (
+#: the runner with its sweep switched off: nothing removed
+SWEEP_OFF = (
     "import sys\n"
     "from polymatch_ros.ros.supervisor import shm\n"
-    "shm.SegmentLedger.note = lambda self, pids, force=False: None\n"
-    "shm.SegmentLedger.remove_ended = lambda self: []\n"
+    "shm.ShmSweep.remove_dead = lambda self, wait=0.0: []\n"
     "from polymatch_ros.cli import main\n"
     "sys.exit(main(sys.argv[1:]))\n"
 )
-VARIANTS = ("shipped", "ledger off")
+VARIANTS = ("shipped", "sweep off")
 
 
 def add_arguments(p):
@@ -63,7 +62,7 @@ def one_run(env, variant, t_end, records):
     """(agents' median rounds/s or None, wall s, segments made, /dev/shm entries left)."""
     from ..ros_families.ros_runs import agent_records
 
-    head = ["-c", LEDGER_OFF] if variant == "ledger off" else ["-m", "polymatch_ros.cli"]
+    head = ["-c", SWEEP_OFF] if variant == "sweep off" else ["-m", "polymatch_ros.cli"]
     argv = ["timeout", "-k", "5", "300", sys.executable, *head, "run", "congruent_triangles",
             "-k", "1", "--integrator", "rkmk4", "--dt", "0.05", "--t-end", str(t_end),
             "--no-compare", "-q", "--run-records", records, "--timeout", "240"]
@@ -111,7 +110,7 @@ def run(args, log):
         rows.append([variant, _fmt(medians[variant][0]), f"{medians[variant][1]:.1f}",
                      " / ".join(str(r[2]) for r in runs),
                      " / ".join(str(len(r[3])) for r in runs), f"{len(rates)} of {len(runs)}"])
-    (rate_on, wall_on), (rate_off, wall_off) = medians["shipped"], medians["ledger off"]
+    (rate_on, wall_on), (rate_off, wall_off) = medians["shipped"], medians["sweep off"]
     ratio = "-" if not (rate_on and rate_off) else f"{rate_on / rate_off:.3f}"
     rows.append(["shipped / off", ratio, f"{wall_on / wall_off:.3f}", "", "", ""])
     report.table(
@@ -126,12 +125,11 @@ def run(args, log):
 
 
 def _remove(entries):
-    """Remove a run's own entries left (the ledger-off runs') whose owner no longer lives."""
+    """Remove a run's own entries left (the sweep-off runs') whose owner no longer lives."""
     from polymatch_ros.ros.supervisor.shm import lock_held
 
     for path in entries:
-        segment = os.path.basename(path).removesuffix("_el")
-        if not lock_held(segment):
+        if not lock_held(path.removesuffix("_el") + "_el"):
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(path)
 

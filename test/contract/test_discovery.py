@@ -105,6 +105,7 @@ def test_server_environments_and_profile(tmp_path):
     assert server["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "SUBNET"
     assert "ROS_DISCOVERY_SERVER" not in server and "ROS_STATIC_PEERS" not in server
     assert server["FASTRTPS_DEFAULT_PROFILES_FILE"] == envs.server_profile
+    assert server["FASTDDS_BUILTIN_TRANSPORTS"] == "UDPv4"  # no shared memory, as its clients
     ns = {"f": discovery.FASTDDS_NAMESPACE}
     rtps = ElementTree.parse(envs.server_profile).getroot().find(".//f:participant/f:rtps", ns)
     assert rtps.findtext("f:prefix", namespaces=ns) == "44.53.00.5f.45.50.52.4f.53.49.4d.41"

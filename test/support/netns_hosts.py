@@ -22,19 +22,24 @@ from benchmarks.hosts.namespaces import (  # noqa: F401 (the tests' names)
 
 def provided_hosts(count, tools=()):
     """A fixture's body: ``count`` namespace hosts for one test (skipped where they or ``tools``
-    are unavailable), closed afterwards with no namespace left over.  The hosts' processes
-    run in one of the suite's ROS slots (``ros_harness.ros_slot``)."""
+    are unavailable), closed afterwards with no namespace left over, and no Fast DDS file of a
+    process that died meanwhile left in /dev/shm, which the namespaces share
+    (``supervisor.shm``).  The hosts' processes run in one of the suite's ROS slots
+    (``ros_harness.ros_slot``)."""
     import pytest
     from ros_harness import ros_slot
+
+    from polymatch_ros.ros.supervisor.shm import ShmSweep
 
     reason = unavailable_reason(tools)
     if reason:
         pytest.skip(reason)
     with ros_slot():
-        hosts = NetnsHosts(count)
+        hosts, sweep = NetnsHosts(count), ShmSweep()
         try:
             hosts.create()
             yield hosts
         finally:
             hosts.close()
+            sweep.remove_dead()
             assert hosts.left_over() == []

@@ -7,8 +7,9 @@ given arguments (e.g. `-m ros test` for the multi-process ROS tests), in a fresh
 process, bounded by a timeout.  The processes' output of every failed test of a ROS world, and
 its failure, are kept under DIR/run_<k>/<test>/ (POLYMATCH_KEEP_LOGS), so a rare failure can
 be read afterwards.  Prints one line per run, then a `  rerun: <test id>` line for each test a
-green run passed only on its rerun (pytest's ``-rR`` summary), and a closing `N passed, N
-failed` line; the pytest output of a run that failed or needed a rerun is kept in
+green run passed only on its rerun (pytest's ``-rR`` summary) and the run's /dev/shm account
+where it left something (``shm_account``), and a closing `N passed, N failed` line; the
+pytest output of a run that failed, needed a rerun or left something in /dev/shm is kept in
 DIR/run_<k>.txt.  Exits 1 if any run failed.
 """
 
@@ -18,6 +19,8 @@ import subprocess
 import sys
 import time
 
+from shm_account import SUMMARY_PREFIX
+
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
@@ -25,6 +28,14 @@ def reruns(output):
     """The test ids of pytest's ``RERUN`` summary lines (pytest-rerunfailures, ``-rR``)."""
     return [line.split()[1] for line in output.splitlines()
             if line.startswith("RERUN ") and len(line.split()) > 1]
+
+
+def shm_left(output):
+    """The run's /dev/shm account (``shm_account``) where it left something, else None."""
+    for line in output.splitlines():
+        if line.startswith(SUMMARY_PREFIX) and not line.endswith(" 0 left by it"):
+            return line
+    return None
 
 
 def main(argv=None):
@@ -62,7 +73,10 @@ def main(argv=None):
         rerun = reruns(proc.stdout) if proc is not None else []
         for test in rerun:
             print(f"  rerun: {test}", flush=True)
-        if not ok or rerun:
+        left = shm_left(proc.stdout) if proc is not None else None
+        if left:
+            print(f"  {left}", flush=True)
+        if not ok or rerun or left:
             os.makedirs(args.logs, exist_ok=True)
             with open(os.path.join(args.logs, f"run_{k}.txt"), "w") as fh:
                 fh.write(proc.stdout if proc is not None else tail)

@@ -4,8 +4,10 @@ Every process started here runs with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST,
 a ROS_DOMAIN_ID reserved for the test alone (domain_coordinator), under
 `timeout -k`, and is ended by its own PID when the test finishes.  The Fast DDS
 shared-memory segments its processes (and theirs) map are noted while they live
-(``shm_watch``); those left once they have ended (a process the test SIGKILLed)
-are removed, never one whose owner lives.
+(``shm_watch``), for the tests that ask what a run left; once they have ended,
+every Fast DDS file that appeared in /dev/shm during the test and whose owner
+has died (a process the test SIGKILLed) is removed (``supervisor.shm``), never
+one whose owner lives.
 """
 
 import contextlib
@@ -50,12 +52,14 @@ class Ros:
 
     def __init__(self, domain):
         from polymatch_ros.ros.network.environment import private_ros_environment
+        from polymatch_ros.ros.supervisor.shm import ShmSweep
 
         self.domain = domain
         self.env = private_ros_environment(domain)
         assert self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
         self.procs = []
         self.shm = ShmWatch(lambda: [p.pid for p in self.procs if p.poll() is None])
+        self.sweep = ShmSweep()  # /dev/shm as the world found it
 
     def start(self, argv, timeout, name="", env=None):
         """Start ``argv`` under `timeout -k 5 <timeout>`; stdout+stderr kept in a temp file;
@@ -143,6 +147,7 @@ class Ros:
                 os.unlink(proc.log.name)
         self.shm.stop()
         self.shm.remove_unheld()
+        self.sweep.remove_dead()  # what a process that died during the test left, noted or not
 
     def shm_left(self):
         """The /dev/shm entries of this world's processes still there (``ShmWatch.left``)."""

@@ -251,9 +251,12 @@ def discovery_environments(spec: str | DiscoverySpec, directory: str | None = No
     client = _overlay(ROS_DISCOVERY_SERVER=address, ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET",
                       FASTDDS_BUILTIN_TRANSPORTS=SERVER_CLIENT_TRANSPORTS)
     super_client = dict(client, ROS_SUPER_CLIENT="TRUE")
-    # A server under LOCALHOST cannot open its port (rmw adds a default unicast locator).
+    # A server under LOCALHOST cannot open its port (rmw adds a default unicast locator).  UDPv4
+    # only, as its clients: with Fast DDS's built-in shared memory as well, a server made a
+    # segment in /dev/shm, and shared-memory ports once clients had found it.
     server = _overlay(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET",
-                      FASTRTPS_DEFAULT_PROFILES_FILE=profile)
+                      FASTRTPS_DEFAULT_PROFILES_FILE=profile,
+                      FASTDDS_BUILTIN_TRANSPORTS=SERVER_CLIENT_TRANSPORTS)
     return DiscoveryEnvironments(spec, client, super_client, server, profile)
 
 

@@ -12,7 +12,6 @@ from ...console import Progress
 from .children import OVERSTAY_SECONDS, Child, describe_agents
 from .plan import RunPlan
 from .recovery import Recovery
-from .shm import SegmentLedger
 
 if TYPE_CHECKING:
     from ..network.discovery import DiscoveryServer
@@ -51,11 +50,10 @@ class Supervision:
     def __init__(self, plan: RunPlan, watcher: Watcher, children: list[Child],
                  monitor: Child | None, progress: Progress,
                  server: DiscoveryServer | None = None,
-                 others: Sequence[Child] = (), ledger: SegmentLedger | None = None) -> None:
+                 others: Sequence[Child] = ()) -> None:
         self.plan, self.watcher, self.progress = plan, watcher, progress
         self.children, self.monitor, self.server = children, monitor, server
         self.others = list(others)  # bridge mode's robots, the recorder
-        self.ledger = SegmentLedger() if ledger is None else ledger
         self.rounds_per_step = (
             1 if plan.realtime else max(1, plan.numerics.method.info.rounds)
         )
@@ -71,11 +69,6 @@ class Supervision:
         """The agent processes, then the monitor and the discovery server (if any)."""
         extra = [p for p in (self.monitor, self.server) if p is not None]
         return [*self.children, *extra]
-
-    def note_segments(self, force: bool = False) -> None:
-        """The shared-memory segments of every live process of the run (``shm``)."""
-        live = [p.pid for p in [*self.processes(), *self.others] if p.poll() is None]
-        self.ledger.note(live, force)
 
     def failure(self) -> tuple[int, str] | None:
         """The run's end by a dead process, as (code, message), or None: under the restart
@@ -189,7 +182,6 @@ class Supervision:
                 lifecycle.step()
             self.lifecycles = [d for d in self.lifecycles if not d.active()]
             self.note_returns()
-            self.note_segments()
             if plan.realtime and lead:
                 self.start_clock()
             self.check_graph()

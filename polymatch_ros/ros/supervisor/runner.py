@@ -48,7 +48,7 @@ from .children import Child, describe_agents, partition, stop_all
 from .plan import RunPlan
 from .recorder_child import report_recording, start_recorder
 from .run_loop import REMOTE_FINAL_POSE_SECONDS, Supervision
-from .shm import SegmentLedger
+from .shm import ShmSweep
 from .summary import RunOutcome, report, verdict
 from .watcher import Watcher
 
@@ -65,7 +65,6 @@ class RunContext:
     shared_domain: bool                   # the user's domain, or discovery beyond loopback
     directory: str                        # the run's private temporary directory
     run_id: int                           # the stage messages' and checkpoints' run id
-    ledger: SegmentLedger                 # its children's /dev/shm segments (``shm``)
 
     @property
     def agents_per_process(self) -> int:
@@ -114,17 +113,16 @@ def run(plan: RunPlan) -> int:
         env = ros_environment(domain)
         spec = plan.hosts.discovery
         envs = None if spec.kind == "localhost" else discovery_environments(spec, directory)
-        ledger = SegmentLedger()
-        context = RunContext(plan, env, domain, envs, shared, directory, _run_id(plan), ledger)
+        sweep = ShmSweep()  # /dev/shm as the run found it
+        context = RunContext(plan, env, domain, envs, shared, directory, _run_id(plan))
         _adopt(env if envs is None else envs.for_role("super_client", env))
         server = _start_server(context, directory)
         try:
             code = _run(context, server)
         finally:
             if server is not None:
-                ledger.note([server.pid], force=True)
                 server.stop()  # the one running now (``recovery`` may have restarted it)
-            ledger.remove_ended()  # what its ended (or killed) children left in /dev/shm
+            sweep.remove_dead()  # what its ended (or killed) children left in /dev/shm
     return code
 
 
@@ -300,10 +298,7 @@ def _announce(context: RunContext) -> None:
 
 def _stop(context: RunContext, children: list[Child], monitor: Child | None,
           watcher: Watcher | None, others: list[Child]) -> None:
-    """End every process of the run by its PID (the robots and the recorder last), once the
-    ledger has looked at each one still running (``shm``)."""
-    running = [c for c in [*children, *others, monitor] if c is not None and c.poll() is None]
-    context.ledger.note([c.pid for c in running], force=True)
+    """End every process of the run by its PID (the robots and the recorder last)."""
     stop_all(children, monitor, watcher, recorded=context.plan.outputs.record is not None)
     stop_all(others, None, None)
 
@@ -341,8 +336,7 @@ def _run(context: RunContext, server: DiscoveryServer | None = None) -> int:
             others = bridge_run.robots(plan, context.role_env("client"))  # as the agents
         others += start_recorder(plan, context.env, context.envs, context.directory)
         monitor, children = _start(context)
-        supervision = Supervision(plan, watcher, children, monitor, progress, server, others,
-                                  context.ledger)
+        supervision = Supervision(plan, watcher, children, monitor, progress, server, others)
         code, message = supervision.watch(interrupted, start)
     except PolymatchError as exc:
         code, message = exc.exit_code, str(exc)

@@ -1,18 +1,22 @@
-"""The Fast DDS shared-memory files of a run's own processes: noted while they live, removed
-once they have ended.
+"""The Fast DDS shared-memory files that processes which died during a run left in /dev/shm,
+removed once the run ends.
 
 Every process runs over UDP only (``environment.TRANSPORTS``, the loopback profile), yet under
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST rmw_fastrtps adds a shared-memory transport of its own
 to each participant, and that transport makes a segment in /dev/shm once the participant first
-sends (``fastrtps_<16 hex digits>``, 512 KiB and a header) beside its lock file
-(``fastrtps_<...>_el``), which the owner holds with ``flock`` while it lives.  Fast DDS removes
-both when the participant is deleted; a process that is killed, or that ends before rclpy has
-let go of its last node, leaves them for good.
+sends (``fastrtps_<16 letters or digits>``, 512 KiB and a header) beside its lock file
+(``<segment>_el``).  A participant that listens on shared memory (one started without the
+profile) also makes its ports (``fastrtps_port<N>``, with ``_el`` or ``_sl`` and
+``sem.fastrtps_port<N>_mutex``).  Fast DDS removes them when the participant is deleted; a
+process that is killed, or that ends before rclpy has let go of its last node, leaves them.
 
-The runner notes, by each child's open files (/proc/PID/fd), which of these its children made,
-and removes them once they ended, never a segment whose lock some live process still holds
-(the kernel drops a dead owner's lock).  Under a discovery beyond loopback the environment
-selects the UDPv4 transport alone and nothing is made.
+Fast DDS tells a dead owner's files from a live one's by the lock files: the owner holds them
+with ``flock`` while it lives, the kernel drops the lock when it dies, and ``fastdds shm clean``
+removes the files whose locks no process holds.  ``ShmSweep`` applies that rule to the files
+that appeared in /dev/shm while the run lasted: what the run's killed children left, and what
+any other process that died meanwhile left; never a file that was there before the run, nor one
+whose owner lives.  No look at the children while they run is needed, so none is missed (a
+child killed right after its first send).
 """
 
 from __future__ import annotations
@@ -20,39 +24,29 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import re
 import time
-from collections.abc import Iterable
 
 SHM_DIR = "/dev/shm"
-PREFIX = "fastrtps_"
-LOCK_SUFFIX = "_el"
-NOTE_INTERVAL = 0.25  # s between two looks at the children that have no segment yet
+LOCK_SUFFIXES = ("_el", "_sl")
+#: the names ``fastdds shm clean`` takes for a participant's segment and a port
+SEGMENT = re.compile(r"fastrtps_[0-9a-z]{16}")
+PORT = re.compile(r"fastrtps_port\d{1,5}")
+#: how old an unheld lock file must be before its files are removed: its owner creates it, then
+#: locks it, so one younger may belong to a live process that has not locked it yet
+GRACE_SECONDS = 1.0
 
 
-def segments_of(pid: int) -> set[str]:
-    """The Fast DDS segments (names in ``SHM_DIR``, without the lock suffix) whose lock file
-    process ``pid`` holds open; empty if it has ended or holds none."""
-    fd_dir = f"/proc/{pid}/fd"
+def port_mutex(port: str) -> str:
+    """The name of a port's named semaphore in /dev/shm (``sem_open`` adds ``sem.``)."""
+    return f"sem.{port}_mutex"
+
+
+def lock_held(lock_path: str) -> bool:
+    """True while a live process holds the lock file (the owner of its segment or port);
+    False once no process does or the file is gone."""
     try:
-        fds = os.listdir(fd_dir)
-    except OSError:
-        return set()
-    found = set()
-    for fd in fds:
-        with contextlib.suppress(OSError):
-            target = os.readlink(os.path.join(fd_dir, fd))
-            folder, name = os.path.split(target)
-            if folder == SHM_DIR and name.startswith(PREFIX) and name.endswith(LOCK_SUFFIX):
-                found.add(name[: -len(LOCK_SUFFIX)])
-    return found
-
-
-def lock_held(segment: str) -> bool:
-    """True while a live process holds the segment's lock file (its owner, as Fast DDS
-    itself tells a live segment from a dead one); False once no process does or the file is
-    gone."""
-    try:
-        fd = os.open(os.path.join(SHM_DIR, segment + LOCK_SUFFIX), os.O_RDONLY)
+        fd = os.open(lock_path, os.O_RDONLY)
     except OSError:
         return False
     try:
@@ -64,40 +58,69 @@ def lock_held(segment: str) -> bool:
     return False
 
 
-class SegmentLedger:
-    """The segments a run's children made (``note``), removed once unheld (``remove_ended``)."""
+def files_of(name: str) -> list[str]:
+    """Every /dev/shm name that belongs to segment or port ``name``."""
+    extra = [port_mutex(name)] if PORT.fullmatch(name) else []
+    return [name, *(name + s for s in LOCK_SUFFIXES), *extra]
 
-    def __init__(self) -> None:
-        self.by_pid: dict[int, set[str]] = {}
-        self.last_look = 0.0
 
-    def note(self, pids: Iterable[int], force: bool = False) -> None:
-        """Look at the given live processes that have no noted segment yet (at most every
-        ``NOTE_INTERVAL`` s unless ``force``): a participant makes its segment on its first
-        send, then keeps it."""
-        now = time.monotonic()
-        if not force and now - self.last_look < NOTE_INTERVAL:
-            return
-        self.last_look = now
-        for pid in pids:
-            if not self.by_pid.get(pid):
-                self.by_pid[pid] = segments_of(pid)
+class ShmSweep:
+    """/dev/shm as the run found it (``before``); ``remove_dead`` at its end."""
 
-    @property
-    def segments(self) -> set[str]:
-        return set().union(*self.by_pid.values())
+    def __init__(self, directory: str = SHM_DIR) -> None:
+        self.directory = directory
+        self.before = self._names()
 
-    def remove_ended(self) -> list[str]:
-        """Remove every noted segment no live process holds (its file and its lock file); the
-        names removed.  A segment still held (a child that outlived the runner's stop) stays."""
-        removed = []
-        for segment in sorted(self.segments):
-            if lock_held(segment):
+    def _names(self) -> set[str]:
+        try:
+            return set(os.listdir(self.directory))
+        except OSError:
+            return set()
+
+    def new_owners(self) -> set[str]:
+        """The segments and ports with a lock file that appeared since ``before``."""
+        owners = set()
+        for name in self._names() - self.before:
+            base = name[:-3] if name.endswith(LOCK_SUFFIXES) else None
+            if base is not None and (SEGMENT.fullmatch(base) or PORT.fullmatch(base)):
+                owners.add(base)
+        return owners
+
+    def _state(self, owner: str, now: float) -> str:
+        """"held", "young" (an unheld lock newer than ``GRACE_SECONDS``), or "dead"."""
+        state = "dead"
+        for suffix in LOCK_SUFFIXES:
+            path = os.path.join(self.directory, owner + suffix)
+            try:
+                made = os.stat(path).st_ctime
+            except OSError:
                 continue
-            for name in (segment, segment + LOCK_SUFFIX):
-                with contextlib.suppress(FileNotFoundError):
-                    os.unlink(os.path.join(SHM_DIR, name))
-            removed.append(segment)
-        for pid in list(self.by_pid):
-            self.by_pid[pid] -= set(removed)
-        return removed
+            if lock_held(path):
+                return "held"
+            if now - made < GRACE_SECONDS:
+                state = "young"
+        return state
+
+    def remove_dead(self, wait: float = 2 * GRACE_SECONDS) -> list[str]:
+        """Remove the files of every new segment or port whose owner has died (no live process
+        holds its lock), waiting up to ``wait`` s for a lock file too young to judge; the
+        segments and ports removed, sorted."""
+        deadline = time.monotonic() + wait
+        removed: list[str] = []
+        pending = self.new_owners()
+        while pending:
+            young = set()
+            for owner in sorted(pending):
+                state = self._state(owner, time.time())
+                if state == "dead":
+                    for name in files_of(owner):
+                        with contextlib.suppress(FileNotFoundError):
+                            os.unlink(os.path.join(self.directory, name))
+                    removed.append(owner)
+                elif state == "young":
+                    young.add(owner)
+            pending = young
+            if not pending or time.monotonic() > deadline:
+                break
+            time.sleep(0.1)
+        return sorted(removed)
