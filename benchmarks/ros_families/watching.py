@@ -122,8 +122,8 @@ def run(args, log):
 def _row(n, runs, others):
     on, off = _median(runs["with"]), _median(runs["without"])
     pairs = [a / b for a, b in zip(runs["with"], runs["without"])]
-    each = " ".join(f"{p:.2f} ({a:.1f}/{b:.1f})"
+    each = " ".join(f"{p:.3f} ({a:.1f}/{b:.1f})"
                     for p, a, b in zip(pairs, others["with"], others["without"]))
     return [str(n), " ".join(f"{v:.0f}" for v in runs["with"]),
             " ".join(f"{v:.0f}" for v in runs["without"]), f"{on:.0f}", f"{off:.0f}",
-            f"{on / off:.2f}" if off == off else "-", each, f"{_median(pairs):.2f}"]
+            f"{on / off:.3f}" if off == off else "-", each, f"{_median(pairs):.3f}"]
