@@ -15,11 +15,12 @@ too, so the account names; it does not fail the run.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import os
 
 import pytest
+
+from polymatch_ros.ros.supervisor.shm import lock_held
 
 SHM = "/dev/shm"
 PREFIXES = ("fastrtps_", "sem.fastrtps_")
@@ -40,17 +41,7 @@ def held(name: str) -> bool:
     """Whether a live process holds the lock of the segment ``name`` belongs to (a segment and
     its lock file; a port's semaphore goes with its port's segment)."""
     segment = name.removeprefix("sem.").removesuffix("_mutex").removesuffix(LOCK_SUFFIX)
-    try:
-        fd = os.open(os.path.join(SHM, segment + LOCK_SUFFIX), os.O_RDONLY)
-    except OSError:
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return True
-    finally:
-        os.close(fd)
-    return False
+    return lock_held(os.path.join(SHM, segment + LOCK_SUFFIX))
 
 
 class ShmAccount:

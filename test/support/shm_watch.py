@@ -108,19 +108,10 @@ class ShmWatch:
 def _remove_if_unheld(seg):
     """Remove segment ``seg`` and its lock file unless a process holds the lock; whether it is
     gone."""
-    import fcntl
+    from polymatch_ros.ros.supervisor.shm import lock_held
 
-    try:
-        fd = os.open(seg + LOCK, os.O_RDONLY)
-    except OSError:
-        fd = None
-    if fd is not None:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            return False
-        finally:
-            os.close(fd)
+    if lock_held(seg + LOCK):
+        return False
     for path in (seg, seg + LOCK):
         with contextlib.suppress(FileNotFoundError):
             os.unlink(path)
